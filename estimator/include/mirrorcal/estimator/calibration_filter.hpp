@@ -1,0 +1,100 @@
+// The mirror calibration filter: the sigma-point filter bound to the mirror model. Predict takes
+// two consecutive IMU samples, update one frame of marker reflections.
+#pragma once
+
+#include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/estimator/sigma_point_filter.hpp"
+
+namespace mirrorcal {
+
+struct CalibrationConfig {
+  Eigen::Vector3d gravity_n{0.0, -9.81, 0.0};  // wall mirror, y up
+  ImuNoise imu{};
+  double pixel_sigma = 1.0;  // px, 1-sigma per coordinate
+  // Intrinsics used where the state does not estimate them (stage 1, and skew when NK = 4).
+  Pinhole<double> intrinsics{833.33, 833.33, 2.0, 8.0, 3.0};
+  // Squared Mahalanobis distance (2 dof) above which a marker is rejected: 99.9 % for 2 dof.
+  double gate_chi2 = 13.8155;
+  SigmaPointParams sigma_points{};
+};
+
+// Running counts over the filter's life.
+struct FilterCounters {
+  std::uint64_t predicts = 0;
+  std::uint64_t updates = 0;
+  std::uint64_t markers_used = 0;
+  std::uint64_t markers_gated = 0;
+  std::uint64_t markers_invalid = 0;
+  std::uint64_t failures = 0;  // predicts or updates refused with a numerical status
+};
+
+template <typename S, int M, int NK>
+class CalibrationFilter {
+ public:
+  using State = MirrorState<S, M, NK>;
+  using Filter = SigmaPointFilter<State>;
+  using Covariance = typename Filter::Covariance;
+  static constexpr int kDim = State::kDim;
+
+  explicit CalibrationFilter(const CalibrationConfig& config)
+      : config_(config),
+        filter_(config.sigma_points),
+        gravity_(config.gravity_n.cast<S>()),
+        fixed_{S(config.intrinsics.fu), S(config.intrinsics.fv), S(config.intrinsics.cu),
+               S(config.intrinsics.cv), S(config.intrinsics.skew)} {}
+
+  void reset(const State& x, const Covariance& p) { filter_.reset(x, p); }
+
+  FilterStatus predict(const ImuSample& s0, const ImuSample& s1) {
+    const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
+    const auto q = imu_process_noise<S>(config_.imu, dt);
+    const Vec3<S> g = gravity_;
+    const FilterStatus st = filter_.template predict<State::kDynamicBegin, State::kDynamicDim>(
+        [&](State& x) { propagate_imu(x, s0, s1, g); }, q);
+    ++counters_.predicts;
+    if (st != FilterStatus::kOk) ++counters_.failures;
+    return st;
+  }
+
+  UpdateResult update(const MarkerFrame<M>& frame) {
+    Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
+    for (int i = 0; i < M; ++i)
+      if (frame.seen[i]) z.template segment<2>(2 * i) = frame.uv[i].template cast<S>();
+    const Eigen::Matrix<S, 2 * M, 1> r =
+        Eigen::Matrix<S, 2 * M, 1>::Constant(S(config_.pixel_sigma * config_.pixel_sigma));
+    const Pinhole<S> fixed = fixed_;
+    const UpdateResult res =
+        filter_.template update<State::kMeasuredBegin, State::kMeasuredDim, 2, M>(
+            [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
+              predict_markers(x, fixed, zp, ok);
+            },
+            z, frame.seen, r, S(config_.gate_chi2));
+    ++counters_.updates;
+    counters_.markers_used += static_cast<std::uint64_t>(res.used);
+    counters_.markers_gated += static_cast<std::uint64_t>(res.gated);
+    counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);
+    if (res.status != FilterStatus::kOk && res.status != FilterStatus::kNoMeasurement)
+      ++counters_.failures;
+    return res;
+  }
+
+  const State& state() const { return filter_.mean(); }
+  const Covariance& covariance() const { return filter_.covariance(); }
+  const CalibrationConfig& config() const { return config_; }
+  const FilterCounters& counters() const { return counters_; }
+  Pinhole<S> intrinsics() const { return intrinsics_of(filter_.mean(), fixed_); }
+
+ private:
+  CalibrationConfig config_;
+  Filter filter_;
+  Vec3<S> gravity_;
+  Pinhole<S> fixed_;
+  FilterCounters counters_{};
+};
+
+// The configurations the product uses are compiled once, in estimator/src/filter_*.cpp.
+extern template class CalibrationFilter<double, 3, 0>;
+extern template class CalibrationFilter<double, 3, 5>;
+extern template class CalibrationFilter<float, 3, 0>;
+
+}  // namespace mirrorcal

@@ -1,0 +1,243 @@
+// The mirror calibration model of Panahandeh & Jansson (paper eqs. (1)-(15)) in the names and
+// conventions of DESIGN.md: the state, IMU propagation, the mirror image of a rig-fixed marker
+// (eq. 11) and the pinhole projection (eqs. 12, 13).
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "mirrorcal/estimator/so3.hpp"
+
+namespace mirrorcal {
+
+template <typename S>
+using Vec2 = Eigen::Matrix<S, 2, 1>;
+using so3::Mat3;
+using so3::Quat;
+using so3::Vec3;
+
+// One IMU sample: body-frame angular rate (rad/s) and specific force (m/s^2).
+struct ImuSample {
+  std::int64_t t_ns = 0;
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel = Eigen::Vector3d::Zero();
+};
+
+// IMU noise in Kalibr's continuous-time units: white noise densities (rad/s/sqrt(Hz),
+// m/s^2/sqrt(Hz)) and bias random walks (rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz)).
+struct ImuNoise {
+  double gyro_noise_density = 1.6968e-4;  // EuRoC imu0 (ADIS16448)
+  double gyro_random_walk = 1.9393e-5;
+  double accel_noise_density = 2.0e-3;
+  double accel_random_walk = 3.0e-3;
+};
+
+// Pinhole intrinsics, in the state's order: u = fu x/z + skew y/z + cu, v = fv y/z + cv.
+template <typename S>
+struct Pinhole {
+  S fu, fv, cu, cv, skew;
+};
+
+// The mirror images of the M markers seen in one frame (any subset).
+template <int M>
+struct MarkerFrame {
+  std::int64_t t_ns = 0;
+  std::array<bool, M> seen{};
+  std::array<Eigen::Vector2d, M> uv{};
+};
+
+// Points nearer than this to the camera plane (m) are not projected: behind the camera or at it.
+template <typename S>
+constexpr S kMinDepth = S(1e-3);
+
+// Pinhole projection; false when the point is not in front of the camera.
+template <typename S>
+bool project(const Pinhole<S>& k, const Vec3<S>& p_c, Vec2<S>& uv) {
+  if (!(p_c.z() > kMinDepth<S>)) return false;
+  const S inv_z = S(1) / p_c.z();
+  const S x = p_c.x() * inv_z, y = p_c.y() * inv_z;
+  uv.x() = k.fu * x + k.skew * y + k.cu;
+  uv.y() = k.fv * y + k.cv;
+  return true;
+}
+
+// Mirror image, in c, of a point pi_c fixed in the camera frame, for the mirror z = 0 of n and a
+// camera at (R_n_c, p_n_c): pi_hat = pi - 2 R_n_c^T e_z e_z^T (R_n_c pi + p_n_c)  (paper eq. 11).
+template <typename S>
+Vec3<S> mirror_image(const Mat3<S>& r_n_c, const Vec3<S>& p_n_c, const Vec3<S>& pi_c) {
+  const S height = r_n_c.row(2).dot(pi_c) + p_n_c.z();  // e_z^T (R_n_c pi + p_n_c)
+  return pi_c - (S(2) * height) * r_n_c.row(2).transpose();
+}
+
+// Calibration state: stage 1 has NK = 0 (21 + 3M error states); stage 2 adds the intrinsics
+// (NK = 5: fu, fv, cu, cv, skew; NK = 4 holds skew at the configured value).
+//
+// The error state is ordered so that the two structured operations touch contiguous blocks:
+// IMU propagation changes [v, b_a, b_g, p, theta] = [0, 15), the camera reads
+// [p, theta, p_b_c, phi, markers, intrinsics] = [9, kDim). Rotations are perturbed on the right
+// (body side): R_n_b = R^_n_b Exp(theta), R_b_c = R^_b_c Exp(phi), so phi is the rotation error
+// log(R_b_c,true^T R_b_c,est) up to sign, the figure the paper's tables report.
+template <typename S, int M, int NK>
+struct MirrorState {
+  static_assert(M >= 1, "at least one marker");
+  static_assert(NK == 0 || NK == 4 || NK == 5, "intrinsics: none, fu fv cu cv, or with skew");
+  using Scalar = S;
+  static constexpr int kMarkers = M;
+  static constexpr int kIntrinsics = NK;
+  static constexpr int kV = 0, kBa = 3, kBg = 6, kP = 9, kTheta = 12, kPbc = 15, kPhi = 18,
+                       kPi = 21, kK = 21 + 3 * M, kDim = 21 + 3 * M + NK;
+  static constexpr int kDynamicBegin = 0, kDynamicDim = 15;
+  static constexpr int kMeasuredBegin = kP, kMeasuredDim = kDim - kP;
+
+  Vec3<S> v = Vec3<S>::Zero();    // IMU velocity in n (m/s)
+  Vec3<S> b_a = Vec3<S>::Zero();  // accelerometer bias (m/s^2)
+  Vec3<S> b_g = Vec3<S>::Zero();  // gyroscope bias (rad/s)
+  Vec3<S> p = Vec3<S>::Zero();    // IMU position in n (m)
+  Quat<S> q_n_b = Quat<S>::Identity();
+  Vec3<S> p_b_c = Vec3<S>::Zero();  // camera position in b (m)
+  Quat<S> q_b_c = Quat<S>::Identity();
+  Eigen::Matrix<S, 3 * M, 1> markers = Eigen::Matrix<S, 3 * M, 1>::Zero();  // pi_i^c (m)
+  Eigen::Matrix<S, NK, 1> intrinsics = Eigen::Matrix<S, NK, 1>::Zero();     // fu fv cu cv [skew]
+
+  Vec3<S> marker(int i) const { return markers.template segment<3>(3 * i); }
+
+  template <int B, int L>
+  void boxplus_block(const Eigen::Matrix<S, L, 1>& d) {
+    add<B, L, kV>(v, d);
+    add<B, L, kBa>(b_a, d);
+    add<B, L, kBg>(b_g, d);
+    add<B, L, kP>(p, d);
+    if constexpr (covers<B, L, kTheta, 3>())
+      q_n_b = so3::boxplus<S>(q_n_b, d.template segment<3>(kTheta - B));
+    add<B, L, kPbc>(p_b_c, d);
+    if constexpr (covers<B, L, kPhi, 3>())
+      q_b_c = so3::boxplus<S>(q_b_c, d.template segment<3>(kPhi - B));
+    add<B, L, kPi>(markers, d);
+    if constexpr (NK > 0) add<B, L, kK>(intrinsics, d);
+  }
+
+  template <int B, int L>
+  Eigen::Matrix<S, L, 1> boxminus_block(const MirrorState& ref) const {
+    Eigen::Matrix<S, L, 1> d;
+    sub<B, L, kV>(v, ref.v, d);
+    sub<B, L, kBa>(b_a, ref.b_a, d);
+    sub<B, L, kBg>(b_g, ref.b_g, d);
+    sub<B, L, kP>(p, ref.p, d);
+    if constexpr (covers<B, L, kTheta, 3>())
+      d.template segment<3>(kTheta - B) = so3::boxminus<S>(q_n_b, ref.q_n_b);
+    sub<B, L, kPbc>(p_b_c, ref.p_b_c, d);
+    if constexpr (covers<B, L, kPhi, 3>())
+      d.template segment<3>(kPhi - B) = so3::boxminus<S>(q_b_c, ref.q_b_c);
+    sub<B, L, kPi>(markers, ref.markers, d);
+    if constexpr (NK > 0) sub<B, L, kK>(intrinsics, ref.intrinsics, d);
+    return d;
+  }
+
+ private:
+  // Whether block [B, B+L) holds component [O, O+D); a block may not split a component.
+  template <int B, int L, int O, int D>
+  static constexpr bool covers() {
+    static_assert(O + D <= B || O >= B + L || (O >= B && O + D <= B + L),
+                  "an error-state block may not split a component");
+    return O >= B && O + D <= B + L;
+  }
+  template <int B, int L, int O, class V>
+  static void add(V& value, const Eigen::Matrix<S, L, 1>& d) {
+    constexpr int D = V::RowsAtCompileTime;
+    if constexpr (covers<B, L, O, D>()) value += d.template segment<D>(O - B);
+  }
+  template <int B, int L, int O, class V>
+  static void sub(const V& a, const V& b, Eigen::Matrix<S, L, 1>& d) {
+    constexpr int D = V::RowsAtCompileTime;
+    if constexpr (covers<B, L, O, D>()) d.template segment<D>(O - B) = a - b;
+  }
+};
+
+// Integrates the nominal IMU state from sample s0 to s1 (both measured, the interval between).
+// Second order: the rotation uses the mean bias-corrected rate plus the coning term
+// dt^2/12 (w0 x w1) (exact for a linearly varying rate), velocity the trapezoid of the
+// navigation-frame accelerations at both ends, position the matching dt^2 (2 a0 + a1)/6 (exact
+// for linearly varying acceleration). Global errors therefore fall as dt^2.
+template <class State>
+void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
+                   const Vec3<typename State::Scalar>& gravity_n) {
+  using S = typename State::Scalar;
+  const S dt = S(static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9);
+  const Vec3<S> w0 = s0.gyro.cast<S>() - x.b_g;
+  const Vec3<S> w1 = s1.gyro.cast<S>() - x.b_g;
+  const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
+  const Vec3<S> dtheta = (S(0.5) * dt) * (w0 + w1) + (dt * dt / S(12)) * w0.cross(w1);
+  x.q_n_b = (x.q_n_b * so3::exp<S>(dtheta)).normalized();
+  const Mat3<S> r1 = x.q_n_b.toRotationMatrix();
+  const Vec3<S> a0 = r0 * (s0.accel.cast<S>() - x.b_a) + gravity_n;
+  const Vec3<S> a1 = r1 * (s1.accel.cast<S>() - x.b_a) + gravity_n;
+  x.p += dt * x.v + (dt * dt / S(6)) * (S(2) * a0 + a1);
+  x.v += (S(0.5) * dt) * (a0 + a1);
+}
+
+// Discrete process noise over the dynamic block [v, b_a, b_g, p, theta] for an interval dt, from
+// the continuous densities: white accelerometer noise integrates into v (sigma^2 dt), p
+// (sigma^2 dt^3/3) with their correlation (sigma^2 dt^2/2); white gyro noise into theta; the bias
+// random walks into the biases. The noise is isotropic, so rotating it into n changes nothing.
+template <typename S>
+Eigen::Matrix<S, 15, 15> imu_process_noise(const ImuNoise& n, double dt) {
+  Eigen::Matrix<S, 15, 15> q = Eigen::Matrix<S, 15, 15>::Zero();
+  const double sa2 = n.accel_noise_density * n.accel_noise_density;
+  const double sg2 = n.gyro_noise_density * n.gyro_noise_density;
+  const auto i3 = Mat3<S>::Identity();
+  q.template block<3, 3>(0, 0) = S(sa2 * dt) * i3;                                        // v
+  q.template block<3, 3>(3, 3) = S(n.accel_random_walk * n.accel_random_walk * dt) * i3;  // b_a
+  q.template block<3, 3>(6, 6) = S(n.gyro_random_walk * n.gyro_random_walk * dt) * i3;    // b_g
+  q.template block<3, 3>(9, 9) = S(sa2 * dt * dt * dt / 3.0) * i3;                        // p
+  q.template block<3, 3>(0, 9) = S(sa2 * dt * dt / 2.0) * i3;
+  q.template block<3, 3>(9, 0) = S(sa2 * dt * dt / 2.0) * i3;
+  q.template block<3, 3>(12, 12) = S(sg2 * dt) * i3;  // theta
+  return q;
+}
+
+// Camera pose in n from the IMU pose and the camera pose in b.
+template <class State>
+void camera_pose(const State& x, Mat3<typename State::Scalar>& r_n_c,
+                 Vec3<typename State::Scalar>& p_n_c) {
+  const Mat3<typename State::Scalar> r_n_b = x.q_n_b.toRotationMatrix();
+  r_n_c = r_n_b * x.q_b_c.toRotationMatrix();
+  p_n_c = x.p + r_n_b * x.p_b_c;
+}
+
+// The intrinsics a state implies: its own for stage 2, the configured ones otherwise.
+template <typename S, int M, int NK>
+Pinhole<S> intrinsics_of(const MirrorState<S, M, NK>& x, const Pinhole<S>& fixed) {
+  Pinhole<S> k = fixed;
+  if constexpr (NK >= 4) {
+    k.fu = x.intrinsics(0);
+    k.fv = x.intrinsics(1);
+    k.cu = x.intrinsics(2);
+    k.cv = x.intrinsics(3);
+  }
+  if constexpr (NK == 5) k.skew = x.intrinsics(4);
+  return k;
+}
+
+// The predicted pixel of every marker flagged in ok; clears ok[i] for a marker whose mirror image
+// is not in front of the camera.
+template <class State>
+void predict_markers(const State& x, const Pinhole<typename State::Scalar>& fixed,
+                     Eigen::Matrix<typename State::Scalar, 2 * State::kMarkers, 1>& z,
+                     std::array<bool, State::kMarkers>& ok) {
+  using S = typename State::Scalar;
+  constexpr int M = State::kMarkers;
+  Mat3<S> r_n_c;
+  Vec3<S> p_n_c;
+  camera_pose(x, r_n_c, p_n_c);
+  const Pinhole<S> k = intrinsics_of(x, fixed);
+  for (int i = 0; i < M; ++i) {
+    if (!ok[i]) continue;
+    Vec2<S> uv;
+    if (project<S>(k, mirror_image<S>(r_n_c, p_n_c, x.marker(i)), uv))
+      z.template segment<2>(2 * i) = uv;
+    else
+      ok[i] = false;
+  }
+}
+
+}  // namespace mirrorcal

@@ -1,0 +1,400 @@
+// A fixed-dimension error-state sigma-point (unscented) Kalman filter on a manifold.
+//
+// The state type supplies the manifold: its error-state dimension kDim and
+//   template <int B, int L> void boxplus_block(const Eigen::Matrix<Scalar, L, 1>& d);
+//   template <int B, int L> Eigen::Matrix<Scalar, L, 1> boxminus_block(const State& ref) const;
+// which add a tangent perturbation to, and take the tangent difference of, the error-state block
+// [B, B+L). The mean is propagated directly, sigma points are tangent perturbations of it, and
+// deviations come back through boxminus: quaternions are never averaged (UKF-M style).
+//
+// Structure is exploited by blocks. A predict names the block its dynamics change (the rest is
+// constant); an update names the block its measurement reads. Sigma points span only that block,
+// and the rest of the state is carried by the statistical linear regression of the transform:
+// with P_bb = L L^T and D the central differences of the outputs along the columns of L, the
+// regression matrix is D L^-1. For the cross-covariances this is exactly what a full-state
+// unscented transform computes (the full Cholesky factor, ordered block first, perturbs the other
+// states only through the block's columns), at a fraction of the cost.
+//
+// No heap, no exceptions, no OS calls: every matrix is fixed-size; numerical failures are
+// returned as a status and leave the filter unchanged.
+#pragma once
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+namespace mirrorcal {
+
+// Scaled unscented transform (Julier 2002). With n the dimension of the sampled block:
+//   lambda = alpha^2 (n + kappa) - n, sigma points at the mean and at +-gamma times the columns of
+//   the Cholesky factor, gamma = sqrt(n + lambda) = alpha sqrt(n + kappa), mean weights
+//   lambda/(n+lambda) (centre) and 1/(2(n+lambda)) (others), and the centre's covariance weight
+//   lambda/(n+lambda) + 1 - alpha^2 + beta.
+// With y0 the centre's image and y+-j those of the pair j, write a_j = (y+j - y-j)/2 and
+// b_j = (y+j + y-j)/2 - y0. The transform's mean is y0 + sum(b_j)/gamma^2 and, collecting terms,
+// its covariance is exactly
+//   sum(a_j a_j^T)/gamma^2 + sum(b_j b_j^T)/gamma^2 + (beta - alpha^2) d d^T,  d = mean - y0,
+// which is how it is computed here: a sum of Gram matrices, positive semi-definite for any alpha
+// and kappa as long as beta >= alpha^2, whereas the textbook weighted sum with a negative centre
+// weight can lose definiteness in rounding (as robot_localization found).
+// The default alpha = 0.4 keeps the sigma points near the mean (gamma = 1.8 on 21 states instead of
+// 4.6 at alpha = 1): with the paper's 10 cm marker prior, points at 4.6 sigma would cross the
+// mirror and make the transform meaningless. beta = 2 is optimal for Gaussian priors.
+struct UnscentedParams {
+  double alpha = 0.4;
+  double beta = 2.0;
+  double kappa = 0.0;
+};
+
+// The filter's numerical settings: the transform, and when to split an update (see update()).
+struct SigmaPointParams {
+  UnscentedParams unscented{};
+  // An update is split into ceil(ratio / spread_per_step) steps, at most max_steps, where ratio
+  // is the largest (predicted measurement variance) / (noise variance) of the blocks used.
+  double spread_per_step = 100.0;
+  int max_steps = 20;
+};
+
+enum class FilterStatus : std::uint8_t {
+  kOk,
+  kCovarianceNotPositiveDefinite,  // the block of P to sample could not be factored
+  kInnovationNotPositiveDefinite,  // S could not be factored
+  kNoMeasurement,                  // nothing left to update with (none given, all gated or invalid)
+  kNonFinite,                      // a NaN or infinity appeared; the filter was left unchanged
+};
+
+const char* to_string(FilterStatus s);
+
+template <typename S, int Dim>
+struct SigmaWeights {
+  S gamma;            // spread: sqrt(n + lambda)
+  S inv_gamma2;       // 1 / gamma^2
+  S mean_correction;  // beta - alpha^2: weight of the mean's shift in the covariance
+
+  static SigmaWeights make(const UnscentedParams& p) {
+    const double g2 = p.alpha * p.alpha * (Dim + p.kappa);
+    SigmaWeights w;
+    w.gamma = S(std::sqrt(g2));
+    w.inv_gamma2 = S(1.0 / g2);
+    w.mean_correction = S(p.beta - p.alpha * p.alpha);
+    return w;
+  }
+};
+
+// Outcome of one update.
+struct UpdateResult {
+  FilterStatus status = FilterStatus::kNoMeasurement;
+  int used = 0;      // measurement blocks that entered the update
+  int gated = 0;     // blocks rejected by the Mahalanobis gate
+  int invalid = 0;   // blocks the model could not evaluate at some sigma point (e.g. behind camera)
+  int steps = 0;     // progressive sub-updates applied (1 for an ordinary update)
+  double nis = 0.0;  // normalised innovation squared of the blocks used
+};
+
+// A Euclidean state R^N: the simplest manifold, used for linear models and in tests.
+template <typename Scalar_, int N>
+struct EuclideanState {
+  using Scalar = Scalar_;
+  static constexpr int kDim = N;
+  Eigen::Matrix<Scalar, N, 1> x = Eigen::Matrix<Scalar, N, 1>::Zero();
+
+  template <int B, int L>
+  void boxplus_block(const Eigen::Matrix<Scalar, L, 1>& d) {
+    x.template segment<L>(B) += d;
+  }
+  template <int B, int L>
+  Eigen::Matrix<Scalar, L, 1> boxminus_block(const EuclideanState& ref) const {
+    return x.template segment<L>(B) - ref.x.template segment<L>(B);
+  }
+};
+
+template <class State>
+class SigmaPointFilter {
+ public:
+  using Scalar = typename State::Scalar;
+  static constexpr int N = State::kDim;
+  using Covariance = Eigen::Matrix<Scalar, N, N>;
+  using ErrorVector = Eigen::Matrix<Scalar, N, 1>;
+
+  SigmaPointFilter() = default;
+  explicit SigmaPointFilter(const SigmaPointParams& p) : params_(p) {}
+  explicit SigmaPointFilter(const UnscentedParams& u) : params_{u} {}
+
+  void reset(const State& mean, const Covariance& cov) {
+    mean_ = mean;
+    cov_ = Scalar(0.5) * (cov + cov.transpose());
+  }
+  const State& mean() const { return mean_; }
+  const Covariance& covariance() const { return cov_; }
+  const SigmaPointParams& params() const { return params_; }
+
+  // Propagates the state through f(State&), which may change only the error-state block
+  // [B, B+L); Q is the process noise added on that block.
+  template <int B, int L, class Propagate>
+  FilterStatus predict(Propagate&& f, const Eigen::Matrix<Scalar, L, L>& q) {
+    static_assert(B >= 0 && L > 0 && B + L <= N, "block out of range");
+    using BlockMat = Eigen::Matrix<Scalar, L, L>;
+    using BlockVec = Eigen::Matrix<Scalar, L, 1>;
+
+    Eigen::LLT<BlockMat> llt(cov_.template block<L, L>(B, B));
+    if (llt.info() != Eigen::Success) return FilterStatus::kCovarianceNotPositiveDefinite;
+    const BlockMat chol = llt.matrixL();
+    const auto w = SigmaWeights<Scalar, L>::make(params_.unscented);
+
+    State centre = mean_;
+    f(centre);
+    // Deviations of the propagated sigma points from the propagated centre: + columns, then -.
+    Eigen::Matrix<Scalar, L, 2 * L> dev;
+    for (int j = 0; j < L; ++j) {
+      for (int sign = 0; sign < 2; ++sign) {
+        State sp = mean_;
+        const BlockVec d = (sign == 0 ? w.gamma : -w.gamma) * chol.col(j);
+        sp.template boxplus_block<B, L>(d);
+        f(sp);
+        dev.col(j + sign * L) = sp.template boxminus_block<B, L>(centre);
+      }
+    }
+    // a_j, b_j of the transform (the centre's deviation is zero by construction).
+    const BlockMat a = Scalar(0.5) * (dev.template leftCols<L>() - dev.template rightCols<L>());
+    const BlockMat b = Scalar(0.5) * (dev.template leftCols<L>() + dev.template rightCols<L>());
+    const BlockVec shift = w.inv_gamma2 * b.rowwise().sum();
+    BlockMat p_bb = w.inv_gamma2 * (a * a.transpose() + b * b.transpose()) +
+                    w.mean_correction * (shift * shift.transpose()) + q;
+    // Regression matrix F = (a / gamma) chol^-1 carries the cross-covariance with the constants.
+    const BlockMat f_reg = chol.transpose()
+                               .template triangularView<Eigen::Upper>()
+                               .solve(a.transpose() / w.gamma)
+                               .transpose();
+
+    if (!p_bb.allFinite() || !f_reg.allFinite() || !shift.allFinite())
+      return FilterStatus::kNonFinite;
+
+    centre.template boxplus_block<B, L>(shift);
+    mean_ = centre;
+    if constexpr (B > 0) {
+      const Eigen::Matrix<Scalar, L, B> c = f_reg * cov_.template block<L, B>(B, 0);
+      cov_.template block<L, B>(B, 0) = c;
+      cov_.template block<B, L>(0, B) = c.transpose();
+    }
+    constexpr int kAfter = N - B - L;
+    if constexpr (kAfter > 0) {
+      const Eigen::Matrix<Scalar, L, kAfter> c = f_reg * cov_.template block<L, kAfter>(B, B + L);
+      cov_.template block<L, kAfter>(B, B + L) = c;
+      cov_.template block<kAfter, L>(B + L, B) = c.transpose();
+    }
+    cov_.template block<L, L>(B, B) = Scalar(0.5) * (p_bb + p_bb.transpose());
+    return FilterStatus::kOk;
+  }
+
+  // Updates with a measurement of up to kBlocks independent blocks of kRows rows each; h reads
+  // only the error-state block [B, B+L). active[b] says block b was measured; r_diag is the
+  // measurement noise variance of each row. h(state, z, ok) writes the predicted measurement of
+  // every active block and clears ok[b] where it cannot evaluate block b. Each block passes the
+  // Mahalanobis gate (squared distance under its marginal innovation covariance) or is rejected.
+  //
+  // A measurement far more certain than the prediction (the first frames, with a 10 cm marker
+  // prior) is applied progressively: as K updates with K times the noise, each from sigma points
+  // redrawn around the last result. For a linear model that is exactly one update; for a
+  // nonlinear one it follows the measurement function instead of trusting one linearisation.
+  template <int B, int L, int kRows, int kBlocks, class Measure>
+  UpdateResult update(Measure&& h, const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& z,
+                      const std::array<bool, kBlocks>& active,
+                      const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& r_diag, Scalar gate) {
+    static_assert(B >= 0 && L > 0 && B + L <= N, "block out of range");
+    constexpr int Z = kRows * kBlocks;
+    using ZVec = Eigen::Matrix<Scalar, Z, 1>;
+    using ZMat = Eigen::Matrix<Scalar, Z, Z>;
+
+    UpdateResult result;
+    std::array<bool, kBlocks> ok = active;
+    int n_active = 0;
+    for (bool a : active) n_active += a ? 1 : 0;
+    if (n_active == 0) return result;
+
+    MeasurementSample<L, Z> ms;
+    if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ms)) {
+      result.status = FilterStatus::kCovarianceNotPositiveDefinite;
+      return result;
+    }
+    for (int b = 0; b < kBlocks; ++b)
+      if (active[b] && !ok[b]) ++result.invalid;
+
+    // Gate each block on its own marginal innovation covariance.
+    ZVec innovation = z - ms.z_mean;
+    ZMat s = ms.p_zz;
+    s.diagonal() += r_diag;
+    Scalar spread_ratio = 0;  // how much more the prediction spreads than the noise, per block
+    for (int b = 0; b < kBlocks; ++b) {
+      if (!ok[b]) continue;
+      const int r0 = b * kRows;
+      const Eigen::Matrix<Scalar, kRows, 1> nu_b = innovation.template segment<kRows>(r0);
+      Eigen::LLT<Eigen::Matrix<Scalar, kRows, kRows>> llt_b(s.template block<kRows, kRows>(r0, r0));
+      const Scalar d2 =
+          llt_b.info() == Eigen::Success ? nu_b.dot(llt_b.solve(nu_b)) : Scalar(INFINITY);
+      if (!(d2 <= gate)) {  // also rejects NaN
+        ok[b] = false;
+        ++result.gated;
+        continue;
+      }
+      ++result.used;
+      const Scalar ratio = ms.p_zz.diagonal().template segment<kRows>(r0).sum() /
+                           r_diag.template segment<kRows>(r0).sum();
+      spread_ratio = ratio > spread_ratio ? ratio : spread_ratio;
+    }
+    if (result.used == 0) {
+      result.status = FilterStatus::kNoMeasurement;
+      return result;
+    }
+    {
+      ZMat s_used = s;
+      ZVec nu_used = innovation;
+      make_inert<kRows, kBlocks>(ok, s_used, nu_used);
+      Eigen::LLT<ZMat> llt_s(s_used);
+      if (llt_s.info() != Eigen::Success) {
+        result.status = FilterStatus::kInnovationNotPositiveDefinite;
+        return result;
+      }
+      result.nis = static_cast<double>(nu_used.dot(llt_s.solve(nu_used)));  // inert blocks add 0
+    }
+
+    const double wanted = std::ceil(static_cast<double>(spread_ratio) / params_.spread_per_step);
+    const int steps = wanted < 1.0                 ? 1
+                      : wanted > params_.max_steps ? params_.max_steps
+                                                   : static_cast<int>(wanted);
+    const ZVec r_step = r_diag * Scalar(steps);
+    for (int k = 0; k < steps; ++k) {
+      if (k > 0) {
+        if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ms)) {
+          result.status = FilterStatus::kCovarianceNotPositiveDefinite;
+          return result;
+        }
+        innovation = z - ms.z_mean;
+      }
+      s = ms.p_zz;
+      s.diagonal() += r_step;
+      const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ms, s, innovation, ok);
+      if (st != FilterStatus::kOk) {
+        result.status = st;
+        return result;
+      }
+    }
+    result.steps = steps;
+    result.status = FilterStatus::kOk;
+    return result;
+  }
+
+ private:
+  // The unscented transform of the measurement: its mean, its covariance (without noise), the
+  // cross-covariance with the sampled block, and that block's Cholesky factorisation.
+  template <int L, int Z>
+  struct MeasurementSample {
+    Eigen::Matrix<Scalar, Z, 1> z_mean;
+    Eigen::Matrix<Scalar, Z, Z> p_zz;
+    Eigen::Matrix<Scalar, L, Z> p_bz;
+    Eigen::LLT<Eigen::Matrix<Scalar, L, L>> llt_p;
+  };
+
+  template <int B, int L, int kRows, int kBlocks, class Measure>
+  bool sample_measurement(Measure& h, std::array<bool, kBlocks>& ok,
+                          MeasurementSample<L, kRows * kBlocks>& ms) const {
+    constexpr int Z = kRows * kBlocks;
+    using BlockMat = Eigen::Matrix<Scalar, L, L>;
+    using BlockVec = Eigen::Matrix<Scalar, L, 1>;
+    using ZVec = Eigen::Matrix<Scalar, Z, 1>;
+    using ZBlock = Eigen::Matrix<Scalar, Z, L>;
+    ms.llt_p.compute(cov_.template block<L, L>(B, B));
+    if (ms.llt_p.info() != Eigen::Success) return false;
+    const BlockMat chol = ms.llt_p.matrixL();
+    const auto w = SigmaWeights<Scalar, L>::make(params_.unscented);
+
+    ZVec z0 = ZVec::Zero();
+    h(mean_, z0, ok);
+    ZBlock z_plus, z_minus;
+    for (int j = 0; j < L; ++j) {
+      for (int sign = 0; sign < 2; ++sign) {
+        State sp = mean_;
+        const BlockVec d = (sign == 0 ? w.gamma : -w.gamma) * chol.col(j);
+        sp.template boxplus_block<B, L>(d);
+        ZVec zj = ZVec::Zero();
+        h(static_cast<const State&>(sp), zj, ok);
+        (sign == 0 ? z_plus : z_minus).col(j) = zj;
+      }
+    }
+    for (int b = 0; b < kBlocks; ++b) {
+      if (ok[b]) continue;
+      z0.template segment<kRows>(b * kRows).setZero();  // rows of unusable blocks stay inert
+      z_plus.template middleRows<kRows>(b * kRows).setZero();
+      z_minus.template middleRows<kRows>(b * kRows).setZero();
+    }
+    const ZBlock a = Scalar(0.5) * (z_plus - z_minus);
+    const ZBlock b = Scalar(0.5) * (z_plus + z_minus) - z0.replicate(1, L);
+    const ZVec shift = w.inv_gamma2 * b.rowwise().sum();
+    ms.z_mean = z0 + shift;
+    ms.p_zz = w.inv_gamma2 * (a * a.transpose() + b * b.transpose()) +
+              w.mean_correction * (shift * shift.transpose());
+    ms.p_bz = chol * a.transpose() / w.gamma;  // sum of w (chi - x)(z - z_mean)^T
+    return true;
+  }
+
+  // Rows of blocks not used get unit variance, no correlation and zero innovation.
+  template <int kRows, int kBlocks, class ZMat, class ZVec>
+  static void make_inert(const std::array<bool, kBlocks>& ok, ZMat& s, ZVec& innovation) {
+    for (int b = 0; b < kBlocks; ++b) {
+      if (ok[b]) continue;
+      const int r0 = b * kRows;
+      s.template middleRows<kRows>(r0).setZero();
+      s.template middleCols<kRows>(r0).setZero();
+      s.template block<kRows, kRows>(r0, r0).setIdentity();
+      innovation.template segment<kRows>(r0).setZero();
+    }
+  }
+
+  template <int B, int L, int kRows, int kBlocks>
+  FilterStatus apply_update(MeasurementSample<L, kRows * kBlocks>& ms,
+                            Eigen::Matrix<Scalar, kRows * kBlocks, kRows * kBlocks>& s,
+                            Eigen::Matrix<Scalar, kRows * kBlocks, 1>& innovation,
+                            const std::array<bool, kBlocks>& ok) {
+    constexpr int Z = kRows * kBlocks;
+    make_inert<kRows, kBlocks>(ok, s, innovation);
+    for (int b = 0; b < kBlocks; ++b)
+      if (!ok[b]) ms.p_bz.template middleCols<kRows>(b * kRows).setZero();
+    Eigen::LLT<Eigen::Matrix<Scalar, Z, Z>> llt_s(s);
+    if (llt_s.info() != Eigen::Success) return FilterStatus::kInnovationNotPositiveDefinite;
+    // P_xz for the whole state: P[:, block] P_bb^-1 P_bz (the regression carries the rest).
+    const Eigen::Matrix<Scalar, L, Z> g = ms.llt_p.solve(ms.p_bz);
+    const Eigen::Matrix<Scalar, N, Z> p_xz = cov_.template middleCols<L>(B) * g;
+    const Eigen::Matrix<Scalar, N, Z> gain = llt_s.solve(p_xz.transpose()).transpose();
+    const ErrorVector dx = gain * innovation;
+    Covariance cov_new = cov_ - gain * p_xz.transpose();
+    cov_new = Scalar(0.5) * (cov_new + cov_new.transpose());
+    if (!dx.allFinite() || !cov_new.allFinite() || !(cov_new.diagonal().array() > Scalar(0)).all())
+      return FilterStatus::kNonFinite;
+    mean_.template boxplus_block<0, N>(dx);
+    cov_ = cov_new;
+    return FilterStatus::kOk;
+  }
+
+  SigmaPointParams params_{};
+  State mean_{};
+  Covariance cov_ = Covariance::Identity();
+};
+
+inline const char* to_string(FilterStatus s) {
+  switch (s) {
+    case FilterStatus::kOk:
+      return "ok";
+    case FilterStatus::kCovarianceNotPositiveDefinite:
+      return "covariance not positive definite";
+    case FilterStatus::kInnovationNotPositiveDefinite:
+      return "innovation covariance not positive definite";
+    case FilterStatus::kNoMeasurement:
+      return "no measurement";
+    case FilterStatus::kNonFinite:
+      return "non-finite value";
+  }
+  return "unknown";
+}
+
+}  // namespace mirrorcal

@@ -1,0 +1,75 @@
+// Rotations as unit quaternions (Hamilton, as Eigen stores them) with the exponential and
+// logarithm maps that the error state uses. Header-only, fixed-size, no heap.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cmath>
+
+namespace mirrorcal::so3 {
+
+template <typename S>
+using Vec3 = Eigen::Matrix<S, 3, 1>;
+template <typename S>
+using Mat3 = Eigen::Matrix<S, 3, 3>;
+template <typename S>
+using Quat = Eigen::Quaternion<S>;
+
+// Below this angle (rad) the series forms are used; chosen so that the truncation error of the
+// series is below the scalar's epsilon (angle^4/1920 for exp in double at 1e-4 is ~5e-20).
+template <typename S>
+constexpr S small_angle() {
+  return sizeof(S) == sizeof(float) ? S(1e-2) : S(1e-4);
+}
+
+template <typename S>
+Mat3<S> hat(const Vec3<S>& w) {
+  Mat3<S> m;
+  m << S(0), -w.z(), w.y(), w.z(), S(0), -w.x(), -w.y(), w.x(), S(0);
+  return m;
+}
+
+// Exp: rotation vector -> unit quaternion.
+template <typename S>
+Quat<S> exp(const Vec3<S>& phi) {
+  const S angle2 = phi.squaredNorm();
+  const S angle = std::sqrt(angle2);
+  S w, k;  // q = (w, k * phi)
+  if (angle < small_angle<S>()) {
+    w = S(1) - angle2 / S(8);
+    k = S(0.5) - angle2 / S(48);
+  } else {
+    w = std::cos(S(0.5) * angle);
+    k = std::sin(S(0.5) * angle) / angle;
+  }
+  Quat<S> q(w, k * phi.x(), k * phi.y(), k * phi.z());
+  return q;
+}
+
+// Log: unit quaternion -> rotation vector with angle in [0, pi]. q and -q give the same result.
+template <typename S>
+Vec3<S> log(const Quat<S>& q_in) {
+  Quat<S> q = q_in;
+  if (q.w() < S(0)) q.coeffs() = -q.coeffs();
+  const Vec3<S> v = q.vec();
+  const S sin_half = v.norm();
+  if (sin_half < small_angle<S>()) {
+    // angle = 2 asin(s) ~ 2 s (1 + s^2/6); divide by w for the tan form's accuracy.
+    return (S(2) / q.w()) * (S(1) - sin_half * sin_half / (S(3) * q.w() * q.w())) * v;
+  }
+  const S angle = S(2) * std::atan2(sin_half, q.w());
+  return (angle / sin_half) * v;
+}
+
+// Right (body-frame) perturbation: q boxplus d = q * Exp(d); boxminus is its inverse.
+template <typename S>
+Quat<S> boxplus(const Quat<S>& q, const Vec3<S>& d) {
+  return (q * exp<S>(d)).normalized();
+}
+
+template <typename S>
+Vec3<S> boxminus(const Quat<S>& a, const Quat<S>& b) {
+  return log<S>(b.conjugate() * a);
+}
+
+}  // namespace mirrorcal::so3

@@ -1,0 +1,141 @@
+#include "outputs.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+
+#include "mirrorcal/estimator/calibration_filter.hpp"
+
+namespace mirrorcal::app {
+
+std::vector<ParamInfo> calibration_params(int markers, int intrinsics) {
+  constexpr double kCm = 100.0, kDeg = 180.0 / M_PI;
+  std::vector<ParamInfo> p;
+  for (const char* a : {"x", "y", "z"}) p.push_back({std::string("p_") + a, "cm", kCm});
+  for (const char* a : {"x", "y", "z"}) p.push_back({std::string("rot_") + a, "deg", kDeg});
+  for (int i = 0; i < markers; ++i)
+    for (const char* a : {"x", "y", "z"})
+      p.push_back({"f" + std::to_string(i + 1) + "_" + a, "cm", kCm});
+  const char* k[5] = {"fu", "fv", "cu", "cv", "skew"};
+  for (int j = 0; j < intrinsics; ++j) p.push_back({k[j], "px", 1.0});
+  return p;
+}
+
+namespace {
+
+using File = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
+
+File open_for_writing(const std::string& path, std::string& error) {
+  File f(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (!f) error = "cannot write " + path + ": " + std::strerror(errno);
+  return f;
+}
+
+bool finish(File& f, const std::string& path, std::string& error) {
+  const bool ok = std::ferror(f.get()) == 0 && std::fclose(f.release()) == 0;
+  if (!ok) error = "error writing " + path;
+  return ok;
+}
+
+void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* indent) {
+  for (int i = 0; i < 4; ++i)
+    std::fprintf(f, "%s- [%.12f, %.12f, %.12f, %.12f]\n", indent, t(i, 0), t(i, 1), t(i, 2),
+                 t(i, 3));
+}
+
+Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
+  const Eigen::Matrix3d r_c_b = r.q_b_c.toRotationMatrix().transpose();
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = r_c_b;
+  t.topRightCorner<3, 1>() = -r_c_b * r.p_b_c;
+  return t;
+}
+
+}  // namespace
+
+bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
+                           std::string& error) {
+  File f = open_for_writing(path, error);
+  if (!f) return false;
+  std::FILE* o = f.get();
+  std::fprintf(o, "# mirrorcal calibration, Kalibr camchain-imucam format\ncam0:\n");
+  std::fprintf(o, "  camera_model: pinhole\n");
+  std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", r.intrinsics.fu, r.intrinsics.fv,
+               r.intrinsics.cu, r.intrinsics.cv);
+  std::fprintf(o, "  intrinsics_skew: %.6f\n", r.intrinsics.skew);
+  std::fprintf(o, "  distortion_model: radtan\n  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]\n");
+  std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
+  std::fprintf(o, "  timeshift_cam_imu: 0.0\n  T_cam_imu:\n");
+  write_matrix_rows(o, t_cam_imu(r), "  ");
+  return finish(f, path, error);
+}
+
+bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error) {
+  File f = open_for_writing(path, error);
+  if (!f) return false;
+  std::FILE* o = f.get();
+  std::fprintf(o,
+               "# mirrorcal result: SI units (m, rad, px); sigma is 1-sigma, rotations as the\n"
+               "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n");
+  std::fprintf(o, "T_cam_imu:\n");
+  write_matrix_rows(o, t_cam_imu(r), "  ");
+  std::fprintf(o, "p_b_c: [%.9f, %.9f, %.9f]\n", r.p_b_c.x(), r.p_b_c.y(), r.p_b_c.z());
+  const Eigen::Matrix3d rbc = r.q_b_c.toRotationMatrix();
+  std::fprintf(o, "R_b_c:\n");
+  for (int i = 0; i < 3; ++i)
+    std::fprintf(o, "  - [%.12f, %.12f, %.12f]\n", rbc(i, 0), rbc(i, 1), rbc(i, 2));
+  std::fprintf(o, "q_b_c_wxyz: [%.12f, %.12f, %.12f, %.12f]\n", r.q_b_c.w(), r.q_b_c.x(),
+               r.q_b_c.y(), r.q_b_c.z());
+  std::fprintf(o, "features_c:\n");
+  for (const auto& m : r.markers) std::fprintf(o, "  - [%.9f, %.9f, %.9f]\n", m.x(), m.y(), m.z());
+  std::fprintf(o, "intrinsics: [%.6f, %.6f, %.6f, %.6f]\nskew: %.6f\n", r.intrinsics.fu,
+               r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv, r.intrinsics.skew);
+  std::fprintf(o, "intrinsics_estimated: %s\nresolution: [%d, %d]\n",
+               r.intrinsics_estimated ? "true" : "false", r.width, r.height);
+  std::fprintf(o, "sigma:\n");
+  for (std::size_t j = 0; j < r.params.size(); ++j)
+    std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
+  return finish(f, path, error);
+}
+
+template <class Filter>
+bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<Filter>>& rows,
+                         std::string& error) {
+  using State = typename Filter::State;
+  File f = open_for_writing(path, error);
+  if (!f) return false;
+  std::FILE* o = f.get();
+  const auto params = calibration_params(State::kMarkers, State::kIntrinsics);
+  std::fprintf(o, "#time [s],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z");
+  for (int i = 0; i < State::kMarkers; ++i)
+    for (const char* a : {"x", "y", "z"}) std::fprintf(o, ",f%d_%s [m]", i + 1, a);
+  const char* k[5] = {"fu [px]", "fv [px]", "cu [px]", "cv [px]", "skew [px]"};
+  for (int j = 0; j < State::kIntrinsics; ++j) std::fprintf(o, ",%s", k[j]);
+  for (const auto& p : params)
+    std::fprintf(o, ",sigma_%s [%s]", p.name.c_str(),
+                 p.unit == "cm"    ? "m"
+                 : p.unit == "deg" ? "rad"
+                                   : "px");
+  std::fprintf(o, "\n");
+  for (const auto& r : rows) {
+    const State& x = r.state;
+    std::fprintf(o, "%.9f,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g", double(r.t_ns) * 1e-9,
+                 double(x.p_b_c.x()), double(x.p_b_c.y()), double(x.p_b_c.z()), double(x.q_b_c.w()),
+                 double(x.q_b_c.x()), double(x.q_b_c.y()), double(x.q_b_c.z()));
+    for (int j = 0; j < 3 * State::kMarkers; ++j) std::fprintf(o, ",%.9g", double(x.markers(j)));
+    for (int j = 0; j < State::kIntrinsics; ++j) std::fprintf(o, ",%.9g", double(x.intrinsics(j)));
+    for (int j = 0; j < r.sigma.size(); ++j) std::fprintf(o, ",%.6g", r.sigma(j));
+    std::fprintf(o, "\n");
+  }
+  return finish(f, path, error);
+}
+
+template bool write_estimates_csv(const std::string&,
+                                  const std::vector<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
+                                  std::string&);
+template bool write_estimates_csv(const std::string&,
+                                  const std::vector<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
+                                  std::string&);
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,59 @@
+// Files users and other tools read (DESIGN.md, "Files users and other tools read").
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "history.hpp"
+#include "mirrorcal/estimator/mirror_model.hpp"
+
+namespace mirrorcal::app {
+
+// A final calibration, in SI units, with 1-sigma from the filter.
+struct CalibrationResult {
+  Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
+  std::vector<Eigen::Vector3d> markers;
+  Pinhole<double> intrinsics{};
+  bool intrinsics_estimated = false;
+  int width = 0, height = 0;
+  std::vector<double> sigma;  // calibration block, in calibration_params() order (SI)
+  std::vector<ParamInfo> params;
+};
+
+template <class Filter>
+CalibrationResult make_result(const Filter& f, int width, int height) {
+  using State = typename Filter::State;
+  CalibrationResult r;
+  const State& x = f.state();
+  r.p_b_c = x.p_b_c.template cast<double>();
+  r.q_b_c = x.q_b_c.template cast<double>();
+  for (int i = 0; i < State::kMarkers; ++i)
+    r.markers.push_back(x.marker(i).template cast<double>());
+  const auto k = f.intrinsics();
+  r.intrinsics = {double(k.fu), double(k.fv), double(k.cu), double(k.cv), double(k.skew)};
+  r.intrinsics_estimated = State::kIntrinsics > 0;
+  r.width = width;
+  r.height = height;
+  for (int j = State::kPbc; j < State::kDim; ++j)
+    r.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
+  r.params = calibration_params(State::kMarkers, State::kIntrinsics);
+  return r;
+}
+
+// Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's.
+bool write_camchain_imucam(const std::string& path, const CalibrationResult& r, std::string& error);
+// Everything estimated with its 1-sigma.
+bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error);
+
+// estimates.csv: time and every calibration state with its 1-sigma (SI units, rotation as the
+// quaternion q_b_c with the 1-sigma of its error vector's components).
+template <class Filter>
+bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<Filter>>& rows,
+                         std::string& error);
+
+}  // namespace mirrorcal::app

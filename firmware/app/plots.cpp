@@ -1,0 +1,115 @@
+#include "plots.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+
+namespace mirrorcal::app {
+
+namespace {
+
+struct Group {
+  std::string file, label;
+  std::vector<std::size_t> params;
+};
+
+std::vector<Group> groups_of(const std::vector<ParamInfo>& params) {
+  std::vector<Group> g = {{"error_p.png", "camera position in the IMU frame p_b_c", {}},
+                          {"error_rot.png", "camera rotation error log(R_true^T R_est)", {}},
+                          {"error_markers.png", "marker positions in the camera frame", {}},
+                          {"error_intrinsics.png", "camera intrinsics", {}}};
+  for (std::size_t j = 0; j < params.size(); ++j) {
+    const std::string& n = params[j].name;
+    const std::size_t k =
+        n.rfind("p_", 0) == 0                                                           ? 0
+        : n.rfind("rot_", 0) == 0                                                       ? 1
+        : n[0] == 'f' && n.size() > 1 && std::isdigit(static_cast<unsigned char>(n[1])) ? 2
+                                                                                        : 3;
+    g[k].params.push_back(j);
+  }
+  std::vector<Group> used;
+  for (auto& x : g)
+    if (!x.params.empty()) used.push_back(x);
+  return used;
+}
+
+}  // namespace
+
+std::vector<std::string> plot_errors(const std::string& dir, const std::string& title,
+                                     const std::vector<ParamInfo>& params,
+                                     const std::vector<ErrorSeries>& runs, double nees_lo,
+                                     double nees_hi, std::string& error) {
+  std::vector<std::string> written;
+  if (runs.empty() || runs[0].t_s.empty()) {
+    error = "nothing to plot";
+    return written;
+  }
+  // errors.dat: one block per run (gnuplot's "index"), columns t, then error of each parameter.
+  // band.dat: t, the RMS over runs of 3 sigma for each parameter, then the mean NEES.
+  {
+    std::ofstream e(dir + "/errors.dat"), b(dir + "/band.dat");
+    for (const auto& r : runs) {
+      for (std::size_t i = 0; i < r.t_s.size(); ++i) {
+        e << r.t_s[i];
+        for (std::size_t j = 0; j < params.size(); ++j) e << ' ' << r.error[j][i];
+        e << '\n';
+      }
+      e << "\n\n";
+    }
+    const std::size_t n = runs[0].t_s.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      b << runs[0].t_s[i];
+      for (std::size_t j = 0; j < params.size(); ++j) {
+        double s2 = 0;
+        for (const auto& r : runs) s2 += i < r.t_s.size() ? r.sigma[j][i] * r.sigma[j][i] : 0.0;
+        b << ' ' << 3.0 * std::sqrt(s2 / double(runs.size()));
+      }
+      double nees = 0;
+      for (const auto& r : runs) nees += i < r.nees.size() ? r.nees[i] : 0.0;
+      b << ' ' << nees / double(runs.size()) << '\n';
+    }
+    if (!e || !b) {
+      error = "cannot write plot data in " + dir;
+      return written;
+    }
+  }
+  const std::string script = dir + "/plots.gp";
+  {
+    std::ofstream g(script);
+    g << "set terminal pngcairo size 1500,900 font 'DejaVu Sans,10'\nset grid\n"
+      << "set key off\nset xlabel 'time [s]'\n";
+    const std::string line =
+        runs.size() > 1 ? "lc rgb '#a0336699' lw 0.6" : "lc rgb '#336699' lw 1.2";
+    for (const Group& grp : groups_of(params)) {
+      const std::size_t n = grp.params.size(), cols = 3, rows = (n + cols - 1) / cols;
+      g << "set output '" << dir << "/" << grp.file << "'\n"
+        << "set multiplot layout " << rows << "," << cols << " title '" << title << ": "
+        << grp.label << " error and +-3 sigma'\n";
+      for (std::size_t j : grp.params) {
+        const std::size_t c = j + 2;  // 1-based column in both files
+        g << "set title '" << params[j].name << "'\nset ylabel '" << params[j].unit << "'\n"
+          << "plot '" << dir << "/errors.dat' using 1:" << c << " with lines " << line << ", '"
+          << dir << "/band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
+          << ", '' using 1:(-$" << c << ") with lines lc rgb '#cc2222' lw 1.5\n";
+      }
+      g << "unset multiplot\n";
+      written.push_back(dir + "/" + grp.file);
+    }
+    const std::size_t nc = params.size() + 2;
+    g << "set output '" << dir << "/nees.png'\nset terminal pngcairo size 900,500\n"
+      << "set title 'NEES of the " << params.size() << " calibration states, mean over "
+      << runs.size() << " run(s), with its 95 % interval'\nset ylabel 'NEES'\nset logscale y\n"
+      << "plot '" << dir << "/band.dat' using 1:" << nc << " with lines lc rgb '#336699' lw 1.5, "
+      << nees_lo << " lc rgb '#cc2222' dt 2, " << nees_hi << " lc rgb '#cc2222' dt 2\n";
+    written.push_back(dir + "/nees.png");
+  }
+  const std::string cmd = "gnuplot '" + script + "' 2>'" + dir + "/gnuplot.log'";
+  if (std::system(cmd.c_str()) != 0) {
+    error = "gnuplot failed or is not installed (see " + dir + "/gnuplot.log); data left in " + dir;
+    written.clear();
+  }
+  return written;
+}
+
+}  // namespace mirrorcal::app

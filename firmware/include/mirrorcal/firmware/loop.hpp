@@ -1,0 +1,88 @@
+// The deterministic calibration loop, the same code on the board and on the host: it takes IMU
+// samples and marker frames in timestamp order from the HAL, propagates the filter to each frame's
+// time, updates, and publishes the estimate. Nothing here allocates after construction.
+#pragma once
+
+#include <cstdint>
+
+#include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/hal/sources.hpp"
+
+namespace mirrorcal::firmware {
+
+struct LoopConfig {
+  std::int64_t imu_period_ns = 5'000'000;  // nominal IMU period (200 Hz)
+  // An interval longer than gap_periods nominal periods is an IMU gap: counted, and propagated
+  // across in steps of one nominal period on linearly interpolated samples.
+  double gap_periods = 2.5;
+};
+
+// What the loop met on its streams; nothing is dropped without being counted here.
+struct LoopCounters {
+  std::uint64_t imu_samples = 0;
+  std::uint64_t imu_out_of_order = 0;  // samples not after the previous one: dropped
+  std::uint64_t imu_gaps = 0;
+  std::uint64_t frames = 0;  // frames used in an update attempt
+  std::uint64_t frames_without_markers = 0;
+  std::uint64_t frames_before_filter = 0;  // frames older than the filter's time: skipped
+  std::uint64_t frames_after_imu = 0;      // frames still pending when the IMU stream ended
+  std::uint64_t filter_failures = 0;       // predicts or updates refused with a numerical status
+};
+
+enum class LoopEnd : std::uint8_t { kEndOfStream, kImuError, kMarkerError };
+
+// Receives the estimate after every frame and at the end of the run.
+template <class Filter>
+class EstimateSink {
+ public:
+  virtual ~EstimateSink() = default;
+  virtual void publish(std::int64_t t_ns, const Filter& filter) = 0;
+};
+
+template <typename S, int M, int NK>
+class CalibrationLoop {
+ public:
+  using Filter = CalibrationFilter<S, M, NK>;
+
+  CalibrationLoop(Filter& filter, hal::ImuSource& imu, hal::MarkerSource<M>& markers,
+                  const LoopConfig& config, EstimateSink<Filter>* sink = nullptr)
+      : filter_(filter), imu_(imu), markers_(markers), config_(config), sink_(sink) {}
+
+  // Processes one IMU sample and every frame it completes. False once the IMU stream has ended
+  // or a source failed (end() says which).
+  bool step();
+  // Counts what is left pending and publishes the final estimate.
+  void finish();
+  // Steps until the end of the IMU stream, then finishes.
+  LoopEnd run();
+
+  const LoopCounters& counters() const { return counters_; }
+  LoopEnd end() const { return end_; }
+  std::int64_t time_ns() const { return last_.t_ns; }
+
+ private:
+  void propagate_to(const ImuSample& next);
+  void apply_frame(const MarkerFrame<M>& frame);
+
+  Filter& filter_;
+  hal::ImuSource& imu_;
+  hal::MarkerSource<M>& markers_;
+  LoopConfig config_;
+  EstimateSink<Filter>* sink_;
+
+  LoopCounters counters_{};
+  LoopEnd end_ = LoopEnd::kEndOfStream;
+  bool started_ = false;
+  bool markers_ended_ = false;
+  ImuSample last_{};  // the IMU sample at the filter's current time (possibly interpolated)
+  MarkerFrame<M> pending_{};
+  bool pending_valid_ = false;
+};
+
+// The sample at time t on the straight line between a and b (a.t_ns <= t <= b.t_ns).
+ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns);
+
+extern template class CalibrationLoop<double, 3, 0>;
+extern template class CalibrationLoop<double, 3, 5>;
+
+}  // namespace mirrorcal::firmware

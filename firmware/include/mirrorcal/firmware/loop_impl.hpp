@@ -1,0 +1,101 @@
+// Definitions of CalibrationLoop; included only where a configuration is instantiated.
+#pragma once
+
+#include "mirrorcal/firmware/loop.hpp"
+
+namespace mirrorcal::firmware {
+
+template <typename S, int M, int NK>
+void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
+  const std::int64_t span = next.t_ns - last_.t_ns;
+  if (span <= 0) return;
+  const auto gap_limit =
+      static_cast<std::int64_t>(config_.gap_periods * static_cast<double>(config_.imu_period_ns));
+  if (span > gap_limit) {
+    ++counters_.imu_gaps;
+    // Step across the gap one nominal period at a time so the integration stays second order.
+    while (next.t_ns - last_.t_ns > config_.imu_period_ns) {
+      const ImuSample mid = interpolate(last_, next, last_.t_ns + config_.imu_period_ns);
+      if (filter_.predict(last_, mid) != FilterStatus::kOk) ++counters_.filter_failures;
+      last_ = mid;
+    }
+  }
+  if (filter_.predict(last_, next) != FilterStatus::kOk) ++counters_.filter_failures;
+  last_ = next;
+}
+
+template <typename S, int M, int NK>
+void CalibrationLoop<S, M, NK>::apply_frame(const MarkerFrame<M>& frame) {
+  ++counters_.frames;
+  const UpdateResult r = filter_.update(frame);
+  if (r.status == FilterStatus::kNoMeasurement) {
+    ++counters_.frames_without_markers;
+  } else if (r.status != FilterStatus::kOk) {
+    ++counters_.filter_failures;
+  }
+  if (sink_ != nullptr) sink_->publish(frame.t_ns, filter_);
+}
+
+template <typename S, int M, int NK>
+bool CalibrationLoop<S, M, NK>::step() {
+  ImuSample sample;
+  const hal::SourceStatus st = imu_.next(sample);
+  if (st != hal::SourceStatus::kOk) {
+    end_ = st == hal::SourceStatus::kEndOfStream ? LoopEnd::kEndOfStream : LoopEnd::kImuError;
+    return false;
+  }
+  ++counters_.imu_samples;
+  if (!started_) {  // the filter's prior holds at the first sample's time
+    started_ = true;
+    last_ = sample;
+    return true;
+  }
+  if (sample.t_ns <= last_.t_ns) {
+    ++counters_.imu_out_of_order;
+    return true;
+  }
+  // Every frame up to this sample's time: propagate to the frame, update, go on.
+  for (;;) {
+    if (!pending_valid_) {
+      if (markers_ended_) break;
+      const hal::SourceStatus ms = markers_.poll(pending_);
+      if (ms == hal::SourceStatus::kEndOfStream) {
+        markers_ended_ = true;
+        break;
+      }
+      if (ms == hal::SourceStatus::kError) {
+        end_ = LoopEnd::kMarkerError;
+        return false;
+      }
+      if (ms != hal::SourceStatus::kOk) break;
+      pending_valid_ = true;
+    }
+    if (pending_.t_ns > sample.t_ns) break;  // the IMU has not reached it yet
+    pending_valid_ = false;
+    if (pending_.t_ns < last_.t_ns) {
+      ++counters_.frames_before_filter;
+      continue;
+    }
+    propagate_to(interpolate(last_, sample, pending_.t_ns));
+    apply_frame(pending_);
+  }
+  propagate_to(sample);
+  return true;
+}
+
+template <typename S, int M, int NK>
+void CalibrationLoop<S, M, NK>::finish() {
+  if (pending_valid_) ++counters_.frames_after_imu;
+  pending_valid_ = false;
+  if (sink_ != nullptr) sink_->publish(last_.t_ns, filter_);
+}
+
+template <typename S, int M, int NK>
+LoopEnd CalibrationLoop<S, M, NK>::run() {
+  while (step()) {
+  }
+  finish();
+  return end_;
+}
+
+}  // namespace mirrorcal::firmware

@@ -1,0 +1,18 @@
+#include "mirrorcal/firmware/loop_impl.hpp"
+
+namespace mirrorcal::firmware {
+
+ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns) {
+  if (b.t_ns == a.t_ns) return b;
+  const double f = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+  ImuSample s;
+  s.t_ns = t_ns;
+  s.gyro = a.gyro + f * (b.gyro - a.gyro);
+  s.accel = a.accel + f * (b.accel - a.accel);
+  return s;
+}
+
+template class CalibrationLoop<double, 3, 0>;
+template class CalibrationLoop<double, 3, 5>;
+
+}  // namespace mirrorcal::firmware

@@ -1,0 +1,45 @@
+// What the loop sees of the hardware: a clock, a stream of IMU samples, and a stream of marker
+// observations (detected in frames by a driver, or synthesised by the simulator). Implemented by
+// drivers/ on the board and sim_host/ on the host; no Linux headers here.
+#pragma once
+
+#include <cstdint>
+
+#include "mirrorcal/estimator/mirror_model.hpp"
+
+namespace mirrorcal::hal {
+
+enum class SourceStatus : std::uint8_t {
+  kOk,           // an item was delivered
+  kNotReady,     // nothing yet (non-blocking sources only)
+  kEndOfStream,  // the source is exhausted (a recording ended, the simulation finished)
+  kError,        // the device failed; the source says why through error()
+};
+
+// The loop's time base: CLOCK_MONOTONIC on the board, simulated time on the host.
+class Clock {
+ public:
+  virtual ~Clock() = default;
+  virtual std::int64_t now_ns() = 0;
+};
+
+// IMU samples in timestamp order. next() blocks until a sample arrives or the stream ends.
+class ImuSource {
+ public:
+  virtual ~ImuSource() = default;
+  virtual SourceStatus next(ImuSample& sample) = 0;
+  virtual const char* error() const { return ""; }
+};
+
+// Marker observations of each frame, in timestamp order. poll() does not block: it returns the
+// next frame if one is available, kNotReady otherwise. A frame may be delivered before the IMU
+// has reached its timestamp; the loop holds it until it has.
+template <int M>
+class MarkerSource {
+ public:
+  virtual ~MarkerSource() = default;
+  virtual SourceStatus poll(MarkerFrame<M>& frame) = 0;
+  virtual const char* error() const { return ""; }
+};
+
+}  // namespace mirrorcal::hal

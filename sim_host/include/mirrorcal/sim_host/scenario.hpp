@@ -1,0 +1,91 @@
+// A simulated rig in front of a plane mirror: what is true (rig geometry, sensors, motion) and what
+// the user claims to know beforehand (priors with 1-sigma).
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "mirrorcal/estimator/mirror_model.hpp"
+
+namespace mirrorcal::sim {
+
+// The rig: camera pose in the IMU frame, markers in the camera frame, and the camera.
+struct Rig {
+  Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
+  std::vector<Eigen::Vector3d> markers;  // pi_i^c (m)
+  Pinhole<double> intrinsics{};
+  // The image: pixel coordinates u in [u_min, u_min + width), v in [v_min, v_min + height).
+  int width = 640, height = 480;
+  double u_min = 0.0, v_min = 0.0;
+};
+
+// 1-sigma of what the user knows before calibrating (SI units, radians).
+struct Priors {
+  double p_b_c = 0.01;
+  double rot_b_c = 2.0 * M_PI / 180.0;  // per axis of the rotation error vector
+  double marker = 0.10;
+  std::array<double, 5> intrinsics{100.0, 100.0, 100.0, 100.0, 100.0};  // fu fv cu cv skew (px)
+  double position = 0.02;                                               // IMU position in n (m)
+  double velocity = 0.05;                                               // m/s
+  double attitude = 1.0 * M_PI / 180.0;                                 // per axis (rad)
+  double accel_bias = 0.03;  // m/s^2; the true bias of each run is drawn with this sigma too
+  double gyro_bias = 0.002;  // rad/s; likewise
+};
+
+// One sine term A sin(2 pi f t + phase).
+struct Sine {
+  double amplitude = 0.0;
+  double freq_hz = 0.0;
+  double phase = 0.0;
+};
+
+// Smooth motion in front of the mirror: IMU position p0 + sum of sines per axis of n, attitude
+// R_n_b = R0 Rz(c(t)) Ry(b(t)) Rx(a(t)) with the angles a, b, c (about the body's axes) sums of
+// sines. Everything is analytic, so the IMU synthesised from it is exact.
+struct Motion {
+  Eigen::Vector3d p0 = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q0 = Eigen::Quaterniond::Identity();
+  std::array<std::vector<Sine>, 3> position;  // x, y, z of n (m)
+  std::array<std::vector<Sine>, 3> angles;    // about body x, y, z (rad)
+};
+
+struct Scenario {
+  std::string name;
+  Eigen::Vector3d gravity_n{0.0, -9.81, 0.0};
+  ImuNoise imu{};  // the true noise; the filter is told the same
+  double imu_rate_hz = 200.0;
+  double camera_rate_hz = 20.0;
+  double camera_offset_s = 0.0025;  // frames fall between IMU samples
+  double duration_s = 60.0;
+  double pixel_sigma = 1.0;
+  Rig truth;
+  Priors priors;
+  Motion motion;
+};
+
+// The paper's Tables I-III set-up: p_b_c = (1, -5, 10) cm, R_b_c = Rz(-90) Ry(0) Rx(-90) deg
+// (the paper's three angles, in its column order, read as rotations about x, y and z composed
+// z-y-x), markers (2,-3,-3), (5,4,-3), (-8,6,1) cm, fu = fv = 833.33, cu = 2, cv = 8, skew = 3 in
+// the paper's centred image coordinates (a 640 x 480 image spanning [-320, 320) x [-240, 240)),
+// a wall mirror with y up, ADIS16448 noise (EuRoC imu0), 1 px, 200 Hz IMU, 20 Hz camera, 60 s.
+Scenario paper_scenario();
+
+// Scenario by name ("paper"); false if unknown.
+bool scenario_by_name(const std::string& name, Scenario& out);
+
+// The true IMU state at time t, with its derivatives, from the analytic motion.
+struct Kinematics {
+  Eigen::Vector3d p, v, a;  // in n
+  Eigen::Quaterniond q_n_b;
+  Eigen::Vector3d omega_b;  // body rate
+};
+Kinematics kinematics(const Motion& m, double t);
+
+// Rotation about a coordinate axis (0 = x, 1 = y, 2 = z) by angle rad.
+Eigen::Matrix3d axis_rotation(int axis, double angle);
+
+}  // namespace mirrorcal::sim

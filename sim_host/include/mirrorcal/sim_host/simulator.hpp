@@ -1,0 +1,122 @@
+// Sensor data of one simulated run, and HAL sources that replay it to the loop.
+#pragma once
+
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "mirrorcal/estimator/prior.hpp"
+#include "mirrorcal/hal/sources.hpp"
+#include "mirrorcal/sim_host/scenario.hpp"
+
+namespace mirrorcal::sim {
+
+struct ObservedMarker {
+  int id = 0;
+  double u = 0.0, v = 0.0;
+};
+
+struct ObservedFrame {
+  std::int64_t t_ns = 0;
+  std::vector<ObservedMarker> markers;  // the reflections in the image, any subset
+};
+
+struct SimData {
+  std::vector<ImuSample> imu;
+  std::vector<ObservedFrame> frames;
+  Eigen::Vector3d b_a0 = Eigen::Vector3d::Zero(), b_g0 = Eigen::Vector3d::Zero();  // true, at t=0
+  std::uint64_t markers_out_of_image = 0;  // reflections that fell outside the image or behind
+};
+
+// Synthesises the IMU stream (DESIGN.md's model: white noise and bias random walks from the
+// Kalibr densities) and the marker reflections (eq. 11 through the true camera, pixel noise,
+// dropped when out of the image or not in front of the camera). Deterministic in seed.
+SimData simulate(const Scenario& s, std::uint64_t seed);
+
+// The true pixel of marker i at the given true IMU pose; false if not visible in the image.
+bool true_pixel(const Scenario& s, const Eigen::Vector3d& p_n_b, const Eigen::Quaterniond& q_n_b,
+                int marker, Eigen::Vector2d& uv);
+
+// Independent streams for the parts of a run, derived from one seed (SplitMix64).
+std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream);
+
+// A prior as a user would give it: each guess is the truth plus a draw from its 1-sigma.
+template <int M>
+Prior<M> draw_prior(const Scenario& s, const SimData& data, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n01;
+  const auto noise3 = [&](double sigma) {
+    const double x = n01(rng), y = n01(rng), z = n01(rng);
+    return Eigen::Vector3d(sigma * x, sigma * y, sigma * z);
+  };
+  const Priors& ps = s.priors;
+  const Kinematics k0 = kinematics(s.motion, 0.0);
+  Prior<M> pr;
+  pr.p = k0.p + noise3(ps.position);
+  pr.v = k0.v + noise3(ps.velocity);
+  pr.q_n_b = so3::boxplus<double>(k0.q_n_b, noise3(ps.attitude));
+  pr.b_a = Eigen::Vector3d::Zero();  // the biases are drawn in the truth; the guess is zero
+  pr.b_g = Eigen::Vector3d::Zero();
+  pr.p_b_c = s.truth.p_b_c + noise3(ps.p_b_c);
+  pr.q_b_c = so3::boxplus<double>(s.truth.q_b_c, noise3(ps.rot_b_c));
+  for (int i = 0; i < M; ++i) {
+    pr.markers[static_cast<std::size_t>(i)] =
+        s.truth.markers[static_cast<std::size_t>(i)] + noise3(ps.marker);
+    pr.sigma_markers[static_cast<std::size_t>(i)] = Eigen::Vector3d::Constant(ps.marker);
+  }
+  const Pinhole<double>& t = s.truth.intrinsics;
+  const double guess[5] = {t.fu + ps.intrinsics[0] * n01(rng), t.fv + ps.intrinsics[1] * n01(rng),
+                           t.cu + ps.intrinsics[2] * n01(rng), t.cv + ps.intrinsics[3] * n01(rng),
+                           t.skew + ps.intrinsics[4] * n01(rng)};
+  pr.intrinsics = {guess[0], guess[1], guess[2], guess[3], guess[4]};
+  pr.sigma_p.setConstant(ps.position);
+  pr.sigma_v.setConstant(ps.velocity);
+  pr.sigma_theta.setConstant(ps.attitude);
+  pr.sigma_b_a.setConstant(ps.accel_bias);
+  pr.sigma_b_g.setConstant(ps.gyro_bias);
+  pr.sigma_p_b_c.setConstant(ps.p_b_c);
+  pr.sigma_rot_b_c.setConstant(ps.rot_b_c);
+  pr.sigma_intrinsics = ps.intrinsics;
+  (void)data;
+  return pr;
+}
+
+// Replays recorded or simulated IMU samples.
+class VectorImuSource final : public hal::ImuSource {
+ public:
+  explicit VectorImuSource(const std::vector<ImuSample>& samples) : samples_(samples) {}
+  hal::SourceStatus next(ImuSample& sample) override {
+    if (next_ >= samples_.size()) return hal::SourceStatus::kEndOfStream;
+    sample = samples_[next_++];
+    return hal::SourceStatus::kOk;
+  }
+
+ private:
+  const std::vector<ImuSample>& samples_;
+  std::size_t next_ = 0;
+};
+
+// Replays observed frames; markers with an id at or above M are ignored (the loader refuses them).
+template <int M>
+class VectorMarkerSource final : public hal::MarkerSource<M> {
+ public:
+  explicit VectorMarkerSource(const std::vector<ObservedFrame>& frames) : frames_(frames) {}
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override {
+    if (next_ >= frames_.size()) return hal::SourceStatus::kEndOfStream;
+    const ObservedFrame& f = frames_[next_++];
+    frame.t_ns = f.t_ns;
+    frame.seen.fill(false);
+    for (const ObservedMarker& m : f.markers) {
+      if (m.id < 0 || m.id >= M) continue;
+      frame.seen[static_cast<std::size_t>(m.id)] = true;
+      frame.uv[static_cast<std::size_t>(m.id)] = Eigen::Vector2d(m.u, m.v);
+    }
+    return hal::SourceStatus::kOk;
+  }
+
+ private:
+  const std::vector<ObservedFrame>& frames_;
+  std::size_t next_ = 0;
+};
+
+}  // namespace mirrorcal::sim

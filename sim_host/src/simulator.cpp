@@ -1,0 +1,86 @@
+#include "mirrorcal/sim_host/simulator.hpp"
+
+#include <cmath>
+
+namespace mirrorcal::sim {
+
+std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream) {
+  std::uint64_t z = seed + 0x9E3779B97F4A7C15ull * (stream + 1);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+bool true_pixel(const Scenario& s, const Eigen::Vector3d& p_n_b, const Eigen::Quaterniond& q_n_b,
+                int marker, Eigen::Vector2d& uv) {
+  const Rig& rig = s.truth;
+  const Eigen::Matrix3d r_n_b = q_n_b.toRotationMatrix();
+  const Eigen::Matrix3d r_n_c = r_n_b * rig.q_b_c.toRotationMatrix();
+  const Eigen::Vector3d p_n_c = p_n_b + r_n_b * rig.p_b_c;
+  const Eigen::Vector3d& pi = rig.markers[static_cast<std::size_t>(marker)];
+  // The marker itself must be on the reflective side, else the mirror shows nothing.
+  if ((r_n_c * pi + p_n_c).z() <= 0.0 || p_n_c.z() <= 0.0) return false;
+  if (!project<double>(rig.intrinsics, mirror_image<double>(r_n_c, p_n_c, pi), uv)) return false;
+  return uv.x() >= rig.u_min && uv.x() < rig.u_min + rig.width && uv.y() >= rig.v_min &&
+         uv.y() < rig.v_min + rig.height;
+}
+
+SimData simulate(const Scenario& s, std::uint64_t seed) {
+  SimData d;
+  std::mt19937_64 rng_imu(derive_seed(seed, 0)), rng_cam(derive_seed(seed, 1)),
+      rng_bias(derive_seed(seed, 2));
+  std::normal_distribution<double> n01;
+  const auto noise3 = [&](std::mt19937_64& rng) {
+    const double x = n01(rng), y = n01(rng), z = n01(rng);
+    return Eigen::Vector3d(x, y, z);
+  };
+
+  // IMU: discrete white noise sigma = density sqrt(rate), bias step sigma = walk / sqrt(rate).
+  const double rate = s.imu_rate_hz;
+  const double sg = s.imu.gyro_noise_density * std::sqrt(rate);
+  const double sa = s.imu.accel_noise_density * std::sqrt(rate);
+  const double sbg = s.imu.gyro_random_walk / std::sqrt(rate);
+  const double sba = s.imu.accel_random_walk / std::sqrt(rate);
+  d.b_a0 = noise3(rng_bias) * s.priors.accel_bias;
+  d.b_g0 = noise3(rng_bias) * s.priors.gyro_bias;
+  Eigen::Vector3d b_a = d.b_a0, b_g = d.b_g0;
+  const auto n_imu = static_cast<std::size_t>(std::llround(s.duration_s * rate)) + 1;
+  d.imu.reserve(n_imu);
+  for (std::size_t k = 0; k < n_imu; ++k) {
+    const std::int64_t t_ns = std::llround(static_cast<double>(k) * 1e9 / rate);
+    const Kinematics kin = kinematics(s.motion, static_cast<double>(t_ns) * 1e-9);
+    ImuSample smp;
+    smp.t_ns = t_ns;
+    smp.gyro = kin.omega_b + b_g + sg * noise3(rng_imu);
+    smp.accel = kin.q_n_b.conjugate() * (kin.a - s.gravity_n) + b_a + sa * noise3(rng_imu);
+    d.imu.push_back(smp);
+    b_g += sbg * noise3(rng_bias);
+    b_a += sba * noise3(rng_bias);
+  }
+
+  // Camera: frames at offset + j / rate, while the IMU covers them.
+  const auto n_frames =
+      static_cast<std::size_t>(std::floor((s.duration_s - s.camera_offset_s) * s.camera_rate_hz)) +
+      1;
+  d.frames.reserve(n_frames);
+  const int m = static_cast<int>(s.truth.markers.size());
+  for (std::size_t j = 0; j < n_frames; ++j) {
+    const double t = s.camera_offset_s + static_cast<double>(j) / s.camera_rate_hz;
+    const Kinematics kin = kinematics(s.motion, t);
+    ObservedFrame f;
+    f.t_ns = std::llround(t * 1e9);
+    for (int i = 0; i < m; ++i) {
+      Eigen::Vector2d uv;
+      const double du = n01(rng_cam), dv = n01(rng_cam);  // drawn always: streams stay aligned
+      if (!true_pixel(s, kin.p, kin.q_n_b, i, uv)) {
+        ++d.markers_out_of_image;
+        continue;
+      }
+      f.markers.push_back({i, uv.x() + s.pixel_sigma * du, uv.y() + s.pixel_sigma * dv});
+    }
+    d.frames.push_back(std::move(f));
+  }
+  return d;
+}
+
+}  // namespace mirrorcal::sim

@@ -1,0 +1,172 @@
+// The deterministic loop: what real streams do (frames between IMU samples, frames without
+// markers, IMU gaps, samples out of order, frames before the filter's time), and bit-identical
+// replays of the simulated rig.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <vector>
+
+#include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
+#include "sim_run.hpp"
+
+namespace mc = mirrorcal;
+using Filter = mc::CalibrationFilter<double, 3, 0>;
+using Loop = mc::firmware::CalibrationLoop<double, 3, 0>;
+
+namespace {
+
+// Records when the loop publishes, and how many predicts the filter had done by then.
+class RecordingSink final : public mc::firmware::EstimateSink<Filter> {
+ public:
+  void publish(std::int64_t t_ns, const Filter& f) override {
+    times.push_back(t_ns);
+    predicts.push_back(f.counters().predicts);
+  }
+  std::vector<std::int64_t> times;
+  std::vector<std::uint64_t> predicts;
+};
+
+// A filter at rest in front of the mirror, as the paper scenario starts.
+Filter make_filter() {
+  const mc::sim::Scenario s = mc::sim::paper_scenario();
+  Filter f(mc::app::scenario_config(s));
+  const mc::sim::SimData d = mc::sim::simulate(s, 7);
+  const auto prior = mc::sim::draw_prior<3>(s, d, 7);
+  Filter::State x;
+  Filter::Covariance p;
+  mc::initialise(prior, x, p);
+  f.reset(x, p);
+  return f;
+}
+
+std::vector<mc::ImuSample> imu_at(const std::vector<std::int64_t>& times_ns) {
+  std::vector<mc::ImuSample> v;
+  for (std::int64_t t : times_ns) {
+    mc::ImuSample s;
+    s.t_ns = t;
+    s.accel = Eigen::Vector3d(0.0, 0.0, 9.81);  // at rest, body z up along -g
+    v.push_back(s);
+  }
+  return v;
+}
+
+constexpr std::int64_t kMs = 1'000'000;
+
+}  // namespace
+
+TEST(Loop, FrameBetweenImuSamplesIsReachedByPropagationToItsTime) {
+  Filter f = make_filter();
+  const auto imu = imu_at({0, 5 * kMs, 10 * kMs, 15 * kMs, 20 * kMs});
+  std::vector<mc::sim::ObservedFrame> frames(1);
+  frames[0].t_ns = 12 * kMs + 500'000;  // between the samples at 10 and 15 ms, no markers
+  mc::sim::VectorImuSource is(imu);
+  mc::sim::VectorMarkerSource<3> ms(frames);
+  RecordingSink sink;
+  Loop loop(f, is, ms, {}, &sink);
+  EXPECT_EQ(loop.run(), mc::firmware::LoopEnd::kEndOfStream);
+  ASSERT_EQ(sink.times.size(), 2u);  // the frame, then the final estimate
+  EXPECT_EQ(sink.times[0], frames[0].t_ns);
+  EXPECT_EQ(sink.predicts[0], 3u);  // 0-5, 5-10, 10-12.5 ms
+  EXPECT_EQ(sink.times[1], 20 * kMs);
+  EXPECT_EQ(f.counters().predicts, 5u);  // and 12.5-15, 15-20
+  EXPECT_EQ(loop.counters().frames, 1u);
+  EXPECT_EQ(loop.counters().frames_without_markers, 1u);
+}
+
+TEST(Loop, ImuGapIsCountedAndCrossedInNominalSteps) {
+  Filter f = make_filter();
+  const auto imu = imu_at({0, 5 * kMs, 55 * kMs, 60 * kMs});  // 50 ms without samples
+  const std::vector<mc::sim::ObservedFrame> frames;
+  mc::sim::VectorImuSource is(imu);
+  mc::sim::VectorMarkerSource<3> ms(frames);
+  Loop loop(f, is, ms, {});
+  loop.run();
+  EXPECT_EQ(loop.counters().imu_gaps, 1u);
+  EXPECT_EQ(f.counters().predicts, 1u + 10u + 1u);
+  EXPECT_TRUE(f.state().p.allFinite());
+}
+
+TEST(Loop, OutOfOrderAndRepeatedSamplesAreDroppedAndCounted) {
+  Filter f = make_filter();
+  const auto imu = imu_at({0, 5 * kMs, 5 * kMs, 3 * kMs, 10 * kMs});
+  const std::vector<mc::sim::ObservedFrame> frames;
+  mc::sim::VectorImuSource is(imu);
+  mc::sim::VectorMarkerSource<3> ms(frames);
+  Loop loop(f, is, ms, {});
+  loop.run();
+  EXPECT_EQ(loop.counters().imu_out_of_order, 2u);
+  EXPECT_EQ(f.counters().predicts, 2u);
+  EXPECT_EQ(loop.time_ns(), 10 * kMs);
+}
+
+TEST(Loop, FramesBeforeTheFilterOrAfterTheImuAreSkippedAndCounted) {
+  Filter f = make_filter();
+  const auto imu = imu_at({10 * kMs, 15 * kMs, 20 * kMs});
+  std::vector<mc::sim::ObservedFrame> frames(3);
+  frames[0].t_ns = 2 * kMs;   // before the first IMU sample
+  frames[1].t_ns = 15 * kMs;  // exactly on a sample
+  frames[2].t_ns = 30 * kMs;  // after the IMU stream ends
+  mc::sim::VectorImuSource is(imu);
+  mc::sim::VectorMarkerSource<3> ms(frames);
+  Loop loop(f, is, ms, {});
+  loop.run();
+  EXPECT_EQ(loop.counters().frames_before_filter, 1u);
+  EXPECT_EQ(loop.counters().frames, 1u);
+  EXPECT_EQ(loop.counters().frames_after_imu, 1u);
+}
+
+TEST(Loop, MarkerMissingForAWhileIsSurvived) {
+  mc::sim::Scenario s = mc::sim::paper_scenario();
+  s.duration_s = 6.0;
+  mc::sim::SimData d = mc::sim::simulate(s, 3);
+  // Marker 2 disappears for two seconds, then every marker for half a second.
+  for (auto& fr : d.frames) {
+    const double t = double(fr.t_ns) * 1e-9;
+    std::vector<mc::sim::ObservedMarker> kept;
+    for (const auto& m : fr.markers)
+      if (!((t > 1.0 && t < 3.0 && m.id == 1) || (t > 4.0 && t < 4.5))) kept.push_back(m);
+    fr.markers = kept;
+  }
+  Filter f(mc::app::scenario_config(s));
+  Filter::State x;
+  Filter::Covariance p;
+  auto prior = mc::sim::draw_prior<3>(s, d, 3);
+  mc::initialise(prior, x, p);
+  f.reset(x, p);
+  mc::sim::VectorImuSource is(d.imu);
+  mc::sim::VectorMarkerSource<3> ms(d.frames);
+  Loop loop(f, is, ms, {});
+  loop.run();
+  EXPECT_EQ(loop.counters().frames_without_markers, 10u);  // 4.0 < t < 4.5 at 20 Hz
+  EXPECT_EQ(loop.counters().filter_failures, 0u);
+  EXPECT_TRUE(f.state().markers.allFinite());
+  // The marker that was missing is still estimated, and its uncertainty shrank from the prior.
+  EXPECT_LT(std::sqrt(f.covariance()(Filter::State::kPi + 3, Filter::State::kPi + 3)), 0.05);
+}
+
+TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
+  mc::sim::Scenario s = mc::sim::paper_scenario();
+  s.duration_s = 10.0;
+  const auto a = mc::app::run_simulation(s, 11);
+  const auto b = mc::app::run_simulation(s, 11);
+  ASSERT_EQ(a.history.size(), b.history.size());
+  for (std::size_t i = 0; i < a.history.size(); ++i) {
+    const auto& ra = a.history[i];
+    const auto& rb = b.history[i];
+    ASSERT_EQ(ra.t_ns, rb.t_ns);
+    ASSERT_EQ(0, std::memcmp(ra.state.markers.data(), rb.state.markers.data(), sizeof(double) * 9))
+        << i;
+    ASSERT_EQ(0, std::memcmp(ra.state.p_b_c.data(), rb.state.p_b_c.data(), sizeof(double) * 3))
+        << i;
+    ASSERT_EQ(0, std::memcmp(ra.state.q_b_c.coeffs().data(), rb.state.q_b_c.coeffs().data(),
+                             sizeof(double) * 4))
+        << i;
+    ASSERT_EQ(0, std::memcmp(ra.sigma.data(), rb.sigma.data(), sizeof(double) * ra.sigma.size()))
+        << i;
+  }
+  // A different seed gives a different run: the comparison above can fail.
+  const auto c = mc::app::run_simulation(s, 12);
+  EXPECT_NE(0, std::memcmp(a.history.back().state.markers.data(),
+                           c.history.back().state.markers.data(), sizeof(double) * 9));
+}
