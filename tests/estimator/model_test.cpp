@@ -1,0 +1,342 @@
+// The models under the filter: SO(3) maps, the mirror image (paper eq. 11), the pinhole
+// projection, the error-state manifold of MirrorState and the IMU integration.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/estimator/so3.hpp"
+#include "test_support.hpp"
+
+namespace mirrorcal {
+namespace {
+
+using test::kDeg;
+using test::kPi;
+
+Eigen::Vector3d random_unit(std::mt19937_64& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::Vector3d v(n(rng), n(rng), n(rng));
+  return v.normalized();
+}
+
+Eigen::Quaterniond random_rotation(std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> a(0.0, kPi);
+  return test::rotvec(a(rng) * random_unit(rng));
+}
+
+// Angle between two rotations, independent of so3::log.
+double angle_between(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
+  return Eigen::AngleAxisd(a.conjugate() * b).angle();
+}
+
+// ---------------------------------------------------------------------------------------------
+// so3
+
+TEST(So3, ExpMatchesAngleAxis) {
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<double> a(0.0, kPi);
+  for (int i = 0; i < 1000; ++i) {
+    const Eigen::Vector3d phi = a(rng) * random_unit(rng);
+    const Eigen::Quaterniond q = so3::exp<double>(phi);
+    EXPECT_NEAR(q.norm(), 1.0, 1e-15);
+    EXPECT_LT(angle_between(q, test::rotvec(phi)), 1e-14);
+  }
+  // Tiny angles, below and above the series threshold: the quaternion is (1 - a^2/8, phi/2 ...).
+  for (double angle : {1e-14, 1e-10, 1e-6, 0.99e-4, 1.01e-4, 1e-3}) {
+    const Eigen::Vector3d phi = angle * Eigen::Vector3d(1, -2, 2) / 3.0;
+    const Eigen::Quaterniond q = so3::exp<double>(phi);
+    EXPECT_NEAR(q.w(), std::cos(0.5 * angle), 1e-16);
+    EXPECT_LT((q.vec() - std::sin(0.5 * angle) * phi / angle).norm(), 1e-16 * angle + 1e-300);
+  }
+}
+
+TEST(So3, LogInvertsExpRandomAndTinyAndNearPi) {
+  std::mt19937_64 rng(2);
+  std::uniform_real_distribution<double> a(0.0, kPi);
+  for (int i = 0; i < 1000; ++i) {
+    const Eigen::Vector3d phi = a(rng) * random_unit(rng);
+    const Eigen::Vector3d back = so3::log<double>(so3::exp<double>(phi));
+    EXPECT_LT((back - phi).norm(), 1e-13) << phi.transpose();
+    // q and -q are the same rotation.
+    Eigen::Quaterniond neg = so3::exp<double>(phi);
+    neg.coeffs() = -neg.coeffs();
+    EXPECT_LT((so3::log<double>(neg) - phi).norm(), 1e-13);
+  }
+  for (double angle : {0.0, 1e-15, 1e-12, 1e-8, 1e-5, 0.99e-4, 1.01e-4, 1e-2, 1.0, kPi - 1e-3,
+                       kPi - 1e-6, kPi - 1e-9}) {
+    const Eigen::Vector3d dir = Eigen::Vector3d(0.3, -0.5, 0.8).normalized();
+    const Eigen::Vector3d phi = angle * dir;
+    const Eigen::Vector3d back = so3::log<double>(so3::exp<double>(phi));
+    // Relative accuracy near zero, absolute near pi (the axis of a near-half-turn is conditioned
+    // by 1/sin(angle/2) ~ 1, so a few ulps).
+    EXPECT_LE((back - phi).norm(), 1e-15 * angle + 4e-16 * angle) << "angle " << angle;
+    // And the angle from log is the one Eigen finds.
+    EXPECT_NEAR(back.norm(), Eigen::AngleAxisd(test::rotvec(phi)).angle(), 1e-15 + 1e-15 * angle);
+  }
+}
+
+TEST(So3, BoxplusBoxminusRoundTrip) {
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> a(0.0, kPi - 1e-6);
+  for (int i = 0; i < 1000; ++i) {
+    const Eigen::Quaterniond q = random_rotation(rng);
+    const Eigen::Vector3d d = a(rng) * random_unit(rng);
+    const Eigen::Quaterniond p = so3::boxplus<double>(q, d);
+    EXPECT_LT((so3::boxminus<double>(p, q) - d).norm(), 1e-12);
+    // Right perturbation: p = q Exp(d), so R_p = R_q R(d).
+    EXPECT_LT(
+        (p.toRotationMatrix() - q.toRotationMatrix() * test::rotvec(d).toRotationMatrix()).norm(),
+        1e-14);
+    // boxplus(q, boxminus(p, q)) = p.
+    EXPECT_LT(angle_between(so3::boxplus<double>(q, so3::boxminus<double>(p, q)), p), 1e-14);
+  }
+  const Eigen::Quaterniond q = random_rotation(rng);
+  for (double angle : {1e-15, 1e-9, 1e-5, 1e-4, 1e-3, kPi - 1e-4, kPi - 1e-7}) {
+    const Eigen::Vector3d d = angle * Eigen::Vector3d(-0.2, 0.9, 0.4).normalized();
+    const Eigen::Vector3d back = so3::boxminus<double>(so3::boxplus<double>(q, d), q);
+    // The quaternion product rounds at ~1e-16 absolute, which near pi is amplified by the
+    // 1/cos(angle/2) of the axis direction only in its w, not in the vector: 1e-9 is generous.
+    EXPECT_LT((back - d).norm(), 1e-15 + 1e-9 * angle) << "angle " << angle;
+  }
+}
+
+TEST(So3, FloatRoundTrip) {
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<float> a(0.0f, 3.0f);
+  for (int i = 0; i < 1000; ++i) {
+    const Eigen::Quaternionf q = random_rotation(rng).cast<float>();
+    const Eigen::Vector3f d = a(rng) * random_unit(rng).cast<float>();
+    const Eigen::Vector3f back = so3::boxminus<float>(so3::boxplus<float>(q, d), q);
+    EXPECT_LT((back - d).norm(), 2e-6f);
+  }
+  for (float angle : {1e-9f, 1e-6f, 0.99e-2f, 1.01e-2f, 0.1f}) {
+    const Eigen::Vector3f d = angle * Eigen::Vector3f(0.6f, 0.0f, -0.8f);
+    const Eigen::Vector3f back = so3::log<float>(so3::exp<float>(d));
+    EXPECT_LT((back - d).norm(), 4e-7f * angle) << "angle " << angle;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mirror image and projection
+
+// A random camera on the reflective side of the mirror (z > 0 in n) looking at it: its optical
+// axis within ~40 deg of -z_n, any roll about the axis.
+void random_camera(std::mt19937_64& rng, Eigen::Matrix3d& r_n_c, Eigen::Vector3d& p_n_c) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::uniform_real_distribution<double> height(0.2, 2.0);
+  p_n_c = Eigen::Vector3d(0.5 * u(rng), 0.5 * u(rng), height(rng));
+  Eigen::Matrix3d base;  // optical axis (z_c) along -z_n
+  base << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  const Eigen::Vector3d tilt = 40.0 * kDeg * std::abs(u(rng)) * random_unit(rng);
+  const double roll = kPi * u(rng);
+  r_n_c = test::rotvec(tilt).toRotationMatrix() * base *
+          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+}
+
+TEST(MirrorImage, MatchesReflectionInMirrorFrame) {
+  std::mt19937_64 rng(10);
+  std::uniform_real_distribution<double> u(-0.15, 0.15);
+  for (int i = 0; i < 2000; ++i) {
+    Eigen::Matrix3d r_n_c;
+    Eigen::Vector3d p_n_c;
+    random_camera(rng, r_n_c, p_n_c);
+    const Eigen::Vector3d pi(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d expected = test::reflect_in_n(r_n_c, p_n_c, pi);
+    const Eigen::Vector3d got = mirror_image<double>(r_n_c, p_n_c, pi);
+    EXPECT_LT((got - expected).norm(), 1e-14);
+    // Float agrees to its own precision (relative to the ~metre scale of the scene).
+    const Eigen::Vector3f got_f =
+        mirror_image<float>(r_n_c.cast<float>(), p_n_c.cast<float>(), pi.cast<float>());
+    EXPECT_LT((got_f.cast<double>() - expected).norm(), 2e-6);
+  }
+}
+
+// Ray trace: back-project the pixel of the predicted image into a ray from the camera centre,
+// intersect it with the mirror, reflect it, and check it hits the marker; the unfolded length of
+// the path is the distance to the virtual point.
+TEST(MirrorImage, RayTraceThroughPixelHitsMarker) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-0.15, 0.15);
+  const test::Rig rig;
+  const Pinhole<double> k{rig.fu, rig.fv, rig.cu, rig.cv, rig.skew};
+  const Eigen::Matrix3d k_inv = rig.k_matrix().inverse();
+  int traced = 0, behind_centre = 0;
+  for (int i = 0; i < 5000; ++i) {
+    Eigen::Matrix3d r_n_c;
+    Eigen::Vector3d p_n_c;
+    random_camera(rng, r_n_c, p_n_c);
+    const Eigen::Vector3d pi_c(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d pi_n = r_n_c * pi_c + p_n_c;
+    if (pi_n.z() <= 0.0) continue;  // marker behind the mirror: no reflection
+    const Eigen::Vector3d img = mirror_image<double>(r_n_c, p_n_c, pi_c);
+    Eigen::Vector2d uv;
+    if (!project<double>(k, img, uv)) continue;
+    ++traced;
+    if (pi_c.z() < 0.0) ++behind_centre;
+
+    const Eigen::Vector3d d_c = k_inv * Eigen::Vector3d(uv.x(), uv.y(), 1.0);
+    const Eigen::Vector3d d = (r_n_c * d_c).normalized();
+    ASSERT_LT(d.z(), 0.0) << "a visible reflection must come from a ray towards the mirror";
+    const double t_hit = -p_n_c.z() / d.z();
+    const Eigen::Vector3d hit = p_n_c + t_hit * d;
+    EXPECT_NEAR(hit.z(), 0.0, 1e-12);
+    const Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d r = d - 2.0 * d.dot(n) * n;
+    const Eigen::Vector3d to_marker = pi_n - hit;
+    const double s = to_marker.dot(r);
+    EXPECT_GT(s, 0.0);
+    EXPECT_LT((to_marker - s * r).norm(), 1e-9) << "reflected ray misses the marker";
+    EXPECT_NEAR(t_hit + s, img.norm(), 1e-9) << "unfolded path length";
+  }
+  EXPECT_GT(traced, 2000);
+  EXPECT_GT(behind_centre, 500) << "markers behind the optical centre must be covered";
+}
+
+TEST(MirrorImage, PaperRigMarkersBehindCameraAreVisible) {
+  // The paper's markers 1 and 2 are 3 cm behind the optical centre; their reflections lie about
+  // twice the camera-mirror distance in front.
+  const test::Rig rig;
+  Eigen::Matrix3d r_n_c;
+  r_n_c << 1, 0, 0, 0, -1, 0, 0, 0, -1;  // looking straight at the mirror
+  const Eigen::Vector3d p_n_c(0.1, 0.2, 0.7);
+  for (const auto& pi : rig.markers) {
+    const Eigen::Vector3d img = mirror_image<double>(r_n_c, p_n_c, pi);
+    // Depth 2h - z (h the camera's height): a marker behind the camera is reflected deeper.
+    EXPECT_NEAR(img.z(), 2.0 * 0.7 - pi.z(), 1e-15);
+    EXPECT_NEAR(img.x(), pi.x(), 1e-15);
+    EXPECT_NEAR(img.y(), pi.y(), 1e-15);
+  }
+}
+
+TEST(Projection, MatchesKMatrix) {
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::uniform_real_distribution<double> depth(0.002, 5.0);
+  const test::Rig rig;
+  const Pinhole<double> k{rig.fu, rig.fv, rig.cu, rig.cv, rig.skew};
+  const Eigen::Matrix3d km = rig.k_matrix();
+  for (int i = 0; i < 1000; ++i) {
+    const Eigen::Vector3d p(u(rng), u(rng), depth(rng));
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(project<double>(k, p, uv));
+    const Eigen::Vector3d h = km * p;
+    const Eigen::Vector2d expected = h.head<2>() / h.z();
+    EXPECT_LT((uv - expected).norm(), 1e-12 * std::max(1.0, expected.norm()));
+    Eigen::Vector2f uv_f;
+    ASSERT_TRUE(project<float>(
+        Pinhole<float>{float(rig.fu), float(rig.fv), float(rig.cu), float(rig.cv), float(rig.skew)},
+        p.cast<float>(), uv_f));
+    EXPECT_LT((uv_f.cast<double>() - expected).norm(), 1e-6 * std::max(1.0, expected.norm()));
+  }
+  // The principal point is the image of the optical axis; skew shears u by y/z.
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(project<double>(k, Eigen::Vector3d(0, 0, 2), uv));
+  EXPECT_NEAR(uv.x(), rig.cu, 1e-12);
+  EXPECT_NEAR(uv.y(), rig.cv, 1e-12);
+  ASSERT_TRUE(project<double>(k, Eigen::Vector3d(0, 1, 1), uv));
+  EXPECT_NEAR(uv.x(), rig.cu + rig.skew, 1e-12);
+  EXPECT_NEAR(uv.y(), rig.cv + rig.fv, 1e-12);
+}
+
+TEST(Projection, RejectsPointsNotInFront) {
+  const Pinhole<double> k{833.33, 833.33, 2.0, 8.0, 3.0};
+  Eigen::Vector2d uv(123.0, 456.0);
+  for (double z : {0.0, -0.0, -1e-9, -0.5, -10.0}) {
+    EXPECT_FALSE(project<double>(k, Eigen::Vector3d(0.1, -0.2, z), uv)) << z;
+  }
+  EXPECT_FALSE(project<double>(k, Eigen::Vector3d(0.1, 0.2, std::nan("")), uv));
+  EXPECT_EQ(uv, Eigen::Vector2d(123.0, 456.0)) << "output untouched on rejection";
+  Eigen::Vector2f uv_f;
+  EXPECT_FALSE(project<float>(Pinhole<float>{833.33f, 833.33f, 2.0f, 8.0f, 3.0f},
+                              Eigen::Vector3f(0.0f, 0.0f, -1.0f), uv_f));
+}
+
+// ---------------------------------------------------------------------------------------------
+// MirrorState manifold
+
+template <typename S, int M, int NK>
+MirrorState<S, M, NK> random_state(std::mt19937_64& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  MirrorState<S, M, NK> x;
+  auto vec = [&](auto& v) {
+    for (int i = 0; i < v.size(); ++i) v(i) = S(n(rng));
+  };
+  vec(x.v);
+  vec(x.b_a);
+  vec(x.b_g);
+  vec(x.p);
+  vec(x.p_b_c);
+  vec(x.markers);
+  vec(x.intrinsics);
+  x.q_n_b = random_rotation(rng).cast<S>();
+  x.q_b_c = random_rotation(rng).cast<S>();
+  return x;
+}
+
+template <typename S, int L>
+Eigen::Matrix<S, L, 1> random_tangent(std::mt19937_64& rng, double scale) {
+  std::normal_distribution<double> n(0.0, scale);
+  Eigen::Matrix<S, L, 1> d;
+  for (int i = 0; i < L; ++i) d(i) = S(n(rng));
+  return d;
+}
+
+template <typename S, int M, int NK>
+void check_state_round_trip(double tol) {
+  using State = MirrorState<S, M, NK>;
+  std::mt19937_64 rng(20 + NK);
+  for (int i = 0; i < 200; ++i) {
+    const State x = random_state<S, M, NK>(rng);
+    const double scale = i < 100 ? 0.5 : 1e-6;  // rotations well below pi, and tiny steps
+    {
+      const auto d = random_tangent<S, State::kDim>(rng, scale);
+      State y = x;
+      y.template boxplus_block<0, State::kDim>(d);
+      const auto back = y.template boxminus_block<0, State::kDim>(x);
+      EXPECT_LT((back - d).norm(), tol * (1.0 + d.norm()));
+      // Each component moved by its own slot of d only.
+      EXPECT_LT(double((y.p - x.p - d.template segment<3>(State::kP)).norm()), tol);
+      EXPECT_LT(double((y.markers - x.markers - d.template segment<3 * M>(State::kPi)).norm()),
+                tol);
+    }
+    {  // The dynamic block leaves the calibration alone, and vice versa.
+      const auto d = random_tangent<S, State::kDynamicDim>(rng, scale);
+      State y = x;
+      y.template boxplus_block<State::kDynamicBegin, State::kDynamicDim>(d);
+      EXPECT_EQ(y.p_b_c, x.p_b_c);
+      EXPECT_EQ(y.q_b_c.coeffs(), x.q_b_c.coeffs());
+      EXPECT_EQ(y.markers, x.markers);
+      const auto back = y.template boxminus_block<State::kDynamicBegin, State::kDynamicDim>(x);
+      EXPECT_LT((back - d).norm(), tol * (1.0 + d.norm()));
+    }
+    {
+      const auto d = random_tangent<S, State::kMeasuredDim>(rng, scale);
+      State y = x;
+      y.template boxplus_block<State::kMeasuredBegin, State::kMeasuredDim>(d);
+      EXPECT_EQ(y.v, x.v);
+      EXPECT_EQ(y.b_a, x.b_a);
+      EXPECT_EQ(y.b_g, x.b_g);
+      const auto back = y.template boxminus_block<State::kMeasuredBegin, State::kMeasuredDim>(x);
+      EXPECT_LT((back - d).norm(), tol * (1.0 + d.norm()));
+      // The attitude slot is a right perturbation of R_n_b.
+      const Eigen::Quaterniond expected =
+          x.q_n_b.template cast<double>() *
+          test::rotvec(
+              d.template segment<3>(State::kTheta - State::kMeasuredBegin).template cast<double>());
+      EXPECT_LT(angle_between(y.q_n_b.template cast<double>(), expected), 10 * tol);
+    }
+  }
+}
+
+TEST(MirrorState, BoxplusBoxminusRoundTrip) {
+  check_state_round_trip<double, 3, 0>(1e-13);
+  check_state_round_trip<double, 3, 5>(1e-13);
+  check_state_round_trip<double, 1, 4>(1e-13);
+  check_state_round_trip<float, 3, 0>(2e-6);
+}
+
+}  // namespace
+}  // namespace mirrorcal

@@ -1,0 +1,399 @@
+// The block-structured sigma-point filter on a linear-Gaussian system equals the Kalman filter:
+// the unscented transform is exact for linear maps, so mean and full covariance (including the
+// cross-covariances carried by the regression) must match a textbook KF on the full state.
+#include <gtest/gtest.h>
+
+#include <Eigen/LU>
+#include <Eigen/QR>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "mirrorcal/estimator/sigma_point_filter.hpp"
+
+namespace mirrorcal {
+namespace {
+
+constexpr int N = 8;
+constexpr int kPredB = 0, kPredL = 4;  // the dynamics change x[0, 4); x[4, 8) are constants
+constexpr int kMeasB = 2, kMeasL = 6;  // the measurement reads x[2, 8)
+constexpr int kRows = 2, kBlocks = 3, Z = kRows * kBlocks;
+
+using State = EuclideanState<double, N>;
+using Filter = SigmaPointFilter<State>;
+using VecN = Eigen::Matrix<double, N, 1>;
+using MatN = Eigen::Matrix<double, N, N>;
+using VecZ = Eigen::Matrix<double, Z, 1>;
+using Active = std::array<bool, kBlocks>;
+
+struct LinearSystem {
+  Eigen::Matrix4d a;
+  Eigen::Vector4d u;  // constant input: x_b' = A x_b + u
+  Eigen::Matrix4d q;
+  Eigen::Matrix<double, Z, kMeasL> h;  // z = H x[2, 8) + v
+  VecZ r;                              // variance of each row of v
+
+  static LinearSystem make(std::mt19937_64& rng) {
+    std::normal_distribution<double> n(0.0, 1.0);
+    LinearSystem s;
+    // A damped rotation (spectral radius 0.97) mixes all four dynamic states and keeps the
+    // covariance bounded over many steps.
+    Eigen::Matrix4d g;
+    for (int i = 0; i < 16; ++i) g(i) = n(rng);
+    const Eigen::Matrix4d rot = Eigen::HouseholderQR<Eigen::Matrix4d>(g).householderQ();
+    s.a = 0.97 * rot;
+    for (int i = 0; i < 4; ++i) s.u(i) = 0.1 * n(rng);
+    Eigen::Matrix4d l;
+    for (int i = 0; i < 16; ++i) l(i) = 0.1 * n(rng);
+    s.q = l * l.transpose() + 0.01 * Eigen::Matrix4d::Identity();  // correlated process noise
+    for (int i = 0; i < Z * kMeasL; ++i) s.h(i) = n(rng);
+    for (int i = 0; i < Z; ++i) s.r(i) = 0.05 + 0.1 * std::abs(n(rng));
+    return s;
+  }
+
+  MatN f_full() const {
+    MatN f = MatN::Identity();
+    f.block<4, 4>(kPredB, kPredB) = a;
+    return f;
+  }
+  Eigen::Matrix<double, Z, N> h_full() const {
+    Eigen::Matrix<double, Z, N> hf = Eigen::Matrix<double, Z, N>::Zero();
+    hf.middleCols<kMeasL>(kMeasB) = h;
+    return hf;
+  }
+};
+
+// Textbook Kalman filter on the whole state, with a dynamic choice of measurement rows.
+struct KalmanFilter {
+  VecN x;
+  MatN p;
+  double nis = 0.0;
+
+  void predict(const LinearSystem& s) {
+    const MatN f = s.f_full();
+    VecN u = VecN::Zero();
+    u.segment<4>(kPredB) = s.u;
+    MatN q = MatN::Zero();
+    q.block<4, 4>(kPredB, kPredB) = s.q;
+    x = f * x + u;
+    p = f * p * f.transpose() + q;
+  }
+  void update(const LinearSystem& s, const VecZ& z, const Active& use) {
+    std::vector<int> rows;
+    for (int b = 0; b < kBlocks; ++b)
+      if (use[b])
+        for (int i = 0; i < kRows; ++i) rows.push_back(b * kRows + i);
+    const int m = static_cast<int>(rows.size());
+    const Eigen::Matrix<double, Z, N> hf = s.h_full();
+    Eigen::MatrixXd h(m, N), r = Eigen::MatrixXd::Zero(m, m);
+    Eigen::VectorXd nu(m);
+    for (int i = 0; i < m; ++i) {
+      h.row(i) = hf.row(rows[i]);
+      r(i, i) = s.r(rows[i]);
+      nu(i) = z(rows[i]) - hf.row(rows[i]).dot(x);
+    }
+    const Eigen::MatrixXd sm = h * p * h.transpose() + r;
+    const Eigen::MatrixXd k = p * h.transpose() * sm.inverse();
+    x += k * nu;
+    const MatN i_kh = MatN::Identity() - k * h;
+    p = i_kh * p * i_kh.transpose() + k * r * k.transpose();  // Joseph form
+    nis = nu.dot(sm.inverse() * nu);
+  }
+};
+
+auto measure(const LinearSystem& s) {
+  return [&s](const State& st, VecZ& z, Active& /*ok*/) { z = s.h * st.x.segment<kMeasL>(kMeasB); };
+}
+
+auto propagate(const LinearSystem& s) {
+  return
+      [&s](State& st) { st.x.segment<kPredL>(kPredB) = s.a * st.x.segment<kPredL>(kPredB) + s.u; };
+}
+
+FilterStatus predict(Filter& f, const LinearSystem& s) {
+  return f.predict<kPredB, kPredL>(propagate(s), s.q);
+}
+
+template <class Measure>
+UpdateResult update(Filter& f, Measure&& h, const VecZ& z, const Active& active, const VecZ& r,
+                    double gate) {
+  return f.update<kMeasB, kMeasL, kRows, kBlocks>(h, z, active, r, gate);
+}
+
+MatN correlated_covariance(std::mt19937_64& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  MatN m;
+  for (int i = 0; i < N * N; ++i) m(i) = n(rng);
+  return 0.3 * m * m.transpose() + 0.1 * MatN::Identity();
+}
+
+double max_abs(const MatN& m) {
+  return m.cwiseAbs().maxCoeff();
+}
+
+struct Settings {
+  const char* name;
+  SigmaPointParams params;
+  bool expect_progressive;  // whether some updates must be split into several steps
+};
+
+class LinearGaussian : public ::testing::TestWithParam<Settings> {};
+
+TEST_P(LinearGaussian, EqualsKalmanFilterOverManyCycles) {
+  std::mt19937_64 rng(100);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const LinearSystem sys = LinearSystem::make(rng);
+  const MatN p0 = correlated_covariance(rng);
+  VecN x0;
+  for (int i = 0; i < N; ++i) x0(i) = n(rng);
+
+  Filter ukf(GetParam().params);
+  State s0;
+  s0.x = x0;
+  ukf.reset(s0, p0);
+  KalmanFilter kf{x0, p0};
+
+  // The truth evolves with the model's noise; the filters see noisy measurements of it.
+  VecN truth = x0 + p0.llt().matrixL() * VecN::NullaryExpr([&] { return n(rng); });
+  const Eigen::Matrix4d lq = sys.q.llt().matrixL();
+  double worst_mean = 0.0, worst_cov = 0.0;
+  int max_steps = 0;
+  for (int cycle = 0; cycle < 60; ++cycle) {
+    for (int k = 0; k < 1 + cycle % 3; ++k) {
+      truth.segment<4>(kPredB) = sys.a * truth.segment<4>(kPredB) + sys.u +
+                                 lq * Eigen::Vector4d::NullaryExpr([&] { return n(rng); });
+      ASSERT_EQ(predict(ukf, sys), FilterStatus::kOk);
+      kf.predict(sys);
+    }
+    VecZ z = sys.h * truth.segment<kMeasL>(kMeasB);
+    for (int i = 0; i < Z; ++i) z(i) += std::sqrt(sys.r(i)) * n(rng);
+    const Active all{true, true, true};
+    const UpdateResult res = update(ukf, measure(sys), z, all, sys.r, 1e12);
+    kf.update(sys, z, all);
+    ASSERT_EQ(res.status, FilterStatus::kOk);
+    EXPECT_EQ(res.used, 3);
+    EXPECT_EQ(res.gated, 0);
+    EXPECT_NEAR(res.nis, kf.nis, 1e-9 * (1.0 + kf.nis));
+    EXPECT_GE(res.steps, 1);
+    EXPECT_LE(res.steps, GetParam().params.max_steps);
+    max_steps = std::max(max_steps, res.steps);
+    worst_mean = std::max(worst_mean, (ukf.mean().x - kf.x).cwiseAbs().maxCoeff());
+    worst_cov = std::max(worst_cov, max_abs(ukf.covariance() - kf.p));
+  }
+  // Scale: the state and covariance entries are O(0.1 .. 1); 1e-9 leaves ~1e6 ulps for the
+  // different operation order (Cholesky, regression, Joseph form) over 60 cycles.
+  EXPECT_LT(worst_mean, 1e-9);
+  EXPECT_LT(worst_cov, 1e-9);
+  EXPECT_LT(max_abs(ukf.covariance() - ukf.covariance().transpose()), 1e-15);
+  // A split update (K steps with K times the noise) is one update for a linear model.
+  if (GetParam().expect_progressive) {
+    EXPECT_GT(max_steps, 1);
+  }
+  std::printf("%s: largest split %d, worst mean difference %.2e, covariance %.2e\n",
+              GetParam().name, max_steps, worst_mean, worst_cov);
+  // The run was informative: the covariance shrank well below the prior.
+  EXPECT_LT(ukf.covariance().trace(), 0.5 * p0.trace());
+}
+
+SigmaPointParams settings(UnscentedParams u, double spread_per_step, int max_steps = 20) {
+  SigmaPointParams p;
+  p.unscented = u;
+  p.spread_per_step = spread_per_step;
+  p.max_steps = max_steps;
+  return p;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Weights, LinearGaussian,
+    ::testing::Values(Settings{"Default", SigmaPointParams{}, false},
+                      Settings{"CubatureOneStep", settings({1.0, 2.0, 0.0}, 1e300), false},
+                      // alpha = 0.5, kappa = 1: a negative centre weight.
+                      Settings{"NegativeCentreSplit", settings({0.5, 2.0, 1.0}, 1.0), true},
+                      Settings{"KappaSplitCapped", settings({1.0, 0.0, 3.0}, 0.01, 7), true}),
+    [](const ::testing::TestParamInfo<Settings>& info) {
+      return std::string(info.param.name);
+    });  // kappa > 0
+
+// A filter and a KF that have both seen a few cycles, so the prior is correlated.
+struct Pair {
+  LinearSystem sys;
+  Filter ukf;
+  KalmanFilter kf;
+};
+
+Pair make_pair(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  Pair p{LinearSystem::make(rng), Filter{}, KalmanFilter{}};
+  const MatN p0 = correlated_covariance(rng);
+  State s0;
+  for (int i = 0; i < N; ++i) s0.x(i) = std::normal_distribution<double>(0.0, 1.0)(rng);
+  p.ukf.reset(s0, p0);
+  p.kf = KalmanFilter{s0.x, p0};
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(predict(p.ukf, p.sys), FilterStatus::kOk);
+    p.kf.predict(p.sys);
+  }
+  return p;
+}
+
+void expect_same(const Filter& ukf, const KalmanFilter& kf) {
+  EXPECT_LT((ukf.mean().x - kf.x).cwiseAbs().maxCoeff(), 1e-11);
+  EXPECT_LT(max_abs(ukf.covariance() - kf.p), 1e-11);
+}
+
+constexpr double kGate = 13.8155;  // chi^2, 2 dof, 99.9 %
+
+TEST(SigmaPointGate, RejectsGrossOutlierBlockAndUsesTheRest) {
+  Pair p = make_pair(200);
+  // The predicted measurement plus a small offset, except block 1, which is off by ~100 sigma.
+  VecZ z = p.sys.h * p.kf.x.segment<kMeasL>(kMeasB);
+  z += 0.1 * VecZ::Ones();
+  z.segment<2>(2) += Eigen::Vector2d(120.0, -90.0);
+  const UpdateResult res =
+      update(p.ukf, measure(p.sys), z, Active{true, true, true}, p.sys.r, kGate);
+  EXPECT_EQ(res.status, FilterStatus::kOk);
+  EXPECT_EQ(res.gated, 1);
+  EXPECT_EQ(res.used, 2);
+  EXPECT_EQ(res.invalid, 0);
+  p.kf.update(p.sys, z, Active{true, false, true});
+  expect_same(p.ukf, p.kf);
+  EXPECT_NEAR(res.nis, p.kf.nis, 1e-9);
+}
+
+TEST(SigmaPointGate, NanBlockIsGatedNotSpread) {
+  Pair p = make_pair(201);
+  VecZ z = p.sys.h * p.kf.x.segment<kMeasL>(kMeasB) + 0.2 * VecZ::Ones();
+  z(4) = std::nan("");
+  const UpdateResult res =
+      update(p.ukf, measure(p.sys), z, Active{true, true, true}, p.sys.r, kGate);
+  EXPECT_EQ(res.status, FilterStatus::kOk);
+  EXPECT_EQ(res.gated, 1);
+  EXPECT_EQ(res.used, 2);
+  EXPECT_TRUE(p.ukf.mean().x.allFinite());
+  EXPECT_TRUE(p.ukf.covariance().allFinite());
+  p.kf.update(p.sys, z, Active{true, true, false});
+  expect_same(p.ukf, p.kf);
+}
+
+TEST(SigmaPointGate, AllBlocksGatedLeavesFilterUnchanged) {
+  Pair p = make_pair(202);
+  const State before = p.ukf.mean();
+  const MatN cov_before = p.ukf.covariance();
+  const VecZ z = p.sys.h * p.kf.x.segment<kMeasL>(kMeasB) + 1e3 * VecZ::Ones();
+  const UpdateResult res =
+      update(p.ukf, measure(p.sys), z, Active{true, true, true}, p.sys.r, kGate);
+  EXPECT_EQ(res.status, FilterStatus::kNoMeasurement);
+  EXPECT_EQ(res.gated, 3);
+  EXPECT_EQ(res.used, 0);
+  EXPECT_EQ(p.ukf.mean().x, before.x);
+  EXPECT_EQ(p.ukf.covariance(), cov_before);
+}
+
+TEST(SigmaPointUpdate, InactiveBlockMatchesKalmanFilterOnActiveRows) {
+  Pair p = make_pair(300);
+  std::mt19937_64 rng(301);
+  std::normal_distribution<double> n(0.0, 1.0);
+  VecZ z = VecZ::NullaryExpr([&] { return n(rng); });
+  z.segment<2>(2).setConstant(std::nan(""));  // whatever an unseen block holds must not matter
+  const UpdateResult res =
+      update(p.ukf, measure(p.sys), z, Active{true, false, true}, p.sys.r, 1e12);
+  EXPECT_EQ(res.status, FilterStatus::kOk);
+  EXPECT_EQ(res.used, 2);
+  EXPECT_EQ(res.gated, 0);
+  EXPECT_EQ(res.invalid, 0);
+  p.kf.update(p.sys, z, Active{true, false, true});
+  expect_same(p.ukf, p.kf);
+  EXPECT_NEAR(res.nis, p.kf.nis, 1e-9 * (1.0 + p.kf.nis));
+}
+
+TEST(SigmaPointUpdate, BlockTheModelCannotEvaluateIsCountedAndDropped) {
+  Pair p = make_pair(400);
+  std::mt19937_64 rng(401);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const VecZ z = VecZ::NullaryExpr([&] { return n(rng); });
+  const LinearSystem& sys = p.sys;
+  int calls = 0;
+  const auto h = [&](const State& st, VecZ& zp, Active& ok) {
+    zp = sys.h * st.x.segment<kMeasL>(kMeasB);
+    if (++calls == 5) ok[0] = false;  // fails at one sigma point only
+  };
+  const UpdateResult res = update(p.ukf, h, z, Active{true, true, true}, sys.r, 1e12);
+  EXPECT_EQ(calls, (2 * kMeasL + 1) * res.steps);
+  EXPECT_EQ(res.status, FilterStatus::kOk);
+  EXPECT_EQ(res.invalid, 1);
+  EXPECT_EQ(res.used, 2);
+  p.kf.update(p.sys, z, Active{false, true, true});
+  expect_same(p.ukf, p.kf);
+}
+
+// A split update that fails in a later step must not leave the earlier steps applied: a refused
+// update leaves the filter unchanged, whichever step refused it.
+TEST(SigmaPointUpdate, FailureInALaterStepLeavesFilterUnchanged) {
+  std::mt19937_64 rng(450);
+  const LinearSystem sys = LinearSystem::make(rng);
+  SigmaPointParams params;
+  params.spread_per_step = 1e-3;  // always split, into max_steps steps
+  Filter f(params);
+  State s0;
+  s0.x.setLinSpaced(-1.0, 1.0);
+  f.reset(s0, correlated_covariance(rng));
+  const State before = f.mean();
+  const MatN cov_before = f.covariance();
+  int calls = 0;
+  const auto h = [&](const State& st, VecZ& zp, Active&) {
+    zp = sys.h * st.x.segment<kMeasL>(kMeasB);
+    if (++calls > 2 * kMeasL + 1) zp(0) = std::nan("");  // breaks down from the second step on
+  };
+  const VecZ z = sys.h * s0.x.segment<kMeasL>(kMeasB) + 0.3 * VecZ::Ones();
+  const UpdateResult res = update(f, h, z, Active{true, true, true}, sys.r, 1e12);
+  EXPECT_GT(calls, 2 * kMeasL + 1) << "the update was not split";
+  EXPECT_NE(res.status, FilterStatus::kOk);
+  EXPECT_EQ(f.mean().x, before.x);
+  EXPECT_EQ(f.covariance(), cov_before);
+}
+
+TEST(SigmaPointUpdate, NoActiveBlockIsNoMeasurement) {
+  Pair p = make_pair(500);
+  const State before = p.ukf.mean();
+  const UpdateResult res =
+      update(p.ukf, measure(p.sys), VecZ::Zero(), Active{false, false, false}, p.sys.r, kGate);
+  EXPECT_EQ(res.status, FilterStatus::kNoMeasurement);
+  EXPECT_EQ(res.used, 0);
+  EXPECT_EQ(p.ukf.mean().x, before.x);
+}
+
+TEST(SigmaPointFailure, NonPositiveDefiniteBlockIsRefusedAndFilterUnchanged) {
+  std::mt19937_64 rng(600);
+  const LinearSystem sys = LinearSystem::make(rng);
+  MatN p0 = correlated_covariance(rng);
+  State s0;
+  s0.x.setLinSpaced(1.0, 8.0);
+  // Indefinite in the predicted block [0, 4): a 2x2 minor with |correlation| > 1.
+  MatN bad = p0;
+  bad(0, 1) = bad(1, 0) = 2.0 * std::sqrt(bad(0, 0) * bad(1, 1));
+  Filter f;
+  f.reset(s0, bad);
+  EXPECT_EQ(predict(f, sys), FilterStatus::kCovarianceNotPositiveDefinite);
+  EXPECT_EQ(f.mean().x, s0.x);
+  EXPECT_EQ(f.covariance(), bad);
+  // Indefinite in the measured block [2, 8): a negative variance.
+  bad = p0;
+  bad(6, 6) = -0.1;
+  f.reset(s0, bad);
+  const UpdateResult res =
+      update(f, measure(sys), VecZ::Zero(), Active{true, true, true}, sys.r, 1e12);
+  EXPECT_EQ(res.status, FilterStatus::kCovarianceNotPositiveDefinite);
+  EXPECT_EQ(f.mean().x, s0.x);
+  EXPECT_EQ(f.covariance(), bad);
+  // The predict does not sample x[6], so it still works and only touches what it may.
+  EXPECT_EQ(predict(f, sys), FilterStatus::kOk);
+  EXPECT_EQ(f.covariance()(6, 6), -0.1);
+}
+
+}  // namespace
+}  // namespace mirrorcal
