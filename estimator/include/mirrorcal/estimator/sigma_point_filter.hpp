@@ -233,7 +233,7 @@ class SigmaPointFilter {
       Eigen::LLT<Eigen::Matrix<Scalar, kRows, kRows>> llt_b(s.template block<kRows, kRows>(r0, r0));
       const Scalar d2 =
           llt_b.info() == Eigen::Success ? nu_b.dot(llt_b.solve(nu_b)) : Scalar(INFINITY);
-      if (!(d2 <= gate)) {  // also rejects NaN
+      if (!(d2 <= gate) || !std::isfinite(d2)) {  // also rejects NaN, and inf under an open gate
         ok[b] = false;
         ++result.gated;
         continue;
@@ -264,9 +264,14 @@ class SigmaPointFilter {
                       : wanted > params_.max_steps ? params_.max_steps
                                                    : static_cast<int>(wanted);
     const ZVec r_step = r_diag * Scalar(steps);
+    // A step that fails after others were applied must not leave them applied.
+    const State mean_before = mean_;
+    const Covariance cov_before = cov_;
     for (int k = 0; k < steps; ++k) {
       if (k > 0) {
         if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ms)) {
+          mean_ = mean_before;
+          cov_ = cov_before;
           result.status = FilterStatus::kCovarianceNotPositiveDefinite;
           return result;
         }
@@ -276,6 +281,8 @@ class SigmaPointFilter {
       s.diagonal() += r_step;
       const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ms, s, innovation, ok);
       if (st != FilterStatus::kOk) {
+        mean_ = mean_before;
+        cov_ = cov_before;
         result.status = st;
         return result;
       }
