@@ -51,15 +51,15 @@ Scenario make_scenario(double duration_s, double pixel_noise, std::uint64_t seed
   return sc;
 }
 
-// Prior: the IMU pose and velocity known well, the calibration as in the paper's Tables I and II
-// (1 cm and 2 deg on the camera pose, 10 cm on the markers), started about one sigma off.
-struct Prior {
+// The starting guess: the IMU pose and velocity known well, the calibration as in the paper's
+// Tables I and II (1 cm and 2 deg on the camera pose, 10 cm on the markers), about 1 sigma off.
+struct StartGuess {
   StateD x;
   CovD p;
 };
 
-Prior make_prior(const Scenario& sc) {
-  Prior pr;
+StartGuess make_start_guess(const Scenario& sc) {
+  StartGuess pr;
   pr.x = test::truth_state<double, 3, 0>(sc.traj, sc.rig, 0.0);
   pr.x.p_b_c += Eigen::Vector3d(0.008, -0.010, 0.007);
   pr.x.q_b_c = so3::boxplus<double>(pr.x.q_b_c, Eigen::Vector3d(1.5, -2.0, 1.2) * kDeg);
@@ -101,7 +101,7 @@ struct RunResult {
 };
 
 template <typename S>
-RunResult run_filter(const Scenario& sc, const Prior& pr, const CalibrationConfig& cfg) {
+RunResult run_filter(const Scenario& sc, const StartGuess& pr, const CalibrationConfig& cfg) {
   CalibrationFilter<S, 3, 0> f(cfg);
   f.reset(cast_state<S>(pr.x), pr.p.cast<S>());
   RunResult r;
@@ -181,7 +181,7 @@ double camera_height_sigma(const StateD& x, const CovD& p) {
 //    about the mirror normal is seen only through gravity; they are checked for consistency only.
 TEST(CalibrationFilter, ConvergesOnNoiseFreeData) {
   const Scenario sc = make_scenario(10.0, 0.0, 1);
-  const Prior pr = make_prior(sc);
+  const StartGuess pr = make_start_guess(sc);
   const RunResult r = run_filter<double>(sc, pr, wall_config());
   const StateD truth = test::truth_state<double, 3, 0>(sc.traj, sc.rig, 10.0);
   const auto e0 = calibration_error(pr.x, truth);
@@ -232,7 +232,7 @@ TEST(CalibrationFilter, ConvergesOnNoiseFreeData) {
 // unobservable (sigma grows to metres); it is compared in the same relative terms.
 TEST(CalibrationFilter, FloatAgreesWithDouble) {
   const Scenario sc = make_scenario(5.0, 0.5, 2);
-  const Prior pr = make_prior(sc);
+  const StartGuess pr = make_start_guess(sc);
   const RunResult rd = run_filter<double>(sc, pr, wall_config());
   const RunResult rf = run_filter<float>(sc, pr, wall_config());
   EXPECT_EQ(rd.failures, 0);
@@ -291,7 +291,7 @@ CalibrationConfig gate_from_start() {
 
 class BadInput : public ::testing::Test {
  protected:
-  BadInput() : sc_(make_scenario(2.0, 0.0, 3)), pr_(make_prior(sc_)), f_(gate_from_start()) {
+  BadInput() : sc_(make_scenario(2.0, 0.0, 3)), pr_(make_start_guess(sc_)), f_(gate_from_start()) {
     f_.reset(pr_.x, pr_.p);
   }
   // Predict up to imu[k] and return the frame there (k a multiple of kImuPerFrame).
@@ -301,7 +301,7 @@ class BadInput : public ::testing::Test {
     return sc_.frames[k / kImuPerFrame];
   }
   Scenario sc_;
-  Prior pr_;
+  StartGuess pr_;
   CalibrationFilter<double, 3, 0> f_;
 };
 

@@ -107,6 +107,11 @@ void free(void* p) noexcept {
 #endif
 
 // ---- operator new and delete, every replaceable form ----------------------------------------
+// They allocate with malloc and release with free. GCC cannot see that pairing where it inlines a
+// replacement delete into a delete-expression, and warns that free() meets operator new's memory.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
 void* operator new(std::size_t n) {
   count_new();
   return checked(std::malloc(n == 0 ? 1 : n));

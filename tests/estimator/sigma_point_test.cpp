@@ -226,7 +226,7 @@ struct Pair {
   KalmanFilter kf;
 };
 
-Pair make_pair(std::uint64_t seed) {
+Pair make_filter_pair(std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   Pair p{LinearSystem::make(rng), Filter{}, KalmanFilter{}};
   const MatN p0 = correlated_covariance(rng);
@@ -249,7 +249,7 @@ void expect_same(const Filter& ukf, const KalmanFilter& kf) {
 constexpr double kGate = 13.8155;  // chi^2, 2 dof, 99.9 %
 
 TEST(SigmaPointGate, RejectsGrossOutlierBlockAndUsesTheRest) {
-  Pair p = make_pair(200);
+  Pair p = make_filter_pair(200);
   // The predicted measurement plus a small offset, except block 1, which is off by ~100 sigma.
   VecZ z = p.sys.h * p.kf.x.segment<kMeasL>(kMeasB);
   z += 0.1 * VecZ::Ones();
@@ -266,7 +266,7 @@ TEST(SigmaPointGate, RejectsGrossOutlierBlockAndUsesTheRest) {
 }
 
 TEST(SigmaPointGate, NanBlockIsGatedNotSpread) {
-  Pair p = make_pair(201);
+  Pair p = make_filter_pair(201);
   VecZ z = p.sys.h * p.kf.x.segment<kMeasL>(kMeasB) + 0.2 * VecZ::Ones();
   z(4) = std::nan("");
   const UpdateResult res =
@@ -281,7 +281,7 @@ TEST(SigmaPointGate, NanBlockIsGatedNotSpread) {
 }
 
 TEST(SigmaPointGate, AllBlocksGatedLeavesFilterUnchanged) {
-  Pair p = make_pair(202);
+  Pair p = make_filter_pair(202);
   const State before = p.ukf.mean();
   const MatN cov_before = p.ukf.covariance();
   const VecZ z = p.sys.h * p.kf.x.segment<kMeasL>(kMeasB) + 1e3 * VecZ::Ones();
@@ -295,7 +295,7 @@ TEST(SigmaPointGate, AllBlocksGatedLeavesFilterUnchanged) {
 }
 
 TEST(SigmaPointUpdate, InactiveBlockMatchesKalmanFilterOnActiveRows) {
-  Pair p = make_pair(300);
+  Pair p = make_filter_pair(300);
   std::mt19937_64 rng(301);
   std::normal_distribution<double> n(0.0, 1.0);
   VecZ z = VecZ::NullaryExpr([&] { return n(rng); });
@@ -312,7 +312,7 @@ TEST(SigmaPointUpdate, InactiveBlockMatchesKalmanFilterOnActiveRows) {
 }
 
 TEST(SigmaPointUpdate, BlockTheModelCannotEvaluateIsCountedAndDropped) {
-  Pair p = make_pair(400);
+  Pair p = make_filter_pair(400);
   std::mt19937_64 rng(401);
   std::normal_distribution<double> n(0.0, 1.0);
   const VecZ z = VecZ::NullaryExpr([&] { return n(rng); });
@@ -358,7 +358,7 @@ TEST(SigmaPointUpdate, FailureInALaterStepLeavesFilterUnchanged) {
 }
 
 TEST(SigmaPointUpdate, NoActiveBlockIsNoMeasurement) {
-  Pair p = make_pair(500);
+  Pair p = make_filter_pair(500);
   const State before = p.ukf.mean();
   const UpdateResult res =
       update(p.ukf, measure(p.sys), VecZ::Zero(), Active{false, false, false}, p.sys.r, kGate);

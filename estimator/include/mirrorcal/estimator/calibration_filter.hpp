@@ -50,39 +50,11 @@ class CalibrationFilter {
 
   void reset(const State& x, const Covariance& p) { filter_.reset(x, p); }
 
-  FilterStatus predict(const ImuSample& s0, const ImuSample& s1) {
-    const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
-    const auto q = imu_process_noise<S>(config_.imu, dt);
-    const Vec3<S> g = gravity_;
-    const FilterStatus st = filter_.template predict<State::kDynamicBegin, State::kDynamicDim>(
-        [&](State& x) { propagate_imu(x, s0, s1, g); }, q);
-    ++counters_.predicts;
-    if (st != FilterStatus::kOk) ++counters_.failures;
-    return st;
-  }
-
-  UpdateResult update(const MarkerFrame<M>& frame) {
-    Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
-    for (int i = 0; i < M; ++i)
-      if (frame.seen[i]) z.template segment<2>(2 * i) = frame.uv[i].template cast<S>();
-    const Eigen::Matrix<S, 2 * M, 1> r =
-        Eigen::Matrix<S, 2 * M, 1>::Constant(S(config_.pixel_sigma * config_.pixel_sigma));
-    const Pinhole<S> fixed = fixed_;
-    const UpdateResult res =
-        filter_.template update<State::kMeasuredBegin, State::kMeasuredDim, 2, M>(
-            [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
-              predict_markers(x, fixed, zp, ok);
-            },
-            z, frame.seen, r,
-            counters_.updates < config_.gate_after_frames ? S(INFINITY) : S(config_.gate_chi2));
-    ++counters_.updates;
-    counters_.markers_used += static_cast<std::uint64_t>(res.used);
-    counters_.markers_gated += static_cast<std::uint64_t>(res.gated);
-    counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);
-    if (res.status != FilterStatus::kOk && res.status != FilterStatus::kNoMeasurement)
-      ++counters_.failures;
-    return res;
-  }
+  // Defined below the class: member functions defined in it would be inline, and an extern
+  // template declaration does not stop inline functions from being instantiated in every unit
+  // that calls them.
+  FilterStatus predict(const ImuSample& s0, const ImuSample& s1);
+  UpdateResult update(const MarkerFrame<M>& frame);
 
   const State& state() const { return filter_.mean(); }
   const Covariance& covariance() const { return filter_.covariance(); }
@@ -97,6 +69,42 @@ class CalibrationFilter {
   Pinhole<S> fixed_;
   FilterCounters counters_{};
 };
+
+template <typename S, int M, int NK>
+FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1) {
+  const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
+  const auto q = imu_process_noise<S>(config_.imu, dt);
+  const Vec3<S> g = gravity_;
+  const FilterStatus st = filter_.template predict<State::kDynamicBegin, State::kDynamicDim>(
+      [&](State& x) { propagate_imu(x, s0, s1, g); }, q);
+  ++counters_.predicts;
+  if (st != FilterStatus::kOk) ++counters_.failures;
+  return st;
+}
+
+template <typename S, int M, int NK>
+UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
+  Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
+  for (int i = 0; i < M; ++i)
+    if (frame.seen[i]) z.template segment<2>(2 * i) = frame.uv[i].template cast<S>();
+  const Eigen::Matrix<S, 2 * M, 1> r =
+      Eigen::Matrix<S, 2 * M, 1>::Constant(S(config_.pixel_sigma * config_.pixel_sigma));
+  const Pinhole<S> fixed = fixed_;
+  const UpdateResult res =
+      filter_.template update<State::kMeasuredBegin, State::kMeasuredDim, 2, M>(
+          [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
+            predict_markers(x, fixed, zp, ok);
+          },
+          z, frame.seen, r,
+          counters_.updates < config_.gate_after_frames ? S(INFINITY) : S(config_.gate_chi2));
+  ++counters_.updates;
+  counters_.markers_used += static_cast<std::uint64_t>(res.used);
+  counters_.markers_gated += static_cast<std::uint64_t>(res.gated);
+  counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);
+  if (res.status != FilterStatus::kOk && res.status != FilterStatus::kNoMeasurement)
+    ++counters_.failures;
+  return res;
+}
 
 // The configurations the product uses are compiled once, in estimator/src/filter_*.cpp.
 extern template class CalibrationFilter<double, 3, 0>;
