@@ -1,0 +1,77 @@
+#include "cli.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+
+namespace mirrorcal::app {
+
+std::string usage() {
+  std::string u = "usage: mirrorcal <command> [options]\n";
+  for (const auto& c : commands()) u += c.usage;
+  return u;
+}
+
+void fail(const std::string& msg, int code) {
+  std::fprintf(stderr, "mirrorcal: %s\n", msg.c_str());
+  std::exit(code);
+}
+
+Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
+              const std::vector<std::string>& flags, std::size_t max_positional) {
+  Options o;
+  for (int i = first; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto in = [&](const std::vector<std::string>& v) {
+      for (const auto& s : v)
+        if (a == "--" + s) return true;
+      return false;
+    };
+    if (in(with_value)) {
+      if (i + 1 >= argc) fail("option " + a + " needs a value\n" + usage());
+      o.values[a.substr(2)] = argv[++i];
+    } else if (in(flags)) {
+      o.values[a.substr(2)] = "1";
+    } else if (a.rfind("-", 0) != 0 && o.positional.size() < max_positional) {
+      o.positional.push_back(a);
+    } else {
+      fail("unknown argument '" + a + "'\n" + usage());
+    }
+  }
+  return o;
+}
+
+std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
+                          std::uint64_t min) {
+  const std::string s = o.get(key, "");
+  if (s.empty()) return def;
+  char* end = nullptr;
+  errno = 0;
+  const unsigned long long v = std::strtoull(s.c_str(), &end, 10);
+  if (errno != 0 || end == s.c_str() || *end != '\0' || s[0] == '-' || v < min)
+    fail("--" + key + " must be an integer >= " + std::to_string(min) + ", not '" + s + "'");
+  return v;
+}
+
+sim::Scenario scenario_option(const Options& o) {
+  sim::Scenario s;
+  const std::string name = o.get("scenario", "paper");
+  if (!sim::scenario_by_name(name, s)) fail("unknown scenario '" + name + "' (known: paper)");
+  return s;
+}
+
+std::string make_out_dir(const Options& o, const std::string& def) {
+  const std::string dir = o.get("out", def);
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) fail("cannot create output directory " + dir + ": " + ec.message(), 1);
+  return dir;
+}
+
+void print_progress(const char* what, double fraction) {
+  std::fprintf(stderr, "\r%s %3.0f %%", what, 100.0 * fraction);
+  std::fflush(stderr);
+}
+
+}  // namespace mirrorcal::app

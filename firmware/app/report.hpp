@@ -1,0 +1,25 @@
+// What the sim and montecarlo commands print beside the truth and the paper's tables.
+#pragma once
+
+#include <vector>
+
+#include "mirrorcal/sim_host/scenario.hpp"
+
+namespace mirrorcal::app {
+
+// Display value of the truth of each calibration parameter, in the row order of
+// calibration_params(): p and markers in cm, the rotation as the scenario's three angles in deg.
+std::vector<double> truth_display(const sim::Scenario& s);
+
+// The paper's Tables I and II, final value and sigma, in our row order (rotation columns read as
+// about x, y, z: see paper_scenario()).
+struct PaperRow {
+  double final_value, sigma;
+};
+const std::vector<PaperRow>& paper_tables();
+
+// Quantile of the chi-square distribution with k degrees of freedom at p = 0.025 or 0.975
+// (Wilson-Hilferty; accurate to <1 % for k > 10).
+double chi2_quantile(double p, double k);
+
+}  // namespace mirrorcal::app
