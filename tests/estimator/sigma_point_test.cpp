@@ -323,7 +323,9 @@ TEST(SigmaPointUpdate, BlockTheModelCannotEvaluateIsCountedAndDropped) {
     if (++calls == 5) ok[0] = false;  // fails at one sigma point only
   };
   const UpdateResult res = update(p.ukf, h, z, Active{true, true, true}, sys.r, 1e12);
-  EXPECT_EQ(calls, (2 * kMeasL + 1) * res.steps);
+  // Every step transforms the block (2L+1 points) and, over a wide prior, its cross terms.
+  const int per_step = 2 * kMeasL + 1 + (res.cross_terms ? kMeasL * (kMeasL - 1) / 2 : 0);
+  EXPECT_EQ(calls, per_step * res.steps);
   EXPECT_EQ(res.status, FilterStatus::kOk);
   EXPECT_EQ(res.invalid, 1);
   EXPECT_EQ(res.used, 2);
@@ -337,7 +339,8 @@ TEST(SigmaPointUpdate, FailureInALaterStepLeavesFilterUnchanged) {
   std::mt19937_64 rng(450);
   const LinearSystem sys = LinearSystem::make(rng);
   SigmaPointParams params;
-  params.spread_per_step = 1e-3;  // always split, into max_steps steps
+  params.spread_per_step = 1e-3;        // always split, into max_steps steps
+  params.cross_terms_above = INFINITY;  // so that the first step is exactly 2L+1 calls
   Filter f(params);
   State s0;
   s0.x.setLinSpaced(-1.0, 1.0);
@@ -355,6 +358,42 @@ TEST(SigmaPointUpdate, FailureInALaterStepLeavesFilterUnchanged) {
   EXPECT_NE(res.status, FilterStatus::kOk);
   EXPECT_EQ(f.mean().x, before.x);
   EXPECT_EQ(f.covariance(), cov_before);
+}
+
+// A bilinear measurement z = x1 x2 + v of independent Gaussians: the sigma points lie on the axes,
+// where x1 x2 is linear, so the transform alone sees Var = mu2^2 s1^2 + mu1^2 s2^2 and misses
+// s1^2 s2^2. With the cross terms the innovation variance is exact, and so are the gain, the
+// posterior covariance and the NIS of the moment-matched Gaussian update.
+TEST(SigmaPointUpdate, CrossTermsMakeABilinearInnovationExact) {
+  using S2 = EuclideanState<double, 2>;
+  const double mu1 = 0.7, mu2 = -1.3, s1 = 0.9, s2 = 0.6, r = 0.05, z = 0.4;
+  for (const bool cross : {false, true}) {
+    SigmaPointParams params;
+    params.cross_terms_above = cross ? 0.0 : INFINITY;
+    params.spread_per_step = 1e9;  // one step, so the result is the single update in closed form
+    SigmaPointFilter<S2> f(params);
+    S2 x0;
+    x0.x << mu1, mu2;
+    f.reset(x0, Eigen::Vector2d(s1 * s1, s2 * s2).asDiagonal());
+    const auto h = [](const S2& st, Eigen::Matrix<double, 1, 1>& zp, std::array<bool, 1>&) {
+      zp(0) = st.x(0) * st.x(1);
+    };
+    const UpdateResult res = f.update<0, 2, 1, 1>(h, Eigen::Matrix<double, 1, 1>(z), {true},
+                                                  Eigen::Matrix<double, 1, 1>(r), INFINITY);
+    ASSERT_EQ(res.status, FilterStatus::kOk);
+    EXPECT_EQ(res.cross_terms, cross);
+    const double var_h =
+        mu2 * mu2 * s1 * s1 + mu1 * mu1 * s2 * s2 + (cross ? s1 * s1 * s2 * s2 : 0);
+    const double s_innov = var_h + r;
+    const Eigen::Vector2d p_xz(mu2 * s1 * s1, mu1 * s2 * s2);  // exact E[(x - mu)(h - E h)]
+    const double innov = z - mu1 * mu2;                        // E h = mu1 mu2: no mean shift
+    EXPECT_NEAR(res.nis, innov * innov / s_innov, 1e-12);
+    const Eigen::Vector2d mean = Eigen::Vector2d(mu1, mu2) + p_xz * innov / s_innov;
+    const Eigen::Matrix2d cov = Eigen::Matrix2d(Eigen::Vector2d(s1 * s1, s2 * s2).asDiagonal()) -
+                                p_xz * p_xz.transpose() / s_innov;
+    EXPECT_LT((f.mean().x - mean).norm(), 1e-12);
+    EXPECT_LT((f.covariance() - cov).norm(), 1e-12);
+  }
 }
 
 TEST(SigmaPointUpdate, NoActiveBlockIsNoMeasurement) {
