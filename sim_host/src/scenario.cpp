@@ -59,11 +59,10 @@ Scenario paper_scenario() {
                                axis_rotation(0, -90 * deg));
   r.markers = {Eigen::Vector3d(0.02, -0.03, -0.03), Eigen::Vector3d(0.05, 0.04, -0.03),
                Eigen::Vector3d(-0.08, 0.06, 0.01)};
-  r.intrinsics = {833.33, 833.33, 2.0, 8.0, 3.0};
   r.width = 640;
   r.height = 480;
-  r.u_min = -320.0;
-  r.v_min = -240.0;
+  // The paper's cu = 2, cv = 8 are centred coordinates; ours start at the top-left pixel.
+  r.intrinsics = {833.33, 833.33, 320.0 + 2.0, 240.0 + 8.0, 3.0};
 
   // Body x forward (the camera looks along it), z up; the rig faces the wall mirror, so body x
   // points along -z of n and body z along +y of n.

@@ -21,8 +21,7 @@ bool true_pixel(const Scenario& s, const Eigen::Vector3d& p_n_b, const Eigen::Qu
   // The marker itself must be on the reflective side, else the mirror shows nothing.
   if ((r_n_c * pi + p_n_c).z() <= 0.0 || p_n_c.z() <= 0.0) return false;
   if (!project<double>(rig.intrinsics, mirror_image<double>(r_n_c, p_n_c, pi), uv)) return false;
-  return uv.x() >= rig.u_min && uv.x() < rig.u_min + rig.width && uv.y() >= rig.v_min &&
-         uv.y() < rig.v_min + rig.height;
+  return uv.x() >= 0.0 && uv.x() < rig.width && uv.y() >= 0.0 && uv.y() < rig.height;
 }
 
 SimData simulate(const Scenario& s, std::uint64_t seed) {

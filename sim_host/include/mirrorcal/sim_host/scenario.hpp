@@ -18,9 +18,8 @@ struct Rig {
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> markers;  // pi_i^c (m)
   Pinhole<double> intrinsics{};
-  // The image: pixel coordinates u in [u_min, u_min + width), v in [v_min, v_min + height).
+  // The image: u in [0, width), v in [0, height), origin at the top-left pixel's centre (DESIGN.md).
   int width = 640, height = 480;
-  double u_min = 0.0, v_min = 0.0;
 };
 
 // 1-sigma of what the user knows before calibrating (SI units, radians).
@@ -70,7 +69,8 @@ struct Scenario {
 // The paper's Tables I-III set-up: p_b_c = (1, -5, 10) cm, R_b_c = Rz(-90) Ry(0) Rx(-90) deg
 // (the paper's three angles, in its column order, read as rotations about x, y and z composed
 // z-y-x), markers (2,-3,-3), (5,4,-3), (-8,6,1) cm, fu = fv = 833.33, cu = 2, cv = 8, skew = 3 in
-// the paper's centred image coordinates (a 640 x 480 image spanning [-320, 320) x [-240, 240)),
+// the paper's centred image coordinates, i.e. cu = 322, cv = 248 in a 640 x 480 image whose origin
+// is the top-left pixel (DESIGN.md's convention, which Kalibr and OpenCV use),
 // a wall mirror with y up, ADIS16448 noise (EuRoC imu0), 1 px, 200 Hz IMU, 20 Hz camera, 60 s.
 Scenario paper_scenario();
 
