@@ -9,6 +9,8 @@ namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv);
 int cmd_montecarlo(int argc, char** argv);
+int cmd_record(int argc, char** argv);
+int cmd_calibrate(int argc, char** argv);
 
 const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
@@ -20,6 +22,15 @@ const std::vector<Command>& commands() {
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n",
        cmd_montecarlo},
+      {"record",
+       "  record      write the simulated rig's data and priors as a EuRoC recording\n"
+       "              --out DIR [--scenario paper] [--seed N]\n",
+       cmd_record},
+      {"calibrate",
+       "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
+       "mirrorcal.yaml)\n"
+       "              DIR [--intrinsics] [--out OUT]\n",
+       cmd_calibrate},
   };
   return table;
 }

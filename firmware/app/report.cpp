@@ -7,11 +7,16 @@ namespace mirrorcal::app {
 std::vector<double> truth_display(const sim::Scenario& s) {
   std::vector<double> t;
   for (int i = 0; i < 3; ++i) t.push_back(100.0 * s.truth.p_b_c(i));
-  const Eigen::Vector3d zyx = s.truth.q_b_c.toRotationMatrix().eulerAngles(2, 1, 0);
-  for (int i = 2; i >= 0; --i) t.push_back(zyx(i) * 180.0 / M_PI);
+  const Eigen::Vector3d angles = display_angles(s.truth.q_b_c);
+  for (int i = 0; i < 3; ++i) t.push_back(angles(i));
   for (const auto& m : s.truth.markers)
     for (int i = 0; i < 3; ++i) t.push_back(100.0 * m(i));
   return t;
+}
+
+Eigen::Vector3d display_angles(const Eigen::Quaterniond& q) {
+  const Eigen::Vector3d zyx = q.toRotationMatrix().eulerAngles(2, 1, 0);
+  return Eigen::Vector3d(zyx(2), zyx(1), zyx(0)) * 180.0 / M_PI;
 }
 
 const std::vector<PaperRow>& paper_tables() {

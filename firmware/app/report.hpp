@@ -18,6 +18,10 @@ struct PaperRow {
 };
 const std::vector<PaperRow>& paper_tables();
 
+// A rotation R_b_c as the three angles (deg) the scenarios state it by: R = Rz(c) Ry(b) Rx(a),
+// returned as (a, b, c).
+Eigen::Vector3d display_angles(const Eigen::Quaterniond& q);
+
 // Quantile of the chi-square distribution with k degrees of freedom at p = 0.025 or 0.975
 // (Wilson-Hilferty; accurate to <1 % for k > 10).
 double chi2_quantile(double p, double k);

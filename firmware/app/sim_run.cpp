@@ -15,7 +15,7 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   LoopData d;
   d.imu = data.imu;
   d.frames = data.frames;
-  d.imu_period_ns = static_cast<std::int64_t>(1e9 / s.imu_rate_hz);
+  d.imu_period_ns = imu_period_ns(s.imu_rate_hz);
   d.width = s.truth.width;
   d.height = s.truth.height;
   return d;

@@ -40,6 +40,11 @@ struct LoopData {
   int width = 640, height = 480;           // image size, for the result files
 };
 
+// The nominal period of an IMU sampled at rate_hz.
+inline std::int64_t imu_period_ns(double rate_hz) {
+  return static_cast<std::int64_t>(1e9 / rate_hz);
+}
+
 // The calibration configuration a scenario implies (the filter is told the true noise levels and,
 // in stage 1, the true intrinsics: the paper's calibrated camera).
 CalibrationConfig scenario_config(const sim::Scenario& s);

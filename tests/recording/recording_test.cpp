@@ -23,7 +23,8 @@ void expect_same(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const char*
 TEST(Recording, StreamsReadBackBitIdentical) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 21);
-  const std::string dir = temp_dir("streams");
+  const TempDir tmp("streams");
+  const std::string& dir = tmp.path;
   write_recording(dir, s, data, 21);
 
   mc::sim::Recording r;
@@ -68,7 +69,8 @@ TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 4);
   const auto prior = mc::app::simulation_prior(s, data, 4);
-  const std::string dir = temp_dir("priors");
+  const TempDir tmp("priors");
+  const std::string& dir = tmp.path;
   std::string err;
   ASSERT_TRUE(
       mc::sim::write_priors_yaml(dir, mc::sim::from_prior(prior, s.gravity_n, 0.75, true), err))
@@ -118,7 +120,8 @@ TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
 }
 
 TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
-  const std::string dir = temp_dir("writer-order");
+  const TempDir tmp("writer-order");
+  const std::string& dir = tmp.path;
   std::string err;
   mc::sim::RecordingWriter w;
   ASSERT_TRUE(w.open(dir, err)) << err;
@@ -136,7 +139,8 @@ TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
 }
 
 TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
-  const std::string dir = temp_dir("images");
+  const TempDir tmp("images");
+  const std::string& dir = tmp.path;
   std::string err;
   mc::sim::RecordingWriter w;
   ASSERT_TRUE(w.open(dir, err)) << err;
