@@ -1,6 +1,9 @@
 #include "sim_run.hpp"
 
+#include <optional>
+
 #include "mirrorcal/sim_host/simulator.hpp"
+#include "sim_frames.hpp"
 
 namespace mirrorcal::app {
 
@@ -28,7 +31,7 @@ State truth_state(const sim::Scenario& s) {
 }  // namespace
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress) {
+                         const std::function<void(double)>& progress, const FrameMode& frames) {
   using Run = SimRun<0>;
   using Filter = Run::Filter;
   Run run;
@@ -43,11 +46,20 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   filter.reset(x0, p0);
 
   sim::VectorImuSource imu(data.imu);
-  sim::VectorMarkerSource<kMarkers> markers(data.frames);
+  sim::VectorMarkerSource<kMarkers> listed(data.frames);
+  std::optional<RenderedMarkers> rendered;
+  if (frames.enabled) {
+    sim::RenderConfig render;
+    render.format = frames.format;
+    rendered.emplace(s, render, sim::derive_seed(seed, 200));
+  }
+  hal::MarkerSource<kMarkers>& markers =
+      rendered ? static_cast<hal::MarkerSource<kMarkers>&>(*rendered) : listed;
   HistorySink<Filter> sink(data.frames.size() + 1, &run.truth);
   firmware::LoopConfig lc;
   lc.imu_period_ns = static_cast<std::int64_t>(1e9 / s.imu_rate_hz);
   firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc, &sink);
+  if (rendered) loop.set_identifier(&*rendered);
 
   const std::size_t report_every = data.imu.size() / 100 + 1;
   std::size_t n = 0;
@@ -64,6 +76,7 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   run.markers_out_of_image = data.markers_out_of_image;
   run.imu_samples = data.imu.size();
   run.frames = data.frames.size();
+  if (rendered) run.detection = rendered->report();
   return run;
 }
 
