@@ -80,6 +80,11 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
       out[found++] = b;
     }
   }
+  const double near = 2.0 * config_.centroid_radius;
+  for (int i = 0; i < found; ++i)
+    for (int j = i + 1; j < found; ++j)
+      if (std::hypot(out[i].u - out[j].u, out[i].v - out[j].v) < near)
+        out[i].crowded = out[j].crowded = true;
   return found;
 }
 

@@ -30,6 +30,8 @@ struct Blob {
   double spread = 0.0;      // largest eigenvalue of the weighted second moment (px^2)
   int area = 0;             // pixels above threshold
   int peak = 0;             // brightest luma
+  // Another blob lies within twice the centroid radius: its tail may pull this centroid.
+  bool crowded = false;
 };
 
 struct BlobCounters {
@@ -45,7 +47,8 @@ class BlobDetector {
   BlobDetector(const BlobConfig& config, int max_width, int max_height);
 
   // Finds the blobs of a frame, in scan order (top to bottom); returns how many were written to
-  // out (at most capacity). A frame larger than the size given at construction yields none.
+  // out (at most capacity), each flagged if crowded. A frame larger than the size given at
+  // construction yields none.
   int detect(const hal::FrameView& frame, Blob* out, int capacity);
 
   const BlobConfig& config() const { return config_; }

@@ -2,11 +2,11 @@
 // Mahalanobis gate on the predicted covariance), and how bright each marker is relative to the
 // others (the rig's markers differ in brightness, 1 : 1.5 : 2.25 by default, so the ratio of two
 // blobs' fluxes names them even while the prediction is still vague). Every assignment of blobs
-// to markers within the gates is scored; the best wins, and a marker whose label the runner-up
-// assignment disputes within a margin is dropped, as are markers whose predictions lie on top of
-// each other (crossing) and blobs too spread out to be one spot (two merged reflections). A
-// missing marker costs more than a poor match, a wrong label is avoided at the price of a frame.
-// Header-only; nothing allocates.
+// to markers within the gates is scored; the best wins, and a marker that some other assignment
+// within a margin of the best labels differently is dropped, as are markers whose predictions lie
+// on top of each other (crossing), and blobs too spread out to be one spot (two merged reflections)
+// or too close to another blob to be measured cleanly. A missing marker costs more than a poor
+// match, a wrong label is avoided at the price of a frame. Header-only; nothing allocates.
 #pragma once
 
 #include <array>
@@ -105,7 +105,7 @@ class MarkerIdentifier {
         info = c.inverse();
       }
       for (int j = 0; j < n; ++j) {
-        if (blobs[j].spread > config_.max_spread_px2) continue;
+        if (!single_spot(blobs[j])) continue;
         double d2 = 0.0;
         if (prediction != nullptr) {
           const Eigen::Vector2d r =
@@ -117,13 +117,15 @@ class MarkerIdentifier {
       }
     }
     for (int j = 0; j < n; ++j)
-      if (blobs[j].spread > config_.max_spread_px2) ++counters.merged;
+      if (!single_spot(blobs[j])) ++counters.merged;
     if (prediction != nullptr) mark_crossing(*prediction, crossing);
 
-    // Search every assignment for the best and the runner-up.
-    best_cost_ = second_cost_ = std::numeric_limits<double>::infinity();
+    // The best assignment; then, per marker, the cheapest assignment that labels it otherwise.
+    best_cost_ = std::numeric_limits<double>::infinity();
     used_.fill(false);
-    search(0, 0.0);
+    search(0, 0.0, false);
+    alt_cost_.fill(std::numeric_limits<double>::infinity());
+    search(0, 0.0, true);
 
     int labelled = 0;
     for (int i = 0; i < M; ++i) {
@@ -133,7 +135,7 @@ class MarkerIdentifier {
         ++counters.crossing;
         continue;
       }
-      if (second_cost_ < best_cost_ + config_.ambiguity_margin && second_[i] != j) {
+      if (alt_cost_[static_cast<std::size_t>(i)] < best_cost_ + config_.ambiguity_margin) {
         ++counters.ambiguous;
         continue;
       }
@@ -151,6 +153,10 @@ class MarkerIdentifier {
   const IdentifierConfig<M>& config() const { return config_; }
 
  private:
+  // A blob that may hold two spots, or whose centroid a neighbour's tail can pull, is no
+  // marker's: a frame without it costs less than a biased or swapped position.
+  bool single_spot(const Blob& b) const { return !b.crowded && b.spread <= config_.max_spread_px2; }
+
   void insert_candidate(int i, int j, double d2) {
     int k = count_[i] < kCandidates ? count_[i]++ : kCandidates;
     if (k == kCandidates) {
@@ -179,29 +185,34 @@ class MarkerIdentifier {
       }
   }
 
-  void search(int i, double cost) {
-    if (cost >= second_cost_) return;  // cannot enter the top two
+  // Depth-first over the assignments (costs only grow, so a partial cost prunes). The first pass
+  // finds the best; the second (alternatives) records, per marker, the cheapest assignment that
+  // labels it otherwise, among those within the ambiguity margin of the best.
+  void search(int i, double cost, bool alternatives) {
+    const double bound = alternatives ? best_cost_ + config_.ambiguity_margin : best_cost_;
+    if (cost >= bound) return;
     if (i == M) {
       cost += brightness_cost();
-      if (cost < best_cost_) {
-        second_cost_ = best_cost_;
-        second_ = best_;
+      if (cost >= bound) return;
+      if (!alternatives) {
         best_cost_ = cost;
         best_ = current_;
-      } else if (cost < second_cost_) {
-        second_cost_ = cost;
-        second_ = current_;
+        return;
+      }
+      for (int k = 0; k < M; ++k) {
+        auto& alt = alt_cost_[static_cast<std::size_t>(k)];
+        if (current_[k] != best_[k] && cost < alt) alt = cost;
       }
       return;
     }
     current_[i] = -1;  // not seen: costs as much as a blob at the gate's edge
-    search(i + 1, cost + config_.gate_chi2);
+    search(i + 1, cost + config_.gate_chi2, alternatives);
     for (int k = 0; k < count_[i]; ++k) {
       const int j = cand_[i][k];
       if (used_[static_cast<std::size_t>(j)]) continue;
       used_[static_cast<std::size_t>(j)] = true;
       current_[i] = j;
-      search(i + 1, cost + cand_d2_[i][k]);
+      search(i + 1, cost + cand_d2_[i][k], alternatives);
       used_[static_cast<std::size_t>(j)] = false;
     }
     current_[i] = -1;
@@ -233,8 +244,9 @@ class MarkerIdentifier {
   int cand_[M][kCandidates]{};
   double cand_d2_[M][kCandidates]{};
   std::array<bool, kMaxBlobs> used_{};
-  std::array<int, M> current_{}, best_{}, second_{};
-  double best_cost_ = 0.0, second_cost_ = 0.0;
+  std::array<int, M> current_{}, best_{};
+  std::array<double, M> alt_cost_{};
+  double best_cost_ = 0.0;
 };
 
 }  // namespace mirrorcal::drivers
