@@ -18,7 +18,16 @@
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"scenario", "seed", "out"}, {"no-plots"});
+  const Options o =
+      parse(argc, argv, 2, {"scenario", "seed", "out", "format"}, {"no-plots", "frames"});
+  FrameMode frames;
+  frames.enabled = o.flag("frames");
+  const std::string format = o.get("format", "grey");
+  if (format == "yuyv")
+    frames.format = hal::PixelFormat::kYuyv;
+  else if (format != "grey")
+    fail("--format: '" + format + "' is not a pixel format (grey or yuyv)");
+  if (o.flag("format") && !frames.enabled) fail("--format applies to --frames only");
   const sim::Scenario s = scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const std::string dir = make_out_dir(o, "out/sim");
@@ -27,7 +36,8 @@ int cmd_sim(int argc, char** argv) {
       s.name.c_str(), static_cast<unsigned long long>(seed), s.duration_s, s.imu_rate_hz,
       s.camera_rate_hz);
   const auto t0 = std::chrono::steady_clock::now();
-  const auto run = run_simulation(s, seed, [](double f) { print_progress("calibrating", f); });
+  const auto run = run_simulation(
+      s, seed, [](double f) { print_progress("calibrating", f); }, frames);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::fprintf(stderr, "\rcalibrating done   \n");
 
@@ -57,6 +67,18 @@ int cmd_sim(int argc, char** argv) {
       (unsigned long long)lc.frames_without_markers, (unsigned long long)lc.imu_gaps,
       (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
       (unsigned long long)fc.failures, wall);
+
+  if (frames.enabled) {
+    const DetectionReport& d = run.detection;
+    std::printf(
+        "detection (%s frames): %llu frames, %llu of %llu reflections labelled, %llu wrong labels, "
+        "%llu withheld in doubt, %llu spurious blobs; centroid error %.3f px RMS (max %.3f) "
+        "against the true projections; %.2f ms per frame\n",
+        hal::to_string(frames.format), (unsigned long long)d.frames,
+        (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
+        (unsigned long long)d.wrong_labels, (unsigned long long)d.dropped_in_doubt,
+        (unsigned long long)d.spurious_blobs, d.centroid_rms_px, d.centroid_max_px, d.ms_per_frame);
+  }
 
   std::string err;
   if (!write_run_outputs(dir, run, err)) fail(err, 1);

@@ -16,7 +16,8 @@ const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
-       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n",
+       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n",
        cmd_sim},
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"

@@ -1,5 +1,10 @@
 #include "sim_run.hpp"
 
+#include <optional>
+
+#include "mirrorcal/sim_host/simulator.hpp"
+#include "sim_frames.hpp"
+
 namespace mirrorcal::app {
 
 CalibrationConfig scenario_config(const sim::Scenario& s) {
@@ -44,7 +49,7 @@ template <int NK>
 SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress) {
+                    const std::function<void(double)>& progress, const MarkerInput& input) {
   using Run = SimRun<NK>;
   using Filter = typename Run::Filter;
   Run run;
@@ -53,11 +58,13 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   filter.reset(x0, p0);
 
   sim::VectorImuSource imu(data.imu);
-  sim::VectorMarkerSource<kMarkers> markers(data.frames);
+  sim::VectorMarkerSource<kMarkers> listed(data.frames);
+  hal::MarkerSource<kMarkers>& markers = input.source != nullptr ? *input.source : listed;
   HistorySink<Filter> sink(data.frames.size() + 1, truth != nullptr ? &run.truth : nullptr);
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, imu, markers, lc, &sink);
+  if (input.relabeler != nullptr) loop.set_identifier(input.relabeler);
 
   const std::size_t report_every = data.imu.size() / 100 + 1;
   std::size_t n = 0;
@@ -78,13 +85,15 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
 
 template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
                                const SimRun<0>::Filter::Covariance&, const LoopData&,
-                               const SimRun<0>::State*, const std::function<void(double)>&);
+                               const SimRun<0>::State*, const std::function<void(double)>&,
+                               const MarkerInput&);
 template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
                                const SimRun<5>::Filter::Covariance&, const LoopData&,
-                               const SimRun<5>::State*, const std::function<void(double)>&);
+                               const SimRun<5>::State*, const std::function<void(double)>&,
+                               const MarkerInput&);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress) {
+                         const std::function<void(double)>& progress, const FrameMode& frames) {
   using Run = SimRun<0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -92,8 +101,17 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   const Run::State truth = truth_state<Run::State>(s);
-  Run run = run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
+  std::optional<RenderedMarkers> rendered;
+  MarkerInput input;
+  if (frames.enabled) {
+    sim::RenderConfig render;
+    render.format = frames.format;
+    rendered.emplace(s, render, sim::derive_seed(seed, 200));
+    input = {&*rendered, &*rendered};
+  }
+  Run run = run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, input);
   run.markers_out_of_image = data.markers_out_of_image;
+  if (rendered) run.detection = rendered->report();
   return run;
 }
 

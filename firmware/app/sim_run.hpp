@@ -9,6 +9,7 @@
 
 #include "history.hpp"
 #include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "outputs.hpp"
@@ -16,6 +17,26 @@
 namespace mirrorcal::app {
 
 constexpr int kMarkers = 3;  // M of the product build: the paper's three markers
+
+// mirrorcal sim --frames: find the markers in rendered frames with the board's detection code
+// (sim_frames.hpp) instead of taking the listed reflections.
+struct FrameMode {
+  bool enabled = false;
+  hal::PixelFormat format = hal::PixelFormat::kGrey;
+};
+
+// How detection did against the rendered truth (--frames only).
+struct DetectionReport {
+  std::uint64_t frames = 0;
+  std::uint64_t markers_drawn = 0;     // reflections in the image
+  std::uint64_t markers_labelled = 0;  // reflections the detection reported
+  std::uint64_t wrong_labels = 0;      // reported under one marker's label at another's spot
+  std::uint64_t dropped_in_doubt = 0;  // labels withheld: ambiguous, crossing or merged
+  std::uint64_t spurious_blobs = 0;    // blobs no marker took
+  double centroid_rms_px = 0.0;        // correctly labelled, against the true projection
+  double centroid_max_px = 0.0;
+  double ms_per_frame = 0.0;  // detection and identification, wall time
+};
 
 template <int NK>
 struct SimRun {
@@ -28,6 +49,7 @@ struct SimRun {
   firmware::LoopCounters loop_counters;
   std::uint64_t markers_out_of_image = 0;
   std::size_t imu_samples = 0, frames = 0;
+  DetectionReport detection;  // --frames only
 };
 template <int NK>
 using CalibrationRun = SimRun<NK>;
@@ -52,24 +74,35 @@ CalibrationConfig scenario_config(const sim::Scenario& s);
 // The data a simulated run hands to the loop.
 LoopData loop_data(const sim::Scenario& s, const sim::SimData& data);
 
+// Where the loop's marker frames come from when not from LoopData::frames (sim --frames: rendered
+// frames through the board's detection, relabelled with the filter's prediction).
+struct MarkerInput {
+  hal::MarkerSource<kMarkers>* source = nullptr;
+  hal::MarkerRelabeler<kMarkers>* relabeler = nullptr;
+};
+
 // Runs the loop on data from the initial estimate (x0, p0). With truth, each history row carries
 // the error and NEES against it. progress(f) is called with the fraction done now and then.
 template <int NK>
 SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress = {});
+                    const std::function<void(double)>& progress = {},
+                    const MarkerInput& input = {});
 
 extern template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
                                       const SimRun<0>::Filter::Covariance&, const LoopData&,
-                                      const SimRun<0>::State*, const std::function<void(double)>&);
+                                      const SimRun<0>::State*, const std::function<void(double)>&,
+                                      const MarkerInput&);
 extern template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
                                       const SimRun<5>::Filter::Covariance&, const LoopData&,
-                                      const SimRun<5>::State*, const std::function<void(double)>&);
+                                      const SimRun<5>::State*, const std::function<void(double)>&,
+                                      const MarkerInput&);
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress = {});
+                         const std::function<void(double)>& progress = {},
+                         const FrameMode& frames = {});
 
 // The prior a simulated run with this seed starts from (a user's guesses, drawn around the truth).
 Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& data,

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "mirrorcal/sim_host/frame_renderer.hpp"
+
 namespace mirrorcal::sim {
 
 std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream) {
@@ -58,16 +60,13 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
   }
 
   // Camera: frames at offset + j / rate, while the IMU covers them.
-  const auto n_frames =
-      static_cast<std::size_t>(std::floor((s.duration_s - s.camera_offset_s) * s.camera_rate_hz)) +
-      1;
+  const std::uint64_t n_frames = frame_count(s);
   d.frames.reserve(n_frames);
   const int m = static_cast<int>(s.truth.markers.size());
-  for (std::size_t j = 0; j < n_frames; ++j) {
-    const double t = s.camera_offset_s + static_cast<double>(j) / s.camera_rate_hz;
-    const Kinematics kin = kinematics(s.motion, t);
+  for (std::uint64_t j = 0; j < n_frames; ++j) {
     ObservedFrame f;
-    f.t_ns = std::llround(t * 1e9);
+    f.t_ns = frame_time_ns(s, j);
+    const Kinematics kin = kinematics(s.motion, static_cast<double>(f.t_ns) * 1e-9);
     for (int i = 0; i < m; ++i) {
       Eigen::Vector2d uv;
       const double du = n01(rng_cam), dv = n01(rng_cam);  // drawn always: streams stay aligned

@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/hal/sources.hpp"
 
 namespace mirrorcal::firmware {
@@ -56,6 +57,10 @@ class CalibrationLoop {
   // Steps until the end of the IMU stream, then finishes.
   LoopEnd run();
 
+  // Marker identification that wants the filter's prediction at each frame's time (a camera
+  // source that detects markers in frames): relabel() is called on every frame before its update.
+  void set_identifier(hal::MarkerRelabeler<M>* identifier) { identifier_ = identifier; }
+
   const LoopCounters& counters() const { return counters_; }
   LoopEnd end() const { return end_; }
   std::int64_t time_ns() const { return last_.t_ns; }
@@ -69,6 +74,8 @@ class CalibrationLoop {
   hal::MarkerSource<M>& markers_;
   LoopConfig config_;
   EstimateSink<Filter>* sink_;
+  hal::MarkerRelabeler<M>* identifier_ = nullptr;
+  hal::MarkerPrediction<M> prediction_{};
 
   LoopCounters counters_{};
   LoopEnd end_ = LoopEnd::kEndOfStream;

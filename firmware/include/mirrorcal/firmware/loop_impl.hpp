@@ -2,6 +2,7 @@
 #pragma once
 
 #include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/firmware/marker_prediction.hpp"
 
 namespace mirrorcal::firmware {
 
@@ -77,6 +78,8 @@ bool CalibrationLoop<S, M, NK>::step() {
       continue;
     }
     propagate_to(interpolate(last_, sample, pending_.t_ns));
+    if (identifier_ != nullptr && predict_marker_pixels(filter_, prediction_))
+      identifier_->relabel(prediction_, pending_);
     apply_frame(pending_);
   }
   propagate_to(sample);

@@ -1,0 +1,64 @@
+// Where the filter expects each marker's reflection: the estimator's own measurement model
+// (predict_markers) at the current mean, and its covariance from the state's uncertainty, sampled
+// at +-1 sigma along the Cholesky columns of the block the camera reads (central differences, so
+// it is the linearised covariance J P J^T without writing J). The loop hands it to marker
+// identification (CalibrationLoop::set_identifier), which gates on it.
+// Fixed-size throughout: no allocation.
+#pragma once
+
+#include <Eigen/Cholesky>
+
+#include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/hal/frames.hpp"
+
+namespace mirrorcal::firmware {
+
+// False if the covariance of the measured block cannot be factored (then no prediction).
+template <class Filter>
+bool predict_marker_pixels(const Filter& filter,
+                           hal::MarkerPrediction<Filter::State::kMarkers>& out) {
+  using State = typename Filter::State;
+  using S = typename State::Scalar;
+  constexpr int M = State::kMarkers;
+  constexpr int B = State::kMeasuredBegin, L = State::kMeasuredDim;
+  using Pixels = Eigen::Matrix<S, 2 * M, 1>;
+
+  const Pinhole<double>& k = filter.config().intrinsics;
+  const Pinhole<S> fixed{S(k.fu), S(k.fv), S(k.cu), S(k.cv), S(k.skew)};
+  const State& mean = filter.state();
+  std::array<bool, M> ok;
+  ok.fill(true);
+  Pixels z0 = Pixels::Zero();
+  predict_markers(mean, fixed, z0, ok);
+
+  const Eigen::Matrix<S, L, L> p_block = filter.covariance().template block<L, L>(B, B);
+  const Eigen::LLT<Eigen::Matrix<S, L, L>> llt(p_block);
+  if (llt.info() != Eigen::Success) return false;
+  const Eigen::Matrix<S, L, L> chol = llt.matrixL();
+
+  std::array<Eigen::Matrix<S, 2, 2>, M> cov;
+  for (auto& c : cov) c.setZero();
+  for (int j = 0; j < L; ++j) {
+    State plus = mean, minus = mean;
+    const Eigen::Matrix<S, L, 1> d = chol.col(j);
+    plus.template boxplus_block<B, L>(d);
+    minus.template boxplus_block<B, L>(Eigen::Matrix<S, L, 1>(-d));
+    Pixels zp = Pixels::Zero(), zm = Pixels::Zero();
+    predict_markers(plus, fixed, zp, ok);
+    predict_markers(minus, fixed, zm, ok);
+    for (int i = 0; i < M; ++i) {
+      const Eigen::Matrix<S, 2, 1> a =
+          S(0.5) * (zp.template segment<2>(2 * i) - zm.template segment<2>(2 * i));
+      cov[static_cast<std::size_t>(i)] += a * a.transpose();
+    }
+  }
+  for (int i = 0; i < M; ++i) {
+    const auto ii = static_cast<std::size_t>(i);
+    out.valid[ii] = ok[ii];
+    out.uv[ii] = z0.template segment<2>(2 * i).template cast<double>();
+    out.covariance[ii] = cov[ii].template cast<double>();
+  }
+  return true;
+}
+
+}  // namespace mirrorcal::firmware

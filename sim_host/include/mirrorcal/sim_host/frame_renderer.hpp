@@ -1,0 +1,88 @@
+// Camera frames of the simulated mirror scene: the markers' reflections drawn as small blurred
+// bright spots (a Gaussian point spread function integrated over each pixel, so the spot's centre
+// is exact to a small fraction of a pixel) on a dim, smoothly lit background, with sensor noise,
+// quantised to 8 bits in GREY or YUYV. Deterministic in the seed and the frame index.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "mirrorcal/hal/frames.hpp"
+#include "mirrorcal/sim_host/scenario.hpp"
+
+namespace mirrorcal::sim {
+
+struct RenderConfig {
+  hal::PixelFormat format = hal::PixelFormat::kGrey;
+  double psf_sigma_px = 1.2;
+  // Peak of each marker's spot above the background (DN), marker i at brightness[i % size]:
+  // 1 : 1.5 : 2.25, LEDs of different drive current (the identification's second cue).
+  std::vector<double> brightness{80.0, 120.0, 180.0};
+  double background_low = 10.0, background_high = 40.0;  // DN, the scene behind the markers
+  double noise_sigma = 2.0;                              // DN, read noise per pixel
+};
+
+// What was drawn in one frame: the true pixel of each marker whose spot is in the image.
+struct RenderedTruth {
+  std::int64_t t_ns = 0;
+  std::vector<bool> visible;
+  std::vector<Eigen::Vector2d> uv;
+};
+
+class FrameRenderer {
+ public:
+  FrameRenderer(const Scenario& scenario, const RenderConfig& config, std::uint64_t seed);
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  int bytes_per_line() const { return width_ * hal::bytes_per_pixel(config_.format); }
+  const RenderConfig& config() const { return config_; }
+
+  // Renders the scene at true time t_ns into image (rows of bytes_per_line() bytes); truth gets
+  // the spots drawn. frame_index selects the noise, so a frame is the same whenever drawn.
+  void render(std::int64_t t_ns, std::uint64_t frame_index, std::uint8_t* image,
+              RenderedTruth& truth);
+
+  // Draws one spot of the given peak (DN above background) at (u, v) into the float canvas;
+  // exposed for tests that place spots by hand.
+  void add_spot(double u, double v, double peak);
+  // Background, spots added since, noise and quantisation into image.
+  void finish(std::uint64_t frame_index, std::uint8_t* image);
+
+ private:
+  const Scenario& scenario_;
+  RenderConfig config_;
+  std::uint64_t seed_;
+  int width_, height_;
+  std::vector<float> background_;  // the static scene, DN
+  std::vector<float> canvas_;      // spots of the frame being drawn, DN
+  std::vector<float> noise_;       // a table of standard normal draws, cycled through per frame
+};
+
+// The rendered frames of a scenario as a hal::FrameSource: frame j at the camera's j-th time
+// (camera_offset_s + j / camera_rate_hz, as simulate() lists them), until the run's end.
+class RenderedFrameSource final : public hal::FrameSource {
+ public:
+  RenderedFrameSource(const Scenario& scenario, const RenderConfig& config, std::uint64_t seed);
+  hal::SourceStatus poll(hal::FrameView& frame) override;
+  hal::FrameCounters counters() const override { return counters_; }
+  // What the last frame delivered shows.
+  const RenderedTruth& truth() const { return truth_; }
+
+ private:
+  const Scenario& scenario_;
+  FrameRenderer renderer_;
+  std::vector<std::uint8_t> image_;
+  std::uint64_t next_ = 0, frames_ = 0;
+  RenderedTruth truth_;
+  hal::FrameCounters counters_{};
+};
+
+// Frame j's timestamp in a scenario (the same times simulate() gives its marker frames).
+std::int64_t frame_time_ns(const Scenario& s, std::uint64_t j);
+// How many frames a scenario's run has.
+std::uint64_t frame_count(const Scenario& s);
+
+}  // namespace mirrorcal::sim

@@ -1,0 +1,142 @@
+#include "mirrorcal/sim_host/frame_renderer.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "mirrorcal/sim_host/simulator.hpp"
+
+namespace mirrorcal::sim {
+
+namespace {
+
+constexpr std::size_t kNoiseTable = std::size_t{1} << 18;
+constexpr std::uint64_t kNoiseStream = 0x4652414d45ull;  // "FRAME": seeds apart from simulate()'s
+
+}  // namespace
+
+std::int64_t frame_time_ns(const Scenario& s, std::uint64_t j) {
+  return std::llround((s.camera_offset_s + static_cast<double>(j) / s.camera_rate_hz) * 1e9);
+}
+
+std::uint64_t frame_count(const Scenario& s) {
+  return static_cast<std::uint64_t>(
+             std::floor((s.duration_s - s.camera_offset_s) * s.camera_rate_hz)) +
+         1;
+}
+
+FrameRenderer::FrameRenderer(const Scenario& scenario, const RenderConfig& config,
+                             std::uint64_t seed)
+    : scenario_(scenario),
+      config_(config),
+      seed_(seed),
+      width_(scenario.truth.width),
+      height_(scenario.truth.height) {
+  const auto n = static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_);
+  background_.resize(n);
+  canvas_.assign(n, 0.0f);
+  // A dim room seen in the mirror: light falling off from the upper left with a soft ripple of
+  // furniture and walls, always well below the markers.
+  const double lo = config_.background_low, hi = config_.background_high;
+  for (int y = 0; y < height_; ++y)
+    for (int x = 0; x < width_; ++x) {
+      const double fx = static_cast<double>(x) / width_, fy = static_cast<double>(y) / height_;
+      const double light =
+          0.55 - 0.3 * (0.6 * fx + 0.4 * fy) +
+          0.15 * std::sin(2.0 * M_PI * (1.3 * fx + 0.2)) * std::cos(2.0 * M_PI * 0.8 * fy) +
+          0.1 * std::sin(2.0 * M_PI * (3.1 * fx - 2.3 * fy));
+      background_[static_cast<std::size_t>(y * width_ + x)] =
+          static_cast<float>(lo + (hi - lo) * std::clamp(light, 0.0, 1.0));
+    }
+  std::mt19937_64 rng(derive_seed(seed, kNoiseStream));
+  std::normal_distribution<float> n01;
+  noise_.resize(kNoiseTable);
+  for (float& v : noise_) v = n01(rng);
+}
+
+void FrameRenderer::add_spot(double u, double v, double peak) {
+  const double s = config_.psf_sigma_px;
+  const double flux = peak * 2.0 * M_PI * s * s;
+  const int r = static_cast<int>(std::ceil(4.0 * s)) + 1;
+  const int x0 = std::max(0, static_cast<int>(std::floor(u)) - r);
+  const int x1 = std::min(width_ - 1, static_cast<int>(std::ceil(u)) + r);
+  const int y0 = std::max(0, static_cast<int>(std::floor(v)) - r);
+  const int y1 = std::min(height_ - 1, static_cast<int>(std::ceil(v)) + r);
+  if (x0 > x1 || y0 > y1) return;
+  // The Gaussian integrated over pixel [x - 0.5, x + 0.5] x [y - 0.5, y + 0.5]: separable.
+  const double k = 1.0 / (s * std::sqrt(2.0));
+  std::array<double, 64> wx{}, wy{};
+  for (int x = x0; x <= x1 && x - x0 < 64; ++x)
+    wx[static_cast<std::size_t>(x - x0)] =
+        0.5 * (std::erf((x + 0.5 - u) * k) - std::erf((x - 0.5 - u) * k));
+  for (int y = y0; y <= y1 && y - y0 < 64; ++y)
+    wy[static_cast<std::size_t>(y - y0)] =
+        0.5 * (std::erf((y + 0.5 - v) * k) - std::erf((y - 0.5 - v) * k));
+  for (int y = y0; y <= y1 && y - y0 < 64; ++y)
+    for (int x = x0; x <= x1 && x - x0 < 64; ++x)
+      canvas_[static_cast<std::size_t>(y * width_ + x)] += static_cast<float>(
+          flux * wx[static_cast<std::size_t>(x - x0)] * wy[static_cast<std::size_t>(y - y0)]);
+}
+
+void FrameRenderer::finish(std::uint64_t frame_index, std::uint8_t* image) {
+  std::mt19937_64 rng(derive_seed(seed_, kNoiseStream + 1 + frame_index));
+  std::size_t at = static_cast<std::size_t>(rng()) & (kNoiseTable - 1);
+  const auto sigma = static_cast<float>(config_.noise_sigma);
+  const int step = hal::bytes_per_pixel(config_.format);
+  const int stride = bytes_per_line();
+  for (int y = 0; y < height_; ++y) {
+    std::uint8_t* row = image + static_cast<std::size_t>(y) * static_cast<std::size_t>(stride);
+    for (int x = 0; x < width_; ++x) {
+      const auto p = static_cast<std::size_t>(y * width_ + x);
+      const float value = background_[p] + canvas_[p] + sigma * noise_[at];
+      at = (at + 1) & (kNoiseTable - 1);
+      row[x * step] = static_cast<std::uint8_t>(std::clamp(std::lround(value), 0L, 255L));
+      if (step == 2) row[x * step + 1] = 128;  // YUYV chroma: grey
+    }
+  }
+  std::fill(canvas_.begin(), canvas_.end(), 0.0f);
+}
+
+void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::uint8_t* image,
+                           RenderedTruth& truth) {
+  const Kinematics kin = kinematics(scenario_.motion, static_cast<double>(t_ns) * 1e-9);
+  const auto m = scenario_.truth.markers.size();
+  truth.t_ns = t_ns;
+  truth.visible.assign(m, false);
+  truth.uv.assign(m, Eigen::Vector2d::Zero());
+  for (std::size_t i = 0; i < m; ++i) {
+    Eigen::Vector2d uv;
+    if (!true_pixel(scenario_, kin.p, kin.q_n_b, static_cast<int>(i), uv)) continue;
+    truth.visible[i] = true;
+    truth.uv[i] = uv;
+    add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);
+  }
+  finish(frame_index, image);
+}
+
+RenderedFrameSource::RenderedFrameSource(const Scenario& scenario, const RenderConfig& config,
+                                         std::uint64_t seed)
+    : scenario_(scenario),
+      renderer_(scenario, config, seed),
+      image_(static_cast<std::size_t>(renderer_.bytes_per_line()) *
+             static_cast<std::size_t>(renderer_.height())),
+      frames_(frame_count(scenario)) {}
+
+hal::SourceStatus RenderedFrameSource::poll(hal::FrameView& frame) {
+  if (next_ >= frames_) return hal::SourceStatus::kEndOfStream;
+  const std::int64_t t_ns = frame_time_ns(scenario_, next_);
+  renderer_.render(t_ns, next_, image_.data(), truth_);
+  frame.format = renderer_.config().format;
+  frame.width = renderer_.width();
+  frame.height = renderer_.height();
+  frame.bytes_per_line = renderer_.bytes_per_line();
+  frame.data = image_.data();
+  frame.bytes = image_.size();
+  frame.t_ns = t_ns;
+  frame.sequence = static_cast<std::uint32_t>(next_);
+  frame.flags = 0;
+  ++next_;
+  ++counters_.frames;
+  return hal::SourceStatus::kOk;
+}
+
+}  // namespace mirrorcal::sim

@@ -1,0 +1,288 @@
+// Marker detection on rendered frames: sub-pixel accuracy against the positions the spots were
+// drawn at (the renderer integrates a Gaussian over each pixel, independently of the detector),
+// pixel formats and padded rows, size limits, and identification that neither takes a spurious
+// blob for a marker nor swaps two markers that cross.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/sim_host/frame_renderer.hpp"
+#include "mirrorcal/sim_host/scenario.hpp"
+
+namespace mc = mirrorcal;
+using mc::drivers::Blob;
+using mc::drivers::BlobDetector;
+
+namespace {
+
+constexpr int M = 3;
+
+mc::hal::FrameView view_of(const std::vector<std::uint8_t>& image, mc::hal::PixelFormat format,
+                           int width, int height, int bytes_per_line) {
+  mc::hal::FrameView v;
+  v.format = format;
+  v.width = width;
+  v.height = height;
+  v.bytes_per_line = bytes_per_line;
+  v.data = image.data();
+  v.bytes = image.size();
+  return v;
+}
+
+// A canvas of the paper scenario's size on which tests place spots by hand.
+struct Canvas {
+  explicit Canvas(mc::sim::RenderConfig rc = {}, std::uint64_t seed = 3)
+      : scenario(mc::sim::paper_scenario()),
+        renderer(scenario, rc, seed),
+        image(static_cast<std::size_t>(renderer.bytes_per_line() * renderer.height())) {}
+  mc::hal::FrameView finish(std::uint64_t index = 0) {
+    renderer.finish(index, image.data());
+    return view_of(image, renderer.config().format, renderer.width(), renderer.height(),
+                   renderer.bytes_per_line());
+  }
+  mc::sim::Scenario scenario;
+  mc::sim::FrameRenderer renderer;
+  std::vector<std::uint8_t> image;
+};
+
+mc::drivers::IdentifierConfig<M> identifier_config() {
+  mc::drivers::IdentifierConfig<M> c;
+  const mc::sim::RenderConfig rc;
+  for (int i = 0; i < M; ++i) c.brightness[i] = rc.brightness[i];
+  return c;
+}
+
+// A confident prediction at the given pixels (what a converged filter gives).
+mc::hal::MarkerPrediction<M> prediction_at(const std::array<Eigen::Vector2d, M>& uv,
+                                           double sigma_px) {
+  mc::hal::MarkerPrediction<M> p;
+  for (int i = 0; i < M; ++i) {
+    p.valid[i] = true;
+    p.uv[i] = uv[i];
+    p.covariance[i] = sigma_px * sigma_px * Eigen::Matrix2d::Identity();
+  }
+  return p;
+}
+
+}  // namespace
+
+TEST(BlobDetector, CentroidsAreSubPixelAccurateWithoutNoise) {
+  // Spots at every tenth of a pixel in u and v: an estimator that locks to the pixel grid shows
+  // errors of tenths of a pixel here.
+  mc::sim::RenderConfig rc;
+  rc.noise_sigma = 0.0;
+  Canvas canvas(rc);
+  std::vector<Eigen::Vector2d> placed;
+  for (int a = 0; a < 10; ++a)
+    for (int b = 0; b < 10; ++b) {
+      const Eigen::Vector2d uv(40.0 + 60.0 * a + 0.1 * a, 30.0 + 44.0 * b + 0.1 * b);
+      canvas.renderer.add_spot(uv.x(), uv.y(), 100.0);
+      placed.push_back(uv);
+    }
+  const mc::hal::FrameView v = canvas.finish();
+  BlobDetector det({}, v.width, v.height);
+  std::vector<Blob> blobs(200);
+  const int n = det.detect(v, blobs.data(), 200);
+  ASSERT_EQ(n, 100);
+  double worst = 0.0;
+  for (const Eigen::Vector2d& p : placed) {
+    double best = 1e9;
+    for (int j = 0; j < n; ++j)
+      best = std::min(best, (Eigen::Vector2d(blobs[j].u, blobs[j].v) - p).norm());
+    worst = std::max(worst, best);
+  }
+  EXPECT_LT(worst, 0.05) << "px";
+}
+
+TEST(BlobDetector, AccuracyAndTimeOnRenderedPaperFrames) {
+  // The paper scenario's frames as the simulation renders them (noise, background, three markers
+  // of different brightness), against the true projections.
+  const mc::sim::Scenario s = mc::sim::paper_scenario();
+  for (const auto format : {mc::hal::PixelFormat::kGrey, mc::hal::PixelFormat::kYuyv}) {
+    mc::sim::RenderConfig rc;
+    rc.format = format;
+    mc::sim::RenderedFrameSource frames(s, rc, 21);
+    mc::drivers::DetectionConfig<M> cfg;
+    cfg.identify = identifier_config();
+    mc::drivers::DetectingMarkerSource<M> source(frames, cfg, s.truth.width, s.truth.height);
+    double sum_sq = 0.0;
+    int labelled = 0, drawn = 0, wrong = 0;
+    mc::MarkerFrame<M> f;
+    for (int k = 0; k < 300 && source.poll(f) == mc::hal::SourceStatus::kOk; ++k) {
+      // Brightness alone (no prediction) must already name them here.
+      const auto& truth = frames.truth();
+      for (int i = 0; i < M; ++i) {
+        drawn += truth.visible[i] ? 1 : 0;
+        if (!f.seen[i]) continue;
+        ++labelled;
+        const double e = (f.uv[i] - truth.uv[i]).norm();
+        if (!truth.visible[i] || e > 1.0) {
+          ++wrong;
+          continue;
+        }
+        sum_sq += e * e;
+      }
+    }
+    const double rms = std::sqrt(sum_sq / labelled);
+    const double ms = 1e3 * source.counters().detect_seconds / source.counters().frames;
+    std::printf(
+        "%s: %d of %d reflections labelled, %d wrong, centroid error %.3f px RMS, %.2f ms/frame\n",
+        mc::hal::to_string(format), labelled, drawn, wrong, rms, ms);
+    EXPECT_EQ(wrong, 0);
+    EXPECT_GE(labelled, drawn * 97 / 100);
+    EXPECT_LT(rms, 0.1) << "px";
+  }
+}
+
+TEST(BlobDetector, GreyAndYuyvGiveTheSameBlobs) {
+  mc::sim::RenderConfig grey, yuyv;
+  yuyv.format = mc::hal::PixelFormat::kYuyv;
+  Canvas a(grey, 9), b(yuyv, 9);
+  for (Canvas* c : {&a, &b}) {
+    c->renderer.add_spot(100.3, 200.7, 90.0);
+    c->renderer.add_spot(400.5, 50.25, 150.0);
+  }
+  const mc::hal::FrameView va = a.finish(4), vb = b.finish(4);
+  BlobDetector da({}, 640, 480), db({}, 640, 480);
+  Blob ba[8], bb[8];
+  const int na = da.detect(va, ba, 8), nb = db.detect(vb, bb, 8);
+  ASSERT_EQ(na, 2);
+  ASSERT_EQ(nb, 2);
+  for (int j = 0; j < 2; ++j) {
+    EXPECT_DOUBLE_EQ(ba[j].u, bb[j].u);
+    EXPECT_DOUBLE_EQ(ba[j].v, bb[j].v);
+    EXPECT_DOUBLE_EQ(ba[j].flux, bb[j].flux);
+  }
+}
+
+TEST(BlobDetector, HonoursPaddedRows) {
+  // The driver's bytes_per_line may exceed the row: padding full of bright bytes must not be read.
+  Canvas c;
+  c.renderer.add_spot(320.4, 240.6, 120.0);
+  const mc::hal::FrameView tight = c.finish();
+  const int pad = 64, stride = tight.bytes_per_line + pad;
+  std::vector<std::uint8_t> padded(static_cast<std::size_t>(stride * tight.height), 255);
+  for (int y = 0; y < tight.height; ++y)
+    std::copy_n(c.image.data() + y * tight.bytes_per_line, tight.bytes_per_line,
+                padded.data() + y * stride);
+  BlobDetector det({}, 640, 480);
+  Blob b[4];
+  const int n = det.detect(view_of(padded, tight.format, tight.width, tight.height, stride), b, 4);
+  ASSERT_EQ(n, 1);
+  EXPECT_NEAR(b[0].u, 320.4, 0.1);
+  EXPECT_NEAR(b[0].v, 240.6, 0.1);
+}
+
+TEST(BlobDetector, SizeLimitsRefuseHotPixelsAndLamps) {
+  Canvas c;
+  const mc::hal::FrameView v = c.finish();
+  c.image[100 * 640 + 100] = 250;  // a hot pixel
+  for (int y = 300; y < 340; ++y)  // a lamp: 40 x 40 saturated
+    for (int x = 500; x < 540; ++x) c.image[static_cast<std::size_t>(y * 640 + x)] = 255;
+  BlobDetector det({}, 640, 480);
+  Blob b[4];
+  EXPECT_EQ(det.detect(v, b, 4), 0);
+  EXPECT_EQ(det.counters().too_small, 1u);
+  EXPECT_EQ(det.counters().too_large, 1u);
+}
+
+TEST(MarkerIdentifier, SpuriousBlobsAreNotTakenForMarkers) {
+  const std::array<Eigen::Vector2d, M> truth = {
+      Eigen::Vector2d(200.3, 150.6), Eigen::Vector2d(260.7, 180.2), Eigen::Vector2d(150.5, 260.4)};
+  const mc::sim::RenderConfig rc;
+  // Spurious spots as bright as each marker in turn, far (40 px) and near (5 px) to marker 1.
+  for (const double offset : {40.0, 5.0})
+    for (const double brightness : rc.brightness) {
+      Canvas c;
+      for (int i = 0; i < M; ++i) c.renderer.add_spot(truth[i].x(), truth[i].y(), rc.brightness[i]);
+      c.renderer.add_spot(truth[1].x() + offset, truth[1].y() - 0.6 * offset, brightness);
+      const mc::hal::FrameView v = c.finish();
+      BlobDetector det({}, 640, 480);
+      Blob b[8];
+      const int n = det.detect(v, b, 8);
+      ASSERT_EQ(n, 4);
+      mc::drivers::MarkerIdentifier<M> id(identifier_config());
+      // The filter's prediction is off by a pixel or two, as it is in motion.
+      std::array<Eigen::Vector2d, M> predicted = truth;
+      for (auto& p : predicted) p += Eigen::Vector2d(1.5, -1.0);
+      const auto pred = prediction_at(predicted, 1.0);
+      mc::MarkerFrame<M> f;
+      const auto counts = id.identify(b, n, &pred, f);
+      for (int i = 0; i < M; ++i) {
+        if (!f.seen[i]) continue;  // withheld in doubt is allowed, a wrong position is not
+        EXPECT_LT((f.uv[i] - truth[i]).norm(), 0.3) << "marker " << i << " offset " << offset;
+      }
+      if (offset > 20.0) {
+        // Far away, it must not cost a marker.
+        EXPECT_TRUE(f.seen[0] && f.seen[1] && f.seen[2]);
+        EXPECT_EQ(counts.unassigned, 1u);
+      }
+    }
+}
+
+TEST(MarkerIdentifier, CrossingMarkersAreNeverSwapped) {
+  // Markers 0 and 1 pass through each other along u; marker 2 stays put. The prediction is the
+  // truth a pixel off with a 1 px sigma, like a converged filter's.
+  const mc::sim::RenderConfig rc;
+  int both_far_apart = 0, far_apart_frames = 0, labelled = 0;
+  Canvas c(rc, 11);
+  BlobDetector det({}, 640, 480);
+  for (double d = 24.0; d >= -24.0; d -= 0.25) {
+    const std::array<Eigen::Vector2d, M> truth = {Eigen::Vector2d(300.2 + d / 2, 200.4 + d / 8),
+                                                  Eigen::Vector2d(300.2 - d / 2, 200.4 - d / 8),
+                                                  Eigen::Vector2d(100.6, 400.3)};
+    for (int i = 0; i < M; ++i) c.renderer.add_spot(truth[i].x(), truth[i].y(), rc.brightness[i]);
+    const mc::hal::FrameView v = c.finish(static_cast<std::uint64_t>(std::lround(d * 4 + 100)));
+    Blob b[8];
+    const int n = det.detect(v, b, 8);
+    std::array<Eigen::Vector2d, M> predicted = truth;
+    predicted[0] += Eigen::Vector2d(0.8, 0.6);
+    predicted[1] += Eigen::Vector2d(-0.8, 0.6);
+    const auto pred = prediction_at(predicted, 1.0);
+    mc::drivers::MarkerIdentifier<M> id(identifier_config());
+    mc::MarkerFrame<M> f;
+    id.identify(b, n, &pred, f);
+    for (int i = 0; i < M; ++i) {
+      if (!f.seen[i]) continue;
+      ++labelled;
+      // A swapped or merged blob would be off by up to d; a labelled one must be right.
+      EXPECT_LT((f.uv[i] - truth[i]).norm(), 0.3) << "marker " << i << " at separation " << d;
+    }
+    EXPECT_TRUE(f.seen[2]);
+    if (std::abs(d) > 10.0) {
+      ++far_apart_frames;
+      both_far_apart += (f.seen[0] && f.seen[1]) ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(both_far_apart, far_apart_frames);  // the crossing costs only the frames near it
+  EXPECT_GT(labelled, 150);
+}
+
+TEST(MarkerIdentifier, BrightnessNamesMarkersWithoutAPrediction) {
+  const mc::sim::RenderConfig rc;
+  const std::array<Eigen::Vector2d, M> truth = {
+      Eigen::Vector2d(500.5, 100.5), Eigen::Vector2d(90.2, 300.7), Eigen::Vector2d(320.0, 240.0)};
+  Canvas c;
+  for (int i = 0; i < M; ++i) c.renderer.add_spot(truth[i].x(), truth[i].y(), rc.brightness[i]);
+  const mc::hal::FrameView v = c.finish();
+  BlobDetector det({}, 640, 480);
+  Blob b[8];
+  const int n = det.detect(v, b, 8);
+  mc::drivers::MarkerIdentifier<M> id(identifier_config());
+  mc::MarkerFrame<M> f;
+  id.identify(b, n, nullptr, f);
+  for (int i = 0; i < M; ++i) {
+    ASSERT_TRUE(f.seen[i]);
+    EXPECT_LT((f.uv[i] - truth[i]).norm(), 0.3);
+  }
+  // With equal brightness and no prediction nothing can be told apart: nothing is labelled.
+  auto equal = identifier_config();
+  equal.brightness = {1.0, 1.0, 1.0};
+  mc::drivers::MarkerIdentifier<M> blind(equal);
+  blind.identify(b, n, nullptr, f);
+  EXPECT_FALSE(f.seen[0] || f.seen[1] || f.seen[2]);
+}
