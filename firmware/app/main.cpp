@@ -14,7 +14,9 @@ const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
-       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n",
+       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
+       "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"

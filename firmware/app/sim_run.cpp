@@ -28,7 +28,8 @@ State truth_state(const sim::Scenario& s) {
 }  // namespace
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress) {
+                         const std::function<void(double)>& progress,
+                         firmware::LoopProfiler* profiler) {
   using Run = SimRun<0>;
   using Filter = Run::Filter;
   Run run;
@@ -47,6 +48,7 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   HistorySink<Filter> sink(data.frames.size() + 1, &run.truth);
   firmware::LoopConfig lc;
   lc.imu_period_ns = static_cast<std::int64_t>(1e9 / s.imu_rate_hz);
+  lc.profiler = profiler;
   firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc, &sink);
 
   const std::size_t report_every = data.imu.size() / 100 + 1;

@@ -32,8 +32,9 @@ struct SimRun {
 CalibrationConfig scenario_config(const sim::Scenario& s);
 
 // Simulates one run (data and initial guess from seed) and calibrates it. progress(f) is called
-// with the fraction done now and then, if given.
+// with the fraction done now and then, if given; profiler, if given, times the loop.
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress = {});
+                         const std::function<void(double)>& progress = {},
+                         firmware::LoopProfiler* profiler = nullptr);
 
 }  // namespace mirrorcal::app
