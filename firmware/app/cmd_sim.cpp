@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "cli.hpp"
+#include "loop_options.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "plots.hpp"
 #include "report.hpp"
@@ -18,8 +19,11 @@
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  const Options o =
-      parse(argc, argv, 2, {"scenario", "seed", "out", "format"}, {"no-plots", "frames"});
+  std::vector<std::string> with_value = {"scenario", "seed", "out", "format"},
+                           flags = {"no-plots", "frames"};
+  with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
+  flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
+  const Options o = parse(argc, argv, 2, with_value, flags);
   FrameMode frames;
   frames.enabled = o.flag("frames");
   const std::string format = o.get("format", "grey");
@@ -31,13 +35,17 @@ int cmd_sim(int argc, char** argv) {
   const sim::Scenario s = scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const std::string dir = make_out_dir(o, "out/sim");
+  firmware::MonotonicClock clock;  // the simulation's own clock is simulated time
+  const auto profiler = make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
+                                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz));
+  apply_realtime_options(o);
   std::printf(
       "mirrorcal sim: scenario '%s', seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), s.duration_s, s.imu_rate_hz,
       s.camera_rate_hz);
   const auto t0 = std::chrono::steady_clock::now();
   const auto run = run_simulation(
-      s, seed, [](double f) { print_progress("calibrating", f); }, frames);
+      s, seed, [](double f) { print_progress("calibrating", f); }, frames, profiler.get());
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::fprintf(stderr, "\rcalibrating done   \n");
 
@@ -83,6 +91,9 @@ int cmd_sim(int argc, char** argv) {
   std::string err;
   if (!write_run_outputs(dir, run, err)) fail(err, 1);
   std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n", dir.c_str());
+  if (profiler)
+    report_profile(*profiler,
+                   "this host's monotonic clock, simulated data fed as fast as it is taken", dir);
   if (!o.flag("no-plots")) {
     const std::vector<ErrorSeries> series = {error_series(run.history, params)};
     const auto pngs = plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params,

@@ -17,7 +17,9 @@ const std::vector<Command>& commands() {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
        "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
-       "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n",
+       "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
+       "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
+       "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"

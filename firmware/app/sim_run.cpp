@@ -49,7 +49,7 @@ template <int NK>
 SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress, const MarkerInput& input) {
+                    const std::function<void(double)>& progress, const LoopHooks& input) {
   using Run = SimRun<NK>;
   using Filter = typename Run::Filter;
   Run run;
@@ -63,6 +63,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   HistorySink<Filter> sink(data.frames.size() + 1, truth != nullptr ? &run.truth : nullptr);
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
+  lc.profiler = input.profiler;
   firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, imu, markers, lc, &sink);
   if (input.relabeler != nullptr) loop.set_identifier(input.relabeler);
 
@@ -86,14 +87,15 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
 template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
                                const SimRun<0>::Filter::Covariance&, const LoopData&,
                                const SimRun<0>::State*, const std::function<void(double)>&,
-                               const MarkerInput&);
+                               const LoopHooks&);
 template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
                                const SimRun<5>::Filter::Covariance&, const LoopData&,
                                const SimRun<5>::State*, const std::function<void(double)>&,
-                               const MarkerInput&);
+                               const LoopHooks&);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress, const FrameMode& frames) {
+                         const std::function<void(double)>& progress, const FrameMode& frames,
+                         firmware::LoopProfiler* profiler) {
   using Run = SimRun<0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -102,12 +104,14 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   initialise(prior, x0, p0);
   const Run::State truth = truth_state<Run::State>(s);
   std::optional<RenderedMarkers> rendered;
-  MarkerInput input;
+  LoopHooks input;
+  input.profiler = profiler;
   if (frames.enabled) {
     sim::RenderConfig render;
     render.format = frames.format;
     rendered.emplace(s, render, sim::derive_seed(seed, 200));
-    input = {&*rendered, &*rendered};
+    input.source = &*rendered;
+    input.relabeler = &*rendered;
   }
   Run run = run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, input);
   run.markers_out_of_image = data.markers_out_of_image;

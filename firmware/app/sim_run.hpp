@@ -74,11 +74,13 @@ CalibrationConfig scenario_config(const sim::Scenario& s);
 // The data a simulated run hands to the loop.
 LoopData loop_data(const sim::Scenario& s, const sim::SimData& data);
 
-// Where the loop's marker frames come from when not from LoopData::frames (sim --frames: rendered
-// frames through the board's detection, relabelled with the filter's prediction).
-struct MarkerInput {
+// What a run may add to the loop: marker frames from elsewhere than LoopData::frames (sim --frames:
+// rendered frames through the board's detection, relabelled with the filter's prediction), and a
+// profiler timing its stages.
+struct LoopHooks {
   hal::MarkerSource<kMarkers>* source = nullptr;
   hal::MarkerRelabeler<kMarkers>* relabeler = nullptr;
+  firmware::LoopProfiler* profiler = nullptr;
 };
 
 // Runs the loop on data from the initial estimate (x0, p0). With truth, each history row carries
@@ -88,21 +90,21 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
                     const std::function<void(double)>& progress = {},
-                    const MarkerInput& input = {});
+                    const LoopHooks& input = {});
 
 extern template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
                                       const SimRun<0>::Filter::Covariance&, const LoopData&,
                                       const SimRun<0>::State*, const std::function<void(double)>&,
-                                      const MarkerInput&);
+                                      const LoopHooks&);
 extern template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
                                       const SimRun<5>::Filter::Covariance&, const LoopData&,
                                       const SimRun<5>::State*, const std::function<void(double)>&,
-                                      const MarkerInput&);
+                                      const LoopHooks&);
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const std::function<void(double)>& progress = {},
-                         const FrameMode& frames = {});
+                         const FrameMode& frames = {}, firmware::LoopProfiler* profiler = nullptr);
 
 // The prior a simulated run with this seed starts from (a user's guesses, drawn around the truth).
 Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& data,

@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/firmware/timing.hpp"
 #include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/hal/sources.hpp"
 
@@ -16,6 +17,8 @@ struct LoopConfig {
   // An interval longer than gap_periods nominal periods is an IMU gap: counted, and propagated
   // across in steps of one nominal period on linearly interpolated samples.
   double gap_periods = 2.5;
+  // Times every stage of the loop when set (see timing.hpp).
+  LoopProfiler* profiler = nullptr;
 };
 
 // What the loop met on its streams; nothing is dropped without being counted here.
@@ -68,6 +71,7 @@ class CalibrationLoop {
  private:
   void propagate_to(const ImuSample& next);
   void apply_frame(const MarkerFrame<M>& frame);
+  hal::SourceStatus poll_markers();
 
   Filter& filter_;
   hal::ImuSource& imu_;
