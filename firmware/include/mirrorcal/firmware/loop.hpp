@@ -86,6 +86,12 @@ class CalibrationLoop {
   bool started_ = false;
   bool markers_ended_ = false;
   ImuSample last_{};  // the IMU sample at the filter's current time (possibly interpolated)
+  // The IMU signal between measured samples is the parabola through the last three (estimator's
+  // imu_signal_at): measured_ is the newest measured sample at or before last_, before_ the one
+  // before it, valid unless a gap lies between them.
+  ImuSample measured_{};
+  ImuSample before_{};
+  bool has_before_ = false;
   MarkerFrame<M> pending_{};
   bool pending_valid_ = false;
 };

@@ -22,7 +22,10 @@ void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
       last_ = mid;
     }
   }
-  if (filter_.predict(last_, next) != FilterStatus::kOk) ++counters_.filter_failures;
+  // The third node of the signal's parabola: the measured sample before the interval's start.
+  const ImuSample* node =
+      !has_before_ ? nullptr : (last_.t_ns == measured_.t_ns ? &before_ : &measured_);
+  if (filter_.predict(last_, next, node) != FilterStatus::kOk) ++counters_.filter_failures;
   last_ = next;
 }
 
@@ -72,13 +75,17 @@ bool CalibrationLoop<S, M, NK>::step() {
   ++counters_.imu_samples;
   if (!started_) {  // the filter's prior holds at the first sample's time
     started_ = true;
-    last_ = sample;
+    last_ = measured_ = sample;
     return true;
   }
   if (sample.t_ns <= last_.t_ns) {
     ++counters_.imu_out_of_order;
     return true;
   }
+  // Across a gap the signal is the straight line (propagate_to steps through it).
+  const bool gap = static_cast<double>(sample.t_ns - measured_.t_ns) >
+                   config_.gap_periods * static_cast<double>(config_.imu_period_ns);
+  if (gap) has_before_ = false;
   // Every frame up to this sample's time: propagate to the frame, update, go on.
   for (;;) {
     if (!pending_valid_) {
@@ -103,12 +110,15 @@ bool CalibrationLoop<S, M, NK>::step() {
       if (config_.profiler != nullptr) config_.profiler->end_frame();
       continue;
     }
-    propagate_to(interpolate(last_, sample, pending_.t_ns));
+    propagate_to(imu_signal_at(has_before_ ? &before_ : nullptr, measured_, sample, pending_.t_ns));
     if (identifier_ != nullptr && predict_marker_pixels(filter_, prediction_))
       identifier_->relabel(prediction_, pending_);
     apply_frame(pending_);
   }
   propagate_to(sample);
+  before_ = measured_;
+  measured_ = sample;
+  has_before_ = !gap;
   return true;
 }
 
