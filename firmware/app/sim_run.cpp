@@ -45,8 +45,11 @@ State truth_state(const sim::Scenario& s) {
 
 }  // namespace
 
+namespace {
+
+// One pass of the loop over the data from (x0, p0).
 template <int NK>
-SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
+SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
                     const std::function<void(double)>& progress, const LoopHooks& input) {
@@ -84,18 +87,47 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   return run;
 }
 
+}  // namespace
+
+template <int NK>
+SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
+                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
+                    const typename SimRun<NK>::State* truth,
+                    const std::function<void(double)>& progress,
+                    const std::function<LoopHooks(int pass)>& hooks, int passes) {
+  using State = typename SimRun<NK>::State;
+  State start = x0;
+  SimRun<NK> run;
+  for (int pass = 0; pass < passes; ++pass) {
+    const auto pass_progress = [&](double f) {
+      if (progress) progress((pass + f) / passes);
+    };
+    run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
+                       hooks ? hooks(pass) : LoopHooks{});
+    // The next pass starts the calibration parameters at this pass's estimate, with the prior's
+    // covariance: the data are linearised about a far better guess (see sim_run.hpp).
+    if (run.history.empty()) break;
+    const State& est = run.history.back().state;
+    start.p_b_c = est.p_b_c;
+    start.q_b_c = est.q_b_c;
+    start.markers = est.markers;
+    start.intrinsics = est.intrinsics;
+  }
+  return run;
+}
+
 template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
                                const SimRun<0>::Filter::Covariance&, const LoopData&,
                                const SimRun<0>::State*, const std::function<void(double)>&,
-                               const LoopHooks&);
+                               const std::function<LoopHooks(int)>&, int);
 template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
                                const SimRun<5>::Filter::Covariance&, const LoopData&,
                                const SimRun<5>::State*, const std::function<void(double)>&,
-                               const LoopHooks&);
+                               const std::function<LoopHooks(int)>&, int);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const std::function<void(double)>& progress, const FrameMode& frames,
-                         firmware::LoopProfiler* profiler) {
+                         firmware::LoopProfiler* profiler, int passes) {
   using Run = SimRun<0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -103,17 +135,22 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   const Run::State truth = truth_state<Run::State>(s);
+  // With frames, every pass renders and detects them afresh (detection follows the prediction).
   std::optional<RenderedMarkers> rendered;
-  LoopHooks input;
-  input.profiler = profiler;
-  if (frames.enabled) {
-    sim::RenderConfig render;
-    render.format = frames.format;
-    rendered.emplace(s, render, sim::derive_seed(seed, 200));
-    input.source = &*rendered;
-    input.relabeler = &*rendered;
-  }
-  Run run = run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, input);
+  const auto hooks = [&](int pass) {
+    LoopHooks h;
+    if (pass == passes - 1) h.profiler = profiler;  // the timing of one pass, the final one
+    if (frames.enabled) {
+      sim::RenderConfig render;
+      render.format = frames.format;
+      rendered.emplace(s, render, sim::derive_seed(seed, 200));
+      h.source = &*rendered;
+      h.relabeler = &*rendered;
+    }
+    return h;
+  };
+  Run run =
+      run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) run.detection = rendered->report();
   return run;

@@ -121,13 +121,16 @@ TEST(Loop, MarkerMissingForAWhileIsSurvived) {
   s.duration_s = 6.0;
   mc::sim::SimData d = mc::sim::simulate(s, 3);
   // Marker 2 disappears for two seconds, then every marker for half a second.
+  std::uint64_t empty_frames = 0;
   for (auto& fr : d.frames) {
     const double t = double(fr.t_ns) * 1e-9;
     std::vector<mc::sim::ObservedMarker> kept;
     for (const auto& m : fr.markers)
       if (!((t > 1.0 && t < 3.0 && m.id == 1) || (t > 4.0 && t < 4.5))) kept.push_back(m);
     fr.markers = kept;
+    empty_frames += kept.empty() ? 1 : 0;
   }
+  ASSERT_GE(empty_frames, static_cast<std::uint64_t>(0.5 * s.camera_rate_hz) - 1);
   Filter f(mc::app::scenario_config(s));
   Filter::State x;
   Filter::Covariance p;
@@ -138,7 +141,7 @@ TEST(Loop, MarkerMissingForAWhileIsSurvived) {
   mc::sim::VectorMarkerSource<3> ms(d.frames);
   Loop loop(f, is, ms, {});
   loop.run();
-  EXPECT_EQ(loop.counters().frames_without_markers, 10u);  // 4.0 < t < 4.5 at 20 Hz
+  EXPECT_EQ(loop.counters().frames_without_markers, empty_frames);
   EXPECT_EQ(loop.counters().filter_failures, 0u);
   EXPECT_TRUE(f.state().markers.allFinite());
   // The marker that was missing is still estimated, and its uncertainty shrank from the prior.
