@@ -22,7 +22,7 @@ const std::vector<PaperRow>& paper_tables();
 // returned as (a, b, c).
 Eigen::Vector3d display_angles(const Eigen::Quaterniond& q);
 
-// Quantile of the chi-square distribution with k degrees of freedom at p = 0.025 or 0.975
+// Quantile of the chi-square distribution with k degrees of freedom at probability p
 // (Wilson-Hilferty; accurate to <1 % for k > 10).
 double chi2_quantile(double p, double k);
 
