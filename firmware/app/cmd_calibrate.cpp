@@ -18,6 +18,12 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
               rec.imu.size(), rec.sensors.imu_rate_hz, rec.frames.size(),
               NK > 0 ? "camera intrinsics estimated too" : "camera intrinsics from camchain.yaml");
+  const std::uint64_t burn_in = recording_config(rec).gate_after_frames;
+  if (rec.frames.size() < burn_in)
+    std::fprintf(stderr,
+                 "mirrorcal: note: only %zu frames; the filter gates markers only after %llu, and "
+                 "the calibration will hardly have converged\n",
+                 rec.frames.size(), static_cast<unsigned long long>(burn_in));
   std::string err;
   SimRun<NK> run;
   const auto t0 = std::chrono::steady_clock::now();
