@@ -81,10 +81,7 @@ int cmd_sim(int argc, char** argv) {
   }
 
   std::string err;
-  if (!write_camchain_imucam(dir + "/camchain-imucam.yaml", run.result, err) ||
-      !write_result_yaml(dir + "/mirrorcal-result.yaml", run.result, err) ||
-      !write_estimates_csv(dir + "/estimates.csv", run.history, err))
-    fail(err, 1);
+  if (!write_run_outputs(dir, run, err)) fail(err, 1);
   std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n", dir.c_str());
   if (!o.flag("no-plots")) {
     const std::vector<ErrorSeries> series = {error_series(run.history, params)};

@@ -1,0 +1,189 @@
+// Recordings in the EuRoC/ASL layout (DESIGN.md, "Files users and other tools read"):
+//   DIR/mav0/imu0/data.csv       #timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]
+//   DIR/mav0/cam0/data.csv       #timestamp [ns],filename          (every frame, with or without
+//                                                                  markers)
+//   DIR/mav0/cam0/features.csv   #timestamp [ns],feature_id,u [px],v [px]   (ids 0..M-1; pixels
+//                                                                  with the origin at the top-left
+//                                                                  pixel's centre)
+//   DIR/mav0/cam0/data/          the images, only when the recording has them (8-bit PGM)
+//   DIR/imu.yaml, DIR/camchain.yaml   Kalibr sensor descriptions
+//   DIR/mirrorcal.yaml                the priors (README, "mirrorcal.yaml")
+// Numbers are written as the shortest decimal that reads back as the same double, so a recording
+// written and read again replays bit-identically.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "mirrorcal/estimator/prior.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
+
+namespace mirrorcal::sim {
+
+// What imu.yaml and camchain.yaml say about the sensors.
+struct SensorInfo {
+  ImuNoise imu{};
+  double imu_rate_hz = 200.0;
+  Pinhole<double> intrinsics{};  // skew from camchain.yaml's intrinsics_skew (0 if absent)
+  int width = 640, height = 480;
+};
+
+// What mirrorcal.yaml says is known before calibrating. SI units, rotations in rad; quaternions
+// Hamilton, w first in the file. Markers are as many as the file lists.
+struct RecordingPriors {
+  Eigen::Vector3d gravity_n = Eigen::Vector3d::Zero();
+  double pixel_sigma = 1.0;
+  Eigen::Vector3d p_n_b = Eigen::Vector3d::Zero(), sigma_p_n_b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d v_n_b = Eigen::Vector3d::Zero(), sigma_v_n_b = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_n_b = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d sigma_rot_n_b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_a = Eigen::Vector3d::Zero(), sigma_b_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_g = Eigen::Vector3d::Zero(), sigma_b_g = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero(), sigma_p_b_c = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d sigma_rot_b_c = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> features_c, sigma_features_c;
+  bool estimate_intrinsics = false;
+  Pinhole<double> intrinsics_guess{};        // default: camchain.yaml's
+  std::array<double, 5> sigma_intrinsics{};  // fu fv cu cv skew (px)
+};
+
+// A recording read back: the streams in timestamp order and the descriptions beside them.
+struct Recording {
+  std::vector<ImuSample> imu;
+  std::vector<ObservedFrame> frames;  // only frames within the IMU data
+  SensorInfo sensors;
+  RecordingPriors priors;
+  std::uint64_t frames_outside_imu = 0;  // skipped: before the first or after the last IMU sample
+  std::vector<std::string> notes;        // defaults used, frames skipped: tell the user
+};
+
+// Reads DIR for a calibration with M = markers. On bad input returns false with a message that
+// names the file, the line and what is wrong.
+bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error);
+
+// The parsers behind read_recording, on a file's text; file names the file in messages.
+bool parse_imu_csv(std::string_view text, const std::string& file, std::vector<ImuSample>& out,
+                   std::string& error);
+// cam0/data.csv: one frame (no markers yet) per line.
+bool parse_frames_csv(std::string_view text, const std::string& file,
+                      std::vector<ObservedFrame>& out, std::string& error);
+// features.csv: adds each row's marker to the frame of that timestamp (frames from
+// parse_frames_csv, in order).
+bool parse_features_csv(std::string_view text, const std::string& file, int markers,
+                        std::vector<ObservedFrame>& frames, std::string& error);
+bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& out,
+                    std::string& error);
+bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
+                         std::vector<std::string>& notes, std::string& error);
+// camera: the intrinsics camchain.yaml gave (the default guess when intrinsics are estimated).
+bool parse_priors_yaml(std::string_view text, const std::string& file,
+                       const Pinhole<double>& camera, RecordingPriors& out,
+                       std::vector<std::string>& notes, std::string& error);
+
+// imu.yaml and camchain.yaml into dir.
+bool write_sensor_yaml(const std::string& dir, const SensorInfo& sensors, std::string& error);
+// mirrorcal.yaml into dir.
+bool write_priors_yaml(const std::string& dir, const RecordingPriors& priors, std::string& error);
+
+// The filter's prior from a recording's (false, with a message, if the file lists a number of
+// markers other than M), and back.
+template <int M>
+bool to_prior(const RecordingPriors& r, Prior<M>& p, std::string& error) {
+  if (r.features_c.size() != static_cast<std::size_t>(M) ||
+      r.sigma_features_c.size() != static_cast<std::size_t>(M)) {
+    error = "mirrorcal.yaml lists " + std::to_string(r.features_c.size()) +
+            " markers; this build calibrates M = " + std::to_string(M);
+    return false;
+  }
+  p.p = r.p_n_b;
+  p.sigma_p = r.sigma_p_n_b;
+  p.v = r.v_n_b;
+  p.sigma_v = r.sigma_v_n_b;
+  p.q_n_b = r.q_n_b;
+  p.sigma_theta = r.sigma_rot_n_b;
+  p.b_a = r.b_a;
+  p.sigma_b_a = r.sigma_b_a;
+  p.b_g = r.b_g;
+  p.sigma_b_g = r.sigma_b_g;
+  p.p_b_c = r.p_b_c;
+  p.sigma_p_b_c = r.sigma_p_b_c;
+  p.q_b_c = r.q_b_c;
+  p.sigma_rot_b_c = r.sigma_rot_b_c;
+  for (std::size_t i = 0; i < static_cast<std::size_t>(M); ++i) {
+    p.markers[i] = r.features_c[i];
+    p.sigma_markers[i] = r.sigma_features_c[i];
+  }
+  p.intrinsics = r.intrinsics_guess;
+  p.sigma_intrinsics = r.sigma_intrinsics;
+  return true;
+}
+
+template <int M>
+RecordingPriors from_prior(const Prior<M>& p, const Eigen::Vector3d& gravity_n, double pixel_sigma,
+                           bool estimate_intrinsics) {
+  RecordingPriors r;
+  r.gravity_n = gravity_n;
+  r.pixel_sigma = pixel_sigma;
+  r.p_n_b = p.p;
+  r.sigma_p_n_b = p.sigma_p;
+  r.v_n_b = p.v;
+  r.sigma_v_n_b = p.sigma_v;
+  r.q_n_b = p.q_n_b;
+  r.sigma_rot_n_b = p.sigma_theta;
+  r.b_a = p.b_a;
+  r.sigma_b_a = p.sigma_b_a;
+  r.b_g = p.b_g;
+  r.sigma_b_g = p.sigma_b_g;
+  r.p_b_c = p.p_b_c;
+  r.sigma_p_b_c = p.sigma_p_b_c;
+  r.q_b_c = p.q_b_c;
+  r.sigma_rot_b_c = p.sigma_rot_b_c;
+  r.features_c.assign(p.markers.begin(), p.markers.end());
+  r.sigma_features_c.assign(p.sigma_markers.begin(), p.sigma_markers.end());
+  r.estimate_intrinsics = estimate_intrinsics;
+  r.intrinsics_guess = p.intrinsics;
+  r.sigma_intrinsics = p.sigma_intrinsics;
+  return r;
+}
+
+// An 8-bit grey image, row-major, stride = width.
+struct GrayImage {
+  int width = 0, height = 0;
+  const std::uint8_t* pixels = nullptr;
+};
+
+// Writes the streams of a recording as they come (the simulator here, the board's loop later).
+// open() allocates what it needs; add_imu() and add_frame() only write. Timestamps must increase
+// in each stream, so whatever it writes reads back.
+class RecordingWriter {
+ public:
+  RecordingWriter();
+  RecordingWriter(const RecordingWriter&) = delete;
+  RecordingWriter& operator=(const RecordingWriter&) = delete;
+  ~RecordingWriter();
+
+  // Creates DIR/mav0/imu0 and DIR/mav0/cam0 and the CSV files with their headers.
+  bool open(const std::string& dir, std::string& error);
+  bool add_imu(const ImuSample& sample);
+  // The frame's marker observations; its image too, when there is one (into cam0/data/).
+  bool add_frame(const ObservedFrame& frame, const GrayImage* image = nullptr);
+  // Flushes and closes the files; false if anything failed since open().
+  bool close(std::string& error);
+  const std::string& error() const { return error_; }
+
+ private:
+  struct File;
+  bool fail(const char* what, const std::string& path);
+
+  std::string dir_, images_path_, error_;
+  std::unique_ptr<File> imu_, frames_, features_;
+  std::int64_t last_imu_ns_ = 0, last_frame_ns_ = 0;
+  bool any_imu_ = false, any_frame_ = false, images_dir_ = false;
+};
+
+}  // namespace mirrorcal::sim

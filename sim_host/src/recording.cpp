@@ -1,0 +1,408 @@
+// EuRoC recordings: the streaming writer, the CSV parsers and read_recording.
+#include "mirrorcal/sim_host/recording.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "text_io.hpp"
+
+namespace mirrorcal::sim {
+
+namespace {
+
+constexpr const char* kImuHeader =
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]";
+constexpr const char* kFramesHeader = "#timestamp [ns],filename";
+constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
+
+// A CSV file's lines with their numbers, after a header that must be exactly EuRoC's.
+class CsvReader {
+ public:
+  CsvReader(std::string_view text, const std::string& file, std::string& error)
+      : text_(text), file_(file), error_(error) {}
+
+  bool header(const char* expected) {
+    std::string_view line;
+    if (!next_line(line))
+      return fail(1, "empty file; expected the header '" + std::string(expected) + "'");
+    if (text::trim(line) != expected)
+      return fail(line_no_, "header " + text::quoted(text::trim(line)) + " is not EuRoC's '" +
+                                std::string(expected) + "'");
+    return true;
+  }
+
+  // The next non-blank line split at commas into exactly n fields; false at the end (error empty)
+  // or on a line with another number of fields (error set).
+  bool row(std::size_t n, std::string_view* fields) {
+    std::string_view line;
+    do {
+      if (!next_line(line)) return false;
+    } while (text::trim(line).empty());
+    std::size_t count = 0;
+    for (;;) {
+      const std::size_t comma = line.find(',');
+      if (count < n) fields[count] = line.substr(0, comma);
+      ++count;
+      if (comma == std::string_view::npos) break;
+      line.remove_prefix(comma + 1);
+    }
+    if (count != n)
+      return fail(line_no_, "expected " + std::to_string(n) + " comma-separated fields, found " +
+                                std::to_string(count) + (at_end() ? " (truncated file?)" : ""));
+    return true;
+  }
+
+  bool number(std::string_view field, const char* what, double& v) {
+    if (!text::parse(field, v))
+      return fail(line_no_, std::string(what) + ": " + text::quoted(field) + " is not a number");
+    if (!std::isfinite(v))
+      return fail(line_no_, std::string(what) + ": " + text::quoted(field) + " is not finite");
+    return true;
+  }
+
+  bool integer(std::string_view field, const char* what, std::int64_t& v) {
+    if (!text::parse(field, v))
+      return fail(line_no_,
+                  std::string(what) + ": " + text::quoted(field) + " is not an integer (int64)");
+    return true;
+  }
+
+  bool fail(std::size_t line, const std::string& what) {
+    error_ = file_ + ":" + std::to_string(line) + ": " + what;
+    return false;
+  }
+  std::size_t line_no() const { return line_no_; }
+  bool failed() const { return !error_.empty(); }
+
+ private:
+  bool at_end() const { return pos_ >= text_.size(); }
+  bool next_line(std::string_view& line) {
+    if (at_end()) return false;
+    const std::size_t nl = text_.find('\n', pos_);
+    const std::size_t end = nl == std::string_view::npos ? text_.size() : nl;
+    line = text_.substr(pos_, end - pos_);
+    pos_ = end + 1;
+    ++line_no_;
+    return true;
+  }
+
+  std::string_view text_;
+  const std::string& file_;
+  std::string& error_;
+  std::size_t pos_ = 0, line_no_ = 0;
+};
+
+bool read_file(const std::string& path, std::string& out, std::string& error) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    error = path + ": cannot open: " + std::strerror(errno);
+    return false;
+  }
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) {
+    error = path + ": read error";
+    return false;
+  }
+  out = ss.str();
+  return true;
+}
+
+}  // namespace
+
+bool parse_imu_csv(std::string_view text, const std::string& file, std::vector<ImuSample>& out,
+                   std::string& error) {
+  error.clear();
+  out.clear();
+  CsvReader csv(text, file, error);
+  if (!csv.header(kImuHeader)) return false;
+  std::string_view f[7];
+  static const char* const names[7] = {"timestamp", "w_RS_S_x", "w_RS_S_y", "w_RS_S_z",
+                                       "a_RS_S_x",  "a_RS_S_y", "a_RS_S_z"};
+  while (csv.row(7, f)) {
+    ImuSample s;
+    double v[6];
+    if (!csv.integer(f[0], names[0], s.t_ns)) return false;
+    for (int j = 0; j < 6; ++j)
+      if (!csv.number(f[j + 1], names[j + 1], v[j])) return false;
+    s.gyro = Eigen::Vector3d(v[0], v[1], v[2]);
+    s.accel = Eigen::Vector3d(v[3], v[4], v[5]);
+    if (!out.empty() && s.t_ns <= out.back().t_ns)
+      return csv.fail(csv.line_no(),
+                      "timestamp " + std::to_string(s.t_ns) +
+                          (s.t_ns == out.back().t_ns ? " repeats" : " goes backwards") +
+                          " (previous " + std::to_string(out.back().t_ns) + ")");
+    out.push_back(s);
+  }
+  return !csv.failed();
+}
+
+bool parse_frames_csv(std::string_view text, const std::string& file,
+                      std::vector<ObservedFrame>& out, std::string& error) {
+  error.clear();
+  out.clear();
+  CsvReader csv(text, file, error);
+  if (!csv.header(kFramesHeader)) return false;
+  std::string_view f[2];
+  while (csv.row(2, f)) {
+    ObservedFrame frame;
+    if (!csv.integer(f[0], "timestamp", frame.t_ns)) return false;
+    if (text::trim(f[1]).empty()) return csv.fail(csv.line_no(), "empty filename");
+    if (!out.empty() && frame.t_ns <= out.back().t_ns)
+      return csv.fail(csv.line_no(),
+                      "timestamp " + std::to_string(frame.t_ns) +
+                          (frame.t_ns == out.back().t_ns ? " repeats" : " goes backwards") +
+                          " (previous " + std::to_string(out.back().t_ns) + ")");
+    out.push_back(std::move(frame));
+  }
+  return !csv.failed();
+}
+
+bool parse_features_csv(std::string_view text, const std::string& file, int markers,
+                        std::vector<ObservedFrame>& frames, std::string& error) {
+  error.clear();
+  CsvReader csv(text, file, error);
+  if (!csv.header(kFeaturesHeader)) return false;
+  std::string_view f[4];
+  std::size_t frame = 0;
+  bool any = false;
+  std::int64_t last_t = 0;
+  while (csv.row(4, f)) {
+    std::int64_t t = 0, id = 0;
+    double u = 0.0, v = 0.0;
+    if (!csv.integer(f[0], "timestamp", t) || !csv.integer(f[1], "feature_id", id) ||
+        !csv.number(f[2], "u", u) || !csv.number(f[3], "v", v))
+      return false;
+    if (any && t < last_t)
+      return csv.fail(csv.line_no(), "timestamp " + std::to_string(t) +
+                                         " goes backwards (previous " + std::to_string(last_t) +
+                                         ")");
+    if (id < 0 || id >= markers)
+      return csv.fail(csv.line_no(), "feature_id " + std::to_string(id) +
+                                         " is not a marker of this calibration (ids 0.." +
+                                         std::to_string(markers - 1) +
+                                         ", M = " + std::to_string(markers) + ")");
+    while (frame < frames.size() && frames[frame].t_ns < t) ++frame;
+    if (frame == frames.size() || frames[frame].t_ns != t)
+      return csv.fail(csv.line_no(),
+                      "timestamp " + std::to_string(t) + " is not a frame of cam0/data.csv");
+    auto& seen = frames[frame].markers;
+    if (std::any_of(seen.begin(), seen.end(), [&](const ObservedMarker& m) { return m.id == id; }))
+      return csv.fail(csv.line_no(), "feature_id " + std::to_string(id) +
+                                         " repeats in the frame at " + std::to_string(t));
+    seen.push_back({static_cast<int>(id), u, v});
+    any = true;
+    last_t = t;
+  }
+  return !csv.failed();
+}
+
+bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
+  out = Recording{};
+  std::string text;
+  const std::string imu_csv = dir + "/mav0/imu0/data.csv";
+  const std::string frames_csv = dir + "/mav0/cam0/data.csv";
+  const std::string features_csv = dir + "/mav0/cam0/features.csv";
+  const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
+  const std::string priors_yaml = dir + "/mirrorcal.yaml";
+  if (!read_file(imu_yaml, text, error) || !parse_imu_yaml(text, imu_yaml, out.sensors, error))
+    return false;
+  if (!read_file(cam_yaml, text, error) ||
+      !parse_camchain_yaml(text, cam_yaml, out.sensors, out.notes, error))
+    return false;
+  if (!read_file(priors_yaml, text, error) ||
+      !parse_priors_yaml(text, priors_yaml, out.sensors.intrinsics, out.priors, out.notes, error))
+    return false;
+  if (!read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
+    return false;
+  if (!read_file(frames_csv, text, error) || !parse_frames_csv(text, frames_csv, out.frames, error))
+    return false;
+  if (!read_file(features_csv, text, error) ||
+      !parse_features_csv(text, features_csv, markers, out.frames, error))
+    return false;
+
+  // The filter starts at the first IMU sample and ends at the last: frames outside are skipped.
+  if (out.imu.size() < 2) {
+    error = imu_csv + ": " + std::to_string(out.imu.size()) +
+            " IMU samples; the filter needs at least 2 (it propagates between samples)";
+    return false;
+  }
+  const std::int64_t t0 = out.imu.front().t_ns, t1 = out.imu.back().t_ns;
+  const auto outside = [&](const ObservedFrame& f) { return f.t_ns < t0 || f.t_ns > t1; };
+  const std::size_t before = out.frames.size();
+  out.frames.erase(std::remove_if(out.frames.begin(), out.frames.end(), outside), out.frames.end());
+  out.frames_outside_imu = before - out.frames.size();
+  if (out.frames_outside_imu > 0)
+    out.notes.push_back(frames_csv + ": " + std::to_string(out.frames_outside_imu) +
+                        " frames outside the IMU data (" + std::to_string(t0) + ".." +
+                        std::to_string(t1) + " ns) skipped");
+  if (out.frames.empty()) {
+    error = frames_csv + ": no frame within the IMU data (" + std::to_string(t0) + ".." +
+            std::to_string(t1) + " ns); the filter needs at least one";
+    return false;
+  }
+  for (int id = 0; id < markers; ++id) {
+    const bool seen =
+        std::any_of(out.frames.begin(), out.frames.end(), [&](const ObservedFrame& f) {
+          return std::any_of(f.markers.begin(), f.markers.end(),
+                             [&](const ObservedMarker& m) { return m.id == id; });
+        });
+    if (!seen) {
+      error = features_csv + ": marker " + std::to_string(id) +
+              " is seen in no frame within the IMU data; the filter cannot locate it";
+      return false;
+    }
+  }
+  return true;
+}
+
+// --- RecordingWriter ---------------------------------------------------------------------------
+
+struct RecordingWriter::File {
+  std::string path;
+  std::FILE* f = nullptr;
+  std::vector<char> buffer;
+  ~File() {
+    if (f != nullptr) std::fclose(f);
+  }
+};
+
+namespace {
+
+constexpr std::size_t kLine = 256;  // longest line we format: 7 numbers of at most 24 characters
+
+// Appends v and a separator to a fixed buffer; no allocation.
+template <typename T>
+char* put(char* p, char* end, T v, char sep) {
+  p = std::to_chars(p, end - 1, v).ptr;  // kLine leaves room: to_chars never fails here
+  *p = sep;
+  return p + 1;
+}
+
+}  // namespace
+
+RecordingWriter::RecordingWriter() = default;
+RecordingWriter::~RecordingWriter() = default;
+
+bool RecordingWriter::fail(const char* what, const std::string& path) {
+  if (error_.empty())
+    error_ = path + ": " + what + (errno != 0 ? std::string(": ") + std::strerror(errno) : "");
+  return false;
+}
+
+bool RecordingWriter::open(const std::string& dir, std::string& error) {
+  dir_ = dir;
+  images_path_ = dir + "/mav0/cam0/data";
+  error_.clear();
+  any_imu_ = any_frame_ = images_dir_ = false;
+  std::error_code ec;
+  for (const char* sub : {"/mav0/imu0", "/mav0/cam0"}) {
+    std::filesystem::create_directories(dir + sub, ec);
+    if (ec) {
+      error = dir + sub + ": cannot create: " + ec.message();
+      return false;
+    }
+  }
+  const auto make = [&](const std::string& path, const char* header, std::unique_ptr<File>& file) {
+    file = std::make_unique<File>();
+    file->path = path;
+    errno = 0;
+    file->f = std::fopen(path.c_str(), "w");
+    if (file->f == nullptr) return fail("cannot write", path);
+    file->buffer.resize(1 << 16);
+    std::setvbuf(file->f, file->buffer.data(), _IOFBF, file->buffer.size());
+    std::fprintf(file->f, "%s\n", header);
+    return true;
+  };
+  if (!make(dir + "/mav0/imu0/data.csv", kImuHeader, imu_) ||
+      !make(dir + "/mav0/cam0/data.csv", kFramesHeader, frames_) ||
+      !make(dir + "/mav0/cam0/features.csv", kFeaturesHeader, features_)) {
+    error = error_;
+    return false;
+  }
+  return true;
+}
+
+bool RecordingWriter::add_imu(const ImuSample& s) {
+  if (!imu_ || imu_->f == nullptr) return fail("not open", dir_);
+  if (any_imu_ && s.t_ns <= last_imu_ns_) {
+    errno = 0;
+    return fail("IMU timestamps must increase", imu_->path);
+  }
+  char line[kLine];
+  char* const end = line + kLine;
+  char* p = put(line, end, s.t_ns, ',');
+  for (int j = 0; j < 3; ++j) p = put(p, end, s.gyro(j), ',');
+  for (int j = 0; j < 3; ++j) p = put(p, end, s.accel(j), j == 2 ? '\n' : ',');
+  std::fwrite(line, 1, static_cast<std::size_t>(p - line), imu_->f);
+  last_imu_ns_ = s.t_ns;
+  any_imu_ = true;
+  return true;
+}
+
+bool RecordingWriter::add_frame(const ObservedFrame& frame, const GrayImage* image) {
+  if (!frames_ || frames_->f == nullptr) return fail("not open", dir_);
+  if (any_frame_ && frame.t_ns <= last_frame_ns_) {
+    errno = 0;
+    return fail("frame timestamps must increase", frames_->path);
+  }
+  std::fprintf(frames_->f, "%lld,%lld.pgm\n", static_cast<long long>(frame.t_ns),
+               static_cast<long long>(frame.t_ns));
+  for (const ObservedMarker& m : frame.markers) {
+    char line[kLine];
+    char* const end = line + kLine;
+    char* p = put(line, end, frame.t_ns, ',');
+    p = put(p, end, static_cast<std::int64_t>(m.id), ',');
+    p = put(p, end, m.u, ',');
+    p = put(p, end, m.v, '\n');
+    std::fwrite(line, 1, static_cast<std::size_t>(p - line), features_->f);
+  }
+  if (image != nullptr) {
+    const std::string& images = images_path_;
+    if (!images_dir_) {  // created with the first image, so image-less recordings have none
+      std::error_code ec;
+      std::filesystem::create_directories(images, ec);
+      if (ec) {
+        errno = 0;
+        return fail("cannot create the image folder", images);
+      }
+      images_dir_ = true;
+    }
+    char path[4096];
+    std::snprintf(path, sizeof path, "%s/%lld.pgm", images.c_str(),
+                  static_cast<long long>(frame.t_ns));
+    std::FILE* f = std::fopen(path, "wb");
+    if (f == nullptr) return fail("cannot write", path);
+    std::fprintf(f, "P5\n%d %d\n255\n", image->width, image->height);
+    const std::size_t n =
+        static_cast<std::size_t>(image->width) * static_cast<std::size_t>(image->height);
+    const bool ok = std::fwrite(image->pixels, 1, n, f) == n;
+    if (std::fclose(f) != 0 || !ok) return fail("error writing", path);
+  }
+  last_frame_ns_ = frame.t_ns;
+  any_frame_ = true;
+  return true;
+}
+
+bool RecordingWriter::close(std::string& error) {
+  for (auto* file : {&imu_, &frames_, &features_}) {
+    if (!*file || (*file)->f == nullptr) continue;
+    std::FILE* f = (*file)->f;
+    (*file)->f = nullptr;
+    errno = 0;
+    const bool ok = std::ferror(f) == 0;
+    if (std::fclose(f) != 0 || !ok) fail("error writing", (*file)->path);
+  }
+  error = error_;
+  return error_.empty();
+}
+
+}  // namespace mirrorcal::sim

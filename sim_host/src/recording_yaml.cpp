@@ -1,0 +1,400 @@
+// The YAML beside a recording: Kalibr's imu.yaml and camchain.yaml, and mirrorcal.yaml (priors).
+// Read with yaml-cpp; numbers parsed with std::from_chars and written in their shortest
+// round-trip form, so written-then-read values are the same doubles.
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <initializer_list>
+
+#include "mirrorcal/sim_host/recording.hpp"
+#include "text_io.hpp"
+
+namespace mirrorcal::sim {
+
+namespace {
+
+// Keys of one YAML map, read with messages that name the file, the line and the key.
+class YamlMap {
+ public:
+  YamlMap(const std::string& file, std::string& error, std::vector<std::string>* notes = nullptr)
+      : file_(file), error_(error), notes_(notes) {}
+
+  bool load(std::string_view text) {
+    try {
+      root_ = YAML::Load(std::string(text));
+    } catch (const YAML::Exception& e) {
+      error_ = file_ + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg;
+      return false;
+    }
+    if (!root_.IsMap()) {
+      error_ = file_ + ": expected a map of keys at the top level";
+      return false;
+    }
+    return true;
+  }
+  bool sub(const YamlMap& parent, const char* key) {
+    const YAML::Node n = parent.root_[key];
+    if (!n) return parent.missing(key);
+    if (!n.IsMap()) return parent.fail(n, key, "expected a map of keys");
+    root_ = n;
+    prefix_ = parent.prefix_ + key + ".";
+    return true;
+  }
+  bool has(const char* key) const { return static_cast<bool>(root_[key]); }
+  YAML::Node node(const char* key) const { return root_[key]; }
+
+  // Notes keys not in known (typos would otherwise pass as defaults).
+  void unknown_keys(std::initializer_list<const char*> known) const {
+    if (notes_ == nullptr) return;
+    for (const auto& kv : root_) {
+      const std::string k = kv.first.IsScalar() ? kv.first.Scalar() : "?";
+      if (std::none_of(known.begin(), known.end(), [&](const char* s) { return k == s; }))
+        notes_->push_back(file_ + ":" + line(kv.first) + ": unknown key " + text::quoted(k) +
+                          " ignored");
+    }
+  }
+
+  bool number(const char* key, double& v) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    return scalar(n, key, v);
+  }
+  bool positive(const char* key, double& v) const {
+    if (!number(key, v)) return false;
+    return v > 0.0 || fail(root_[key], key, "must be > 0");
+  }
+  bool integer(const YAML::Node& n, const char* key, std::int64_t& v) const {
+    if (!n.IsScalar() || !text::parse(n.Scalar(), v)) return fail(n, key, "expected an integer");
+    return true;
+  }
+  bool flag(const char* key, bool& v) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    if (!n.IsScalar() || !YAML::convert<bool>::decode(n, v))
+      return fail(n, key, "expected true or false");
+    return true;
+  }
+  bool string(const char* key, std::string& v) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    if (!n.IsScalar()) return fail(n, key, "expected a string");
+    v = n.Scalar();
+    return true;
+  }
+  // A sequence of exactly n numbers.
+  bool numbers(const YAML::Node& n, const char* key, std::size_t count, double* v) const {
+    if (!n.IsSequence() || n.size() != count)
+      return fail(n, key, "expected a list of " + std::to_string(count) + " numbers");
+    for (std::size_t i = 0; i < count; ++i)
+      if (!scalar(n[i], key, v[i])) return false;
+    return true;
+  }
+  bool numbers(const char* key, std::size_t count, double* v) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    return numbers(n, key, count, v);
+  }
+  bool vec3(const char* key, Eigen::Vector3d& v) const { return numbers(key, 3, v.data()); }
+  // A 1-sigma per axis: three numbers, or one for all axes; each > 0.
+  bool sigma3(const YAML::Node& n, const char* key, Eigen::Vector3d& v) const {
+    double s = 0.0;
+    if (n.IsScalar()) {
+      if (!scalar(n, key, s)) return false;
+      v.setConstant(s);
+    } else if (!numbers(n, key, 3, v.data())) {
+      return false;
+    }
+    return v.minCoeff() > 0.0 || fail(n, key, "every 1-sigma must be > 0");
+  }
+  bool sigma3(const char* key, Eigen::Vector3d& v) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    return sigma3(n, key, v);
+  }
+  // A unit quaternion [w, x, y, z] (Hamilton); up to 1e-3 off unit norm is accepted as rounding.
+  bool quaternion(const char* key, Eigen::Quaterniond& q) const {
+    double v[4];
+    if (!numbers(key, 4, v)) return false;
+    q = Eigen::Quaterniond(v[0], v[1], v[2], v[3]);
+    if (std::abs(q.norm() - 1.0) > 1e-3)
+      return fail(root_[key], key,
+                  "expected a unit quaternion [w, x, y, z], norm is " + std::to_string(q.norm()));
+    return true;
+  }
+  // A list of count [x, y, z] (count < 0: any number, at least one).
+  bool vec3_list(const char* key, std::vector<Eigen::Vector3d>& out, bool sigma,
+                 long count = -1) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    if (!n.IsSequence() || n.size() == 0) return fail(n, key, "expected a list of [x, y, z]");
+    if (count >= 0 && n.size() != static_cast<std::size_t>(count))
+      return fail(n, key,
+                  "lists " + std::to_string(n.size()) + " entries, features_c lists " +
+                      std::to_string(count));
+    out.assign(n.size(), Eigen::Vector3d::Zero());
+    for (std::size_t i = 0; i < n.size(); ++i) {
+      const bool ok = sigma ? sigma3(n[i], key, out[i]) : numbers(n[i], key, 3, out[i].data());
+      if (!ok) return false;
+    }
+    return true;
+  }
+
+  void note_default(const char* key, const std::string& value) const {
+    if (notes_ != nullptr)
+      notes_->push_back(file_ + ": " + prefix_ + key + " not given; using the default " + value);
+  }
+  bool missing(const char* key) const {
+    error_ = file_ + ": missing required key '" + prefix_ + key + "'";
+    return false;
+  }
+  bool fail(const YAML::Node& n, const char* key, const std::string& what) const {
+    error_ = file_ + ":" + line(n) + ": " + prefix_ + key + ": " + what;
+    return false;
+  }
+
+ private:
+  static std::string line(const YAML::Node& n) {
+    const YAML::Mark m = n.Mark();
+    return m.is_null() ? "?" : std::to_string(m.line + 1);
+  }
+  bool scalar(const YAML::Node& n, const char* key, double& v) const {
+    if (!n.IsScalar() || !text::parse(n.Scalar(), v))
+      return fail(n, key,
+                  "expected a number" +
+                      (n.IsScalar() ? ", not " + text::quoted(n.Scalar()) : std::string()));
+    if (!std::isfinite(v)) return fail(n, key, text::quoted(n.Scalar()) + " is not finite");
+    return true;
+  }
+
+  const std::string& file_;
+  std::string& error_;
+  std::vector<std::string>* notes_;
+  YAML::Node root_;
+  std::string prefix_;
+};
+
+bool write_text(const std::string& path, const std::string& text, std::string& error) {
+  errno = 0;
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) {
+    error = path + ": cannot write: " + std::strerror(errno);
+    return false;
+  }
+  const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+  if (std::fclose(f) != 0 || !ok) {
+    error = path + ": error writing";
+    return false;
+  }
+  return true;
+}
+
+// "[a, b, c]" in shortest round-trip form.
+std::string list(const double* v, std::size_t n) {
+  std::string s = "[";
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i > 0) s += ", ";
+    text::append(s, v[i]);
+  }
+  return s + "]";
+}
+std::string list(const Eigen::Vector3d& v) {
+  return list(v.data(), 3);
+}
+std::string number(double v) {
+  std::string s;
+  text::append(s, v);
+  return s;
+}
+std::string wxyz(const Eigen::Quaterniond& q) {
+  const double v[4] = {q.w(), q.x(), q.y(), q.z()};
+  return list(v, 4);
+}
+std::array<double, 5> as_array(const Pinhole<double>& k) {
+  return {k.fu, k.fv, k.cu, k.cv, k.skew};
+}
+
+}  // namespace
+
+bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& out,
+                    std::string& error) {
+  YamlMap y(file, error);
+  return y.load(text) && y.positive("accelerometer_noise_density", out.imu.accel_noise_density) &&
+         y.positive("accelerometer_random_walk", out.imu.accel_random_walk) &&
+         y.positive("gyroscope_noise_density", out.imu.gyro_noise_density) &&
+         y.positive("gyroscope_random_walk", out.imu.gyro_random_walk) &&
+         y.positive("update_rate", out.imu_rate_hz);
+}
+
+bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
+                         std::vector<std::string>& notes, std::string& error) {
+  YamlMap top(file, error, &notes), cam(file, error, &notes);
+  if (!top.load(text) || !cam.sub(top, "cam0")) return false;
+  std::string model;
+  if (!cam.string("camera_model", model)) return false;
+  if (model != "pinhole")
+    return cam.fail(cam.node("camera_model"), "camera_model",
+                    text::quoted(model) + " is not supported (mirrorcal models a pinhole)");
+  double k[4];
+  if (!cam.numbers("intrinsics", 4, k)) return false;
+  out.intrinsics = {k[0], k[1], k[2], k[3], 0.0};
+  if (cam.has("intrinsics_skew")) {
+    if (!cam.number("intrinsics_skew", out.intrinsics.skew)) return false;
+  } else {
+    cam.note_default("intrinsics_skew", "0 px");
+  }
+  double res[2];
+  if (!cam.numbers("resolution", 2, res)) return false;
+  if (res[0] < 1 || res[1] < 1 || res[0] > 1e5 || res[1] > 1e5 || res[0] != std::floor(res[0]) ||
+      res[1] != std::floor(res[1]))
+    return cam.fail(cam.node("resolution"), "resolution",
+                    "expected two positive integers [width, height]");
+  out.width = static_cast<int>(res[0]);
+  out.height = static_cast<int>(res[1]);
+  if (cam.has("distortion_coeffs")) {
+    // mirrorcal models no lens distortion: features must be undistorted, and the file must say so.
+    const YAML::Node d = cam.node("distortion_coeffs");
+    if (!d.IsSequence()) return cam.fail(d, "distortion_coeffs", "expected a list of numbers");
+    for (std::size_t i = 0; i < d.size(); ++i) {
+      double c = 0.0;
+      if (!d[i].IsScalar() || !text::parse(d[i].Scalar(), c) || c != 0.0)
+        return cam.fail(d, "distortion_coeffs",
+                        "must all be 0: mirrorcal models an undistorted pinhole (undistort the "
+                        "features first)");
+    }
+  }
+  return true;
+}
+
+bool parse_priors_yaml(std::string_view text, const std::string& file,
+                       const Pinhole<double>& camera, RecordingPriors& out,
+                       std::vector<std::string>& notes, std::string& error) {
+  YamlMap y(file, error, &notes);
+  if (!y.load(text)) return false;
+  y.unknown_keys({"gravity_n",
+                  "pixel_sigma",
+                  "p_n_b",
+                  "sigma_p_n_b",
+                  "v_n_b",
+                  "sigma_v_n_b",
+                  "q_n_b_wxyz",
+                  "sigma_rot_n_b",
+                  "b_a",
+                  "sigma_b_a",
+                  "b_g",
+                  "sigma_b_g",
+                  "p_b_c",
+                  "sigma_p_b_c",
+                  "q_b_c_wxyz",
+                  "sigma_rot_b_c",
+                  "features_c",
+                  "sigma_features_c",
+                  "estimate_intrinsics",
+                  "intrinsics_guess",
+                  "sigma_intrinsics"});
+  RecordingPriors r;
+  if (!y.vec3("gravity_n", r.gravity_n) || !y.vec3("p_n_b", r.p_n_b) ||
+      !y.sigma3("sigma_p_n_b", r.sigma_p_n_b) || !y.vec3("v_n_b", r.v_n_b) ||
+      !y.sigma3("sigma_v_n_b", r.sigma_v_n_b) || !y.quaternion("q_n_b_wxyz", r.q_n_b) ||
+      !y.sigma3("sigma_rot_n_b", r.sigma_rot_n_b) || !y.vec3("p_b_c", r.p_b_c) ||
+      !y.sigma3("sigma_p_b_c", r.sigma_p_b_c) || !y.quaternion("q_b_c_wxyz", r.q_b_c) ||
+      !y.sigma3("sigma_rot_b_c", r.sigma_rot_b_c) ||
+      !y.vec3_list("features_c", r.features_c, false) ||
+      !y.vec3_list("sigma_features_c", r.sigma_features_c, true,
+                   static_cast<long>(r.features_c.size())))
+    return false;
+  // Optional keys, with the defaults the filter's prior uses.
+  const auto optional_vec3 = [&](const char* key, Eigen::Vector3d& v, const Eigen::Vector3d& def,
+                                 const char* shown, bool sigma) {
+    if (!y.has(key)) {
+      v = def;
+      y.note_default(key, shown);
+      return true;
+    }
+    return sigma ? y.sigma3(key, v) : y.vec3(key, v);
+  };
+  if (!optional_vec3("b_a", r.b_a, Eigen::Vector3d::Zero(), "[0, 0, 0] m/s^2", false) ||
+      !optional_vec3("sigma_b_a", r.sigma_b_a, Eigen::Vector3d::Constant(0.03), "0.03 m/s^2",
+                     true) ||
+      !optional_vec3("b_g", r.b_g, Eigen::Vector3d::Zero(), "[0, 0, 0] rad/s", false) ||
+      !optional_vec3("sigma_b_g", r.sigma_b_g, Eigen::Vector3d::Constant(0.002), "0.002 rad/s",
+                     true))
+    return false;
+  if (y.has("pixel_sigma")) {
+    if (!y.positive("pixel_sigma", r.pixel_sigma)) return false;
+  } else {
+    r.pixel_sigma = 1.0;
+    y.note_default("pixel_sigma", "1 px");
+  }
+  r.estimate_intrinsics = false;
+  if (y.has("estimate_intrinsics") && !y.flag("estimate_intrinsics", r.estimate_intrinsics))
+    return false;
+  // The intrinsics' guess and 1-sigma matter only when they are estimated; say so only then.
+  if (y.has("intrinsics_guess")) {
+    double k[5];
+    if (!y.numbers("intrinsics_guess", 5, k)) return false;
+    r.intrinsics_guess = {k[0], k[1], k[2], k[3], k[4]};
+  } else {
+    r.intrinsics_guess = camera;
+    if (r.estimate_intrinsics) y.note_default("intrinsics_guess", "of camchain.yaml");
+  }
+  if (y.has("sigma_intrinsics")) {
+    if (!y.numbers("sigma_intrinsics", 5, r.sigma_intrinsics.data())) return false;
+    if (*std::min_element(r.sigma_intrinsics.begin(), r.sigma_intrinsics.end()) <= 0.0)
+      return y.fail(y.node("sigma_intrinsics"), "sigma_intrinsics", "every 1-sigma must be > 0");
+  } else {
+    r.sigma_intrinsics = {100.0, 100.0, 100.0, 100.0, 100.0};
+    if (r.estimate_intrinsics) y.note_default("sigma_intrinsics", "100 px each (the paper's)");
+  }
+  out = std::move(r);
+  return true;
+}
+
+bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string& error) {
+  std::string imu = "# Kalibr IMU description (continuous-time noise densities)\nrostopic: /imu0\n";
+  imu +=
+      "accelerometer_noise_density: " + number(s.imu.accel_noise_density) + "  # m/s^2/sqrt(Hz)\n";
+  imu += "accelerometer_random_walk: " + number(s.imu.accel_random_walk) + "  # m/s^3/sqrt(Hz)\n";
+  imu += "gyroscope_noise_density: " + number(s.imu.gyro_noise_density) + "  # rad/s/sqrt(Hz)\n";
+  imu += "gyroscope_random_walk: " + number(s.imu.gyro_random_walk) + "  # rad/s^2/sqrt(Hz)\n";
+  imu += "update_rate: " + number(s.imu_rate_hz) + "  # Hz\n";
+  const auto k = as_array(s.intrinsics);
+  std::string cam = "# Kalibr camera description (pixels: origin at the top-left pixel's centre)\n";
+  cam += "cam0:\n  camera_model: pinhole\n  intrinsics: " + list(k.data(), 4) + "\n";
+  cam += "  intrinsics_skew: " + number(s.intrinsics.skew) + "\n";
+  cam += "  distortion_model: radtan\n  distortion_coeffs: [0, 0, 0, 0]\n";
+  cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
+  cam += "  rostopic: /cam0/image_raw\n";
+  return write_text(dir + "/imu.yaml", imu, error) &&
+         write_text(dir + "/camchain.yaml", cam, error);
+}
+
+bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::string& error) {
+  std::string t =
+      "# mirrorcal priors: what is known before calibrating (README, \"mirrorcal.yaml\").\n"
+      "# SI units (m, m/s, rad, m/s^2, rad/s, px); quaternions Hamilton [w, x, y, z];\n"
+      "# sigma_* are 1-sigma per axis (rotations: of the error vector, R = R_guess Exp(e)).\n";
+  t += "gravity_n: " + list(r.gravity_n) + "\n";
+  t += "pixel_sigma: " + number(r.pixel_sigma) + "\n";
+  t += "p_n_b: " + list(r.p_n_b) + "\nsigma_p_n_b: " + list(r.sigma_p_n_b) + "\n";
+  t += "v_n_b: " + list(r.v_n_b) + "\nsigma_v_n_b: " + list(r.sigma_v_n_b) + "\n";
+  t += "q_n_b_wxyz: " + wxyz(r.q_n_b) + "\nsigma_rot_n_b: " + list(r.sigma_rot_n_b) + "\n";
+  t += "b_a: " + list(r.b_a) + "\nsigma_b_a: " + list(r.sigma_b_a) + "\n";
+  t += "b_g: " + list(r.b_g) + "\nsigma_b_g: " + list(r.sigma_b_g) + "\n";
+  t += "p_b_c: " + list(r.p_b_c) + "\nsigma_p_b_c: " + list(r.sigma_p_b_c) + "\n";
+  t += "q_b_c_wxyz: " + wxyz(r.q_b_c) + "\nsigma_rot_b_c: " + list(r.sigma_rot_b_c) + "\n";
+  t += "features_c:\n";
+  for (const auto& f : r.features_c) t += "  - " + list(f) + "\n";
+  t += "sigma_features_c:\n";
+  for (const auto& f : r.sigma_features_c) t += "  - " + list(f) + "\n";
+  t += std::string("estimate_intrinsics: ") + (r.estimate_intrinsics ? "true" : "false") + "\n";
+  const auto k = as_array(r.intrinsics_guess);
+  t += "intrinsics_guess: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew (px)\n";
+  t += "sigma_intrinsics: " + list(r.sigma_intrinsics.data(), 5) + "\n";
+  return write_text(dir + "/mirrorcal.yaml", t, error);
+}
+
+}  // namespace mirrorcal::sim

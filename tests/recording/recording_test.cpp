@@ -1,0 +1,155 @@
+// Recordings: what the writer writes reads back bit-identically (streams, sensors, priors), and
+// the writer refuses what could not be read back.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "test_support.hpp"
+
+using namespace rectest;
+
+namespace {
+
+bool same_bits(double a, double b) {
+  return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+void expect_same(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const char* what) {
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(same_bits(a(i), b(i))) << what << "(" << i << ")";
+}
+
+}  // namespace
+
+TEST(Recording, StreamsReadBackBitIdentical) {
+  const auto s = short_scenario();
+  const auto data = mc::sim::simulate(s, 21);
+  const std::string dir = temp_dir("streams");
+  write_recording(dir, s, data, 21);
+
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir, 3, r, err)) << err;
+  ASSERT_EQ(r.imu.size(), data.imu.size());
+  for (std::size_t k = 0; k < r.imu.size(); ++k) {
+    ASSERT_EQ(r.imu[k].t_ns, data.imu[k].t_ns);
+    expect_same(r.imu[k].gyro, data.imu[k].gyro, "gyro");
+    expect_same(r.imu[k].accel, data.imu[k].accel, "accel");
+  }
+  ASSERT_EQ(r.frames.size(), data.frames.size());
+  EXPECT_EQ(r.frames_outside_imu, 0u);
+  for (std::size_t k = 0; k < r.frames.size(); ++k) {
+    ASSERT_EQ(r.frames[k].t_ns, data.frames[k].t_ns);
+    ASSERT_EQ(r.frames[k].markers.size(), data.frames[k].markers.size());
+    for (std::size_t j = 0; j < r.frames[k].markers.size(); ++j) {
+      EXPECT_EQ(r.frames[k].markers[j].id, data.frames[k].markers[j].id);
+      EXPECT_TRUE(same_bits(r.frames[k].markers[j].u, data.frames[k].markers[j].u));
+      EXPECT_TRUE(same_bits(r.frames[k].markers[j].v, data.frames[k].markers[j].v));
+    }
+  }
+  // The sensors as written.
+  const auto want = sensors_of(s);
+  EXPECT_EQ(r.sensors.imu_rate_hz, want.imu_rate_hz);
+  EXPECT_EQ(r.sensors.imu.gyro_noise_density, want.imu.gyro_noise_density);
+  EXPECT_EQ(r.sensors.imu.gyro_random_walk, want.imu.gyro_random_walk);
+  EXPECT_EQ(r.sensors.imu.accel_noise_density, want.imu.accel_noise_density);
+  EXPECT_EQ(r.sensors.imu.accel_random_walk, want.imu.accel_random_walk);
+  EXPECT_EQ(r.sensors.intrinsics.fu, want.intrinsics.fu);
+  EXPECT_EQ(r.sensors.intrinsics.cv, want.intrinsics.cv);
+  EXPECT_EQ(r.sensors.intrinsics.skew, want.intrinsics.skew);
+  EXPECT_EQ(r.sensors.width, want.width);
+  EXPECT_EQ(r.sensors.height, want.height);
+  // Every key was written, so no default was used.
+  EXPECT_TRUE(r.notes.empty()) << r.notes.front();
+  // No images were given, so there is no image folder.
+  EXPECT_FALSE(fs::exists(dir + "/mav0/cam0/data"));
+}
+
+TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
+  const auto s = short_scenario();
+  const auto data = mc::sim::simulate(s, 4);
+  const auto prior = mc::app::simulation_prior(s, data, 4);
+  const std::string dir = temp_dir("priors");
+  std::string err;
+  ASSERT_TRUE(
+      mc::sim::write_priors_yaml(dir, mc::sim::from_prior(prior, s.gravity_n, 0.75, true), err))
+      << err;
+
+  mc::sim::RecordingPriors read;
+  std::vector<std::string> notes;
+  const mc::Pinhole<double> camera{1, 2, 3, 4, 5};  // not used: the file gives intrinsics_guess
+  ASSERT_TRUE(mc::sim::parse_priors_yaml(slurp(dir + "/mirrorcal.yaml"), "mirrorcal.yaml", camera,
+                                         read, notes, err))
+      << err;
+  EXPECT_TRUE(notes.empty());
+  EXPECT_TRUE(read.estimate_intrinsics);
+  EXPECT_EQ(read.pixel_sigma, 0.75);
+  expect_same(read.gravity_n, s.gravity_n, "gravity_n");
+
+  mc::Prior<3> back;
+  ASSERT_TRUE(mc::sim::to_prior(read, back, err)) << err;
+  expect_same(back.p, prior.p, "p");
+  expect_same(back.v, prior.v, "v");
+  EXPECT_TRUE(back.q_n_b.coeffs() == prior.q_n_b.coeffs());
+  expect_same(back.p_b_c, prior.p_b_c, "p_b_c");
+  EXPECT_TRUE(back.q_b_c.coeffs() == prior.q_b_c.coeffs());
+  for (int i = 0; i < 3; ++i) {
+    expect_same(back.markers[i], prior.markers[i], "marker");
+    expect_same(back.sigma_markers[i], prior.sigma_markers[i], "sigma_marker");
+  }
+  expect_same(back.sigma_p, prior.sigma_p, "sigma_p");
+  expect_same(back.sigma_v, prior.sigma_v, "sigma_v");
+  expect_same(back.sigma_theta, prior.sigma_theta, "sigma_theta");
+  expect_same(back.sigma_b_a, prior.sigma_b_a, "sigma_b_a");
+  expect_same(back.sigma_b_g, prior.sigma_b_g, "sigma_b_g");
+  expect_same(back.sigma_p_b_c, prior.sigma_p_b_c, "sigma_p_b_c");
+  expect_same(back.sigma_rot_b_c, prior.sigma_rot_b_c, "sigma_rot_b_c");
+  EXPECT_EQ(back.intrinsics.fu, prior.intrinsics.fu);
+  EXPECT_EQ(back.intrinsics.skew, prior.intrinsics.skew);
+  EXPECT_EQ(back.sigma_intrinsics, prior.sigma_intrinsics);
+
+  // The initial estimate the filter starts from is the same to the bit.
+  using F = mc::CalibrationFilter<double, 3, 0>;
+  F::State xa, xb;
+  F::Covariance pa, pb;
+  mc::initialise(prior, xa, pa);
+  mc::initialise(back, xb, pb);
+  EXPECT_TRUE(pa == pb);
+  EXPECT_TRUE(xa.markers == xb.markers && xa.p == xb.p && xa.q_n_b.coeffs() == xb.q_n_b.coeffs());
+}
+
+TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
+  const std::string dir = temp_dir("writer-order");
+  std::string err;
+  mc::sim::RecordingWriter w;
+  ASSERT_TRUE(w.open(dir, err)) << err;
+  mc::ImuSample a;
+  a.t_ns = 10;
+  EXPECT_TRUE(w.add_imu(a));
+  EXPECT_FALSE(w.add_imu(a));  // repeated
+  mc::sim::ObservedFrame f;
+  f.t_ns = 7;
+  EXPECT_TRUE(w.add_frame(f));
+  f.t_ns = 6;
+  EXPECT_FALSE(w.add_frame(f));  // backwards
+  EXPECT_FALSE(w.close(err));
+  EXPECT_NE(err.find("must increase"), std::string::npos) << err;
+}
+
+TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
+  const std::string dir = temp_dir("images");
+  std::string err;
+  mc::sim::RecordingWriter w;
+  ASSERT_TRUE(w.open(dir, err)) << err;
+  const std::uint8_t pixels[6] = {0, 1, 2, 250, 254, 255};
+  const mc::sim::GrayImage img{3, 2, pixels};
+  mc::sim::ObservedFrame f;
+  f.t_ns = 1234;
+  f.markers.push_back({1, 10.5, 20.25});
+  ASSERT_TRUE(w.add_frame(f, &img));
+  ASSERT_TRUE(w.close(err)) << err;
+  EXPECT_EQ(slurp(dir + "/mav0/cam0/data/1234.pgm"),
+            std::string("P5\n3 2\n255\n") + std::string(reinterpret_cast<const char*>(pixels), 6));
+  EXPECT_EQ(slurp(dir + "/mav0/cam0/data.csv"), "#timestamp [ns],filename\n1234,1234.pgm\n");
+  EXPECT_EQ(slurp(dir + "/mav0/cam0/features.csv"),
+            "#timestamp [ns],feature_id,u [px],v [px]\n1234,1,10.5,20.25\n");
+}

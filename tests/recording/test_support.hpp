@@ -1,0 +1,72 @@
+// Shared by the recording tests: temporary folders, files as text, a short simulated recording.
+#pragma once
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <unistd.h>
+
+#include "mirrorcal/sim_host/recording.hpp"
+#include "sim_run.hpp"
+
+namespace rectest {
+
+namespace fs = std::filesystem;
+namespace mc = mirrorcal;
+
+// A fresh folder under the system's temporary one, for this process (builds may test at once).
+inline std::string temp_dir(const std::string& name) {
+  const fs::path p =
+      fs::temp_directory_path() / ("mirrorcal-test-" + std::to_string(getpid()) + "-" + name);
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p.string();
+}
+
+inline std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+inline void spit(const std::string& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+// The paper scenario, shortened to seconds of data: enough for every marker to be seen.
+inline mc::sim::Scenario short_scenario(double seconds = 2.0) {
+  mc::sim::Scenario s = mc::sim::paper_scenario();
+  s.duration_s = seconds;
+  return s;
+}
+
+inline mc::sim::SensorInfo sensors_of(const mc::sim::Scenario& s) {
+  mc::sim::SensorInfo i;
+  i.imu = s.imu;
+  i.imu_rate_hz = s.imu_rate_hz;
+  i.intrinsics = s.truth.intrinsics;
+  i.width = s.truth.width;
+  i.height = s.truth.height;
+  return i;
+}
+
+// Writes a complete recording of data with the prior of seed into dir.
+inline void write_recording(const std::string& dir, const mc::sim::Scenario& s,
+                            const mc::sim::SimData& data, std::uint64_t seed) {
+  std::string err;
+  mc::sim::RecordingWriter w;
+  if (!w.open(dir, err)) throw std::runtime_error(err);
+  for (const auto& smp : data.imu) w.add_imu(smp);
+  for (const auto& f : data.frames) w.add_frame(f);
+  if (!w.close(err)) throw std::runtime_error(err);
+  const auto prior = mc::app::simulation_prior(s, data, seed);
+  if (!mc::sim::write_sensor_yaml(dir, sensors_of(s), err) ||
+      !mc::sim::write_priors_yaml(
+          dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))
+    throw std::runtime_error(err);
+}
+
+}  // namespace rectest
