@@ -1,91 +1,22 @@
 // The writer the board's loop will record through allocates nothing per sample or frame once
-// open: it counts every malloc family call (forwarding to glibc's __libc_* entry points, which
-// operator new also reaches; under AddressSanitizer, which owns malloc, through its allocation
-// hook). A reduced form of tests/estimator/no_heap_test.cpp's harness, for C allocation only.
+// open (allocations counted by tests/support/alloc_counter).
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <atomic>
-#include <cstddef>
 
+#include "alloc_counter.hpp"
 #include "test_support.hpp"
-
-#if defined(__SANITIZE_ADDRESS__)
-#define MIRRORCAL_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define MIRRORCAL_ASAN 1
-#endif
-#endif
-
-namespace {
-std::atomic<bool> g_armed{false};
-std::atomic<long> g_allocations{0};
-inline void count() {
-  if (g_armed.load(std::memory_order_relaxed)) g_allocations.fetch_add(1);
-}
-}  // namespace
-
-#ifdef MIRRORCAL_ASAN
-extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*)(const volatile void*,
-                                                                  std::size_t),
-                                                         void (*)(const volatile void*));
-namespace {
-void on_malloc(const volatile void*, std::size_t) {
-  count();
-}
-void on_free(const volatile void*) {}
-const int g_hooks = __sanitizer_install_malloc_and_free_hooks(on_malloc, on_free);
-}  // namespace
-#else
-extern "C" {
-void* __libc_malloc(std::size_t) noexcept;
-void* __libc_calloc(std::size_t, std::size_t) noexcept;
-void* __libc_realloc(void*, std::size_t) noexcept;
-void* __libc_memalign(std::size_t, std::size_t) noexcept;
-void __libc_free(void*) noexcept;
-void* malloc(std::size_t n) noexcept {
-  count();
-  return __libc_malloc(n);
-}
-void* calloc(std::size_t n, std::size_t size) noexcept {
-  count();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, std::size_t n) noexcept {
-  count();
-  return __libc_realloc(p, n);
-}
-void* memalign(std::size_t al, std::size_t n) noexcept {
-  count();
-  return __libc_memalign(al, n);
-}
-void* aligned_alloc(std::size_t al, std::size_t n) noexcept {
-  count();
-  return __libc_memalign(al, n);
-}
-int posix_memalign(void** out, std::size_t al, std::size_t n) noexcept {
-  count();
-  void* p = __libc_memalign(al, n);
-  if (p == nullptr) return 12;  // ENOMEM
-  *out = p;
-  return 0;
-}
-void free(void* p) noexcept {
-  __libc_free(p);
-}
-}  // extern "C"
-#endif
 
 using namespace rectest;
 
 TEST(RecordingWriter, TheCounterSeesAllocations) {
-  g_allocations = 0;
-  g_armed = true;
-  auto* v = new std::vector<double>(1000);  // operator new reaches malloc
-  g_armed = false;
+  ASSERT_TRUE(mc::test::alloc_counter_installed());
+  mc::test::AllocCounter counting;
+  auto* v = new std::vector<double>(1000);
+  mc::test::escape(v);
+  const auto c = counting.stop();
   delete v;
-  EXPECT_GE(g_allocations.load(), 2);
+  EXPECT_GE(c.total(), 1);
 }
 
 TEST(RecordingWriter, AddsSamplesFramesAndImagesWithoutTheHeap) {
@@ -102,8 +33,7 @@ TEST(RecordingWriter, AddsSamplesFramesAndImagesWithoutTheHeap) {
   frame.t_ns = 1;
   ASSERT_TRUE(w.add_frame(frame, &image));
 
-  g_allocations = 0;
-  g_armed = true;
+  mc::test::AllocCounter counting;
   bool ok = true;
   for (int k = 0; k < 2000; ++k) {  // enough rows to flush the stdio buffers several times
     mc::ImuSample s;
@@ -118,9 +48,9 @@ TEST(RecordingWriter, AddsSamplesFramesAndImagesWithoutTheHeap) {
       ok = w.add_frame(frame, k % 100 == 0 ? &image : nullptr) && ok;
     }
   }
-  g_armed = false;
+  const auto c = counting.stop();
   EXPECT_TRUE(ok) << w.error();
-  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_EQ(c.total(), 0);
   ASSERT_TRUE(w.close(err)) << err;
   // It did write: 2000 samples and a header.
   const std::string imu = slurp(tmp.path + "/mav0/imu0/data.csv");
