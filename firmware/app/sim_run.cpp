@@ -40,6 +40,9 @@ State truth_state(const sim::Scenario& s) {
   t.q_b_c = s.truth.q_b_c;
   for (int i = 0; i < State::kMarkers; ++i)
     t.markers.template segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
+  const Pinhole<double>& k = s.truth.intrinsics;
+  const double all[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
+  for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = all[j];
   return t;
 }
 
@@ -79,6 +82,7 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   loop.finish();
 
   run.history = sink.rows();
+  run.covariance = filter.covariance();
   run.result = make_result(filter, data.width, data.height);
   run.filter_counters = filter.counters();
   run.loop_counters = loop.counters();
@@ -153,6 +157,36 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
       run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) run.detection = rendered->report();
+  return run;
+}
+
+SimRun<5> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                   const std::function<void(double)>& progress) {
+  const auto half = [&](double offset) {
+    return [&progress, offset](double f) {
+      if (progress) progress(offset + 0.5 * f);
+    };
+  };
+  const SimRun<0> stage1 = run_simulation(s, seed, half(0.0));
+
+  using Run = SimRun<5>;
+  using State = Run::State;
+  const std::uint64_t seed2 = sim::derive_seed(seed, 300);
+  const sim::SimData data = sim::simulate(s, seed2);
+  const Prior<kMarkers> prior = simulation_prior(s, data, seed2);
+  State x0;
+  Run::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
+  const auto& est = stage1.history.back().state;
+  x0.p_b_c = est.p_b_c;
+  x0.q_b_c = est.q_b_c;
+  x0.markers = est.markers;
+  constexpr int B = State::kPbc, L = SimRun<0>::State::kDim - B;
+  p0.block<L, L>(B, B) = stage1.covariance.block<L, L>(B, B);
+  const State truth = truth_state<State>(s);
+  Run run = run_loop<5>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
 }
 
