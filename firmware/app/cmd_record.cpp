@@ -10,7 +10,7 @@
 namespace mirrorcal::app {
 
 int cmd_record(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"scenario", "seed", "out"}, {});
+  const Options o = parse(argc, argv, 2, {"scenario", "seed", "out"}, {"intrinsics"});
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
   const sim::Scenario s = scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
@@ -35,7 +35,10 @@ int cmd_record(int argc, char** argv) {
   sensors.intrinsics = s.truth.intrinsics;  // stage 1 calibrates with a calibrated camera
   sensors.width = s.truth.width;
   sensors.height = s.truth.height;
-  const sim::RecordingPriors priors = sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false);
+  // --intrinsics: calibrate estimates the intrinsics too, from the prior's guess (the paper's
+  // Table III errors) rather than camchain.yaml's calibrated camera.
+  const sim::RecordingPriors priors =
+      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, o.flag("intrinsics"));
   if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err))
     fail(err, 1);
   std::printf(

@@ -28,7 +28,7 @@ const std::vector<Command>& commands() {
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
-       "              --out DIR [--scenario paper] [--seed N]\n",
+       "              --out DIR [--scenario paper] [--seed N] [--intrinsics]\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "

@@ -102,6 +102,21 @@ TEST(Cli, CalibrateWithIntrinsicsRunsTheStage2Filter) {
   EXPECT_NE(csv.find("sigma_skew [px]"), std::string::npos);
 }
 
+TEST(Cli, RecordWithIntrinsicsAsksForThemInThePriors) {
+  TempDir dir("cli-record-intrinsics");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 9 --intrinsics --out " + d + "/a", d).code, 0);
+  ASSERT_EQ(run_mirrorcal("record --seed 9 --out " + d + "/b", d).code, 0);
+  EXPECT_TRUE(YAML::LoadFile(d + "/a/mirrorcal.yaml")["estimate_intrinsics"].as<bool>());
+  EXPECT_FALSE(YAML::LoadFile(d + "/b/mirrorcal.yaml")["estimate_intrinsics"].as<bool>());
+  // Without --intrinsics on calibrate, the priors' request runs the intrinsics filter: the same
+  // bytes as calibrate --intrinsics on the other recording.
+  ASSERT_EQ(run_mirrorcal("calibrate " + d + "/a --out " + d + "/ca", d).code, 0);
+  ASSERT_EQ(run_mirrorcal("calibrate " + d + "/b --intrinsics --out " + d + "/cb", d).code, 0);
+  EXPECT_EQ(slurp(d + "/ca/estimates.csv"), slurp(d + "/cb/estimates.csv"));
+  EXPECT_NE(slurp(d + "/ca/estimates.csv").find("sigma_fu [px]"), std::string::npos);
+}
+
 TEST(Cli, CalibrateOnAMissingRecordingNamesTheFileAndFails) {
   TempDir dir("cli-missing");
   const Result r =
