@@ -7,9 +7,11 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "cli.hpp"
+#include "loop_options.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "plots.hpp"
 #include "report.hpp"
@@ -18,8 +20,11 @@
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  const Options o =
-      parse(argc, argv, 2, {"scenario", "seed", "out", "format"}, {"no-plots", "frames"});
+  std::vector<std::string> with_value = {"scenario", "seed", "out", "format"},
+                           flags = {"no-plots", "frames", "intrinsics"};
+  with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
+  flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
+  const Options o = parse(argc, argv, 2, with_value, flags);
   FrameMode frames;
   frames.enabled = o.flag("frames");
   const std::string format = o.get("format", "grey");
@@ -28,69 +33,89 @@ int cmd_sim(int argc, char** argv) {
   else if (format != "grey")
     fail("--format: '" + format + "' is not a pixel format (grey or yuyv)");
   if (o.flag("format") && !frames.enabled) fail("--format applies to --frames only");
+  const bool intrinsics = o.flag("intrinsics");
+  if (intrinsics && (frames.enabled || o.flag("profile")))
+    fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
   const sim::Scenario s = scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const std::string dir = make_out_dir(o, "out/sim");
+  firmware::MonotonicClock clock;  // the simulation's own clock is simulated time
+  const auto profiler = make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
+                                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz));
+  apply_realtime_options(o);
   std::printf(
       "mirrorcal sim: scenario '%s', seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), s.duration_s, s.imu_rate_hz,
       s.camera_rate_hz);
   const auto t0 = std::chrono::steady_clock::now();
-  const auto run = run_simulation(
-      s, seed, [](double f) { print_progress("calibrating", f); }, frames);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::fprintf(stderr, "\rcalibrating done   \n");
+  const auto progress = [](double f) { print_progress("calibrating", f); };
+  // What a run shows and writes, whichever stage it ended in.
+  const auto report = [&](const auto& run) {
+    const double wall =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::fprintf(stderr, "\rcalibrating done   \n");
 
-  const auto& params = run.result.params;
-  const auto truth = truth_display(s);
-  const auto& first = run.history.front();
-  const auto& last = run.history.back();
-  std::printf("\n%-8s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth", "after 1st frame +-1s",
-              "final +-1sigma", "error/sig");
-  for (std::size_t j = 0; j < params.size(); ++j) {
-    const double sc = params[j].scale;
-    std::printf("%-8s %-5s %12.4f %12.4f +-%-6.3f %12.4f +-%-6.4f %+10.2f\n",
-                params[j].name.c_str(), params[j].unit.c_str(), truth[j],
-                truth[j] + first.error(int(j)) * sc, first.sigma(int(j)) * sc,
-                truth[j] + last.error(int(j)) * sc, last.sigma(int(j)) * sc,
-                last.error(int(j)) / last.sigma(int(j)));
-  }
-  const auto& lc = run.loop_counters;
-  const auto& fc = run.filter_counters;
-  std::printf("\nNEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f)\n",
-              params.size(), last.nees, chi2_quantile(0.025, double(params.size())),
-              chi2_quantile(0.975, double(params.size())));
-  std::printf(
-      "loop: %llu IMU samples, %llu frames (%llu without markers), %llu IMU gaps, "
-      "%llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
-      (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
-      (unsigned long long)lc.frames_without_markers, (unsigned long long)lc.imu_gaps,
-      (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
-      (unsigned long long)fc.failures, wall);
-
-  if (frames.enabled) {
-    const DetectionReport& d = run.detection;
+    const auto& params = run.result.params;
+    const auto truth = truth_display(s, std::decay_t<decltype(run)>::State::kIntrinsics);
+    const auto& first = run.history.front();
+    const auto& last = run.history.back();
+    std::printf("\n%-8s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth",
+                "after 1st frame +-1s", "final +-1sigma", "error/sig");
+    for (std::size_t j = 0; j < params.size(); ++j) {
+      const double sc = params[j].scale;
+      std::printf("%-8s %-5s %12.4f %12.4f +-%-6.3f %12.4f +-%-6.4f %+10.2f\n",
+                  params[j].name.c_str(), params[j].unit.c_str(), truth[j],
+                  truth[j] + first.error(int(j)) * sc, first.sigma(int(j)) * sc,
+                  truth[j] + last.error(int(j)) * sc, last.sigma(int(j)) * sc,
+                  last.error(int(j)) / last.sigma(int(j)));
+    }
+    const auto& lc = run.loop_counters;
+    const auto& fc = run.filter_counters;
+    std::printf("\nNEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f)\n",
+                params.size(), last.nees, chi2_quantile(0.025, double(params.size())),
+                chi2_quantile(0.975, double(params.size())));
     std::printf(
-        "detection (%s frames): %llu frames, %llu of %llu reflections labelled, %llu wrong labels, "
-        "%llu withheld in doubt, %llu spurious blobs; centroid error %.3f px RMS (max %.3f) "
-        "against the true projections; %.2f ms per frame\n",
-        hal::to_string(frames.format), (unsigned long long)d.frames,
-        (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
-        (unsigned long long)d.wrong_labels, (unsigned long long)d.dropped_in_doubt,
-        (unsigned long long)d.spurious_blobs, d.centroid_rms_px, d.centroid_max_px, d.ms_per_frame);
-  }
+        "loop: %llu IMU samples, %llu frames (%llu without markers), %llu IMU gaps, "
+        "%llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
+        (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
+        (unsigned long long)lc.frames_without_markers, (unsigned long long)lc.imu_gaps,
+        (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
+        (unsigned long long)fc.failures, wall);
 
-  std::string err;
-  if (!write_run_outputs(dir, run, err)) fail(err, 1);
-  std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n", dir.c_str());
-  if (!o.flag("no-plots")) {
-    const std::vector<ErrorSeries> series = {error_series(run.history, params)};
-    const auto pngs = plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params,
-                                  series, chi2_quantile(0.025, double(params.size())),
-                                  chi2_quantile(0.975, double(params.size())), err);
-    if (pngs.empty()) std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
-    for (const auto& p : pngs) std::printf("plot: %s\n", p.c_str());
-  }
+    if (frames.enabled) {
+      const DetectionReport& d = run.detection;
+      std::printf(
+          "detection (%s frames): %llu frames, %llu of %llu reflections labelled, %llu wrong "
+          "labels, "
+          "%llu withheld in doubt, %llu spurious blobs; centroid error %.3f px RMS (max %.3f) "
+          "against the true projections; %.2f ms per frame\n",
+          hal::to_string(frames.format), (unsigned long long)d.frames,
+          (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
+          (unsigned long long)d.wrong_labels, (unsigned long long)d.dropped_in_doubt,
+          (unsigned long long)d.spurious_blobs, d.centroid_rms_px, d.centroid_max_px,
+          d.ms_per_frame);
+    }
+
+    std::string err;
+    if (!write_run_outputs(dir, run, err)) fail(err, 1);
+    std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n",
+                dir.c_str());
+    if (profiler)
+      report_profile(*profiler,
+                     "this host's monotonic clock, simulated data fed as fast as it is taken", dir);
+    if (!o.flag("no-plots")) {
+      const std::vector<ErrorSeries> series = {error_series(run.history, params)};
+      const auto pngs = plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params,
+                                    series, chi2_quantile(0.025, double(params.size())),
+                                    chi2_quantile(0.975, double(params.size())), err);
+      if (pngs.empty()) std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
+      for (const auto& p : pngs) std::printf("plot: %s\n", p.c_str());
+    }
+  };
+  if (intrinsics)
+    report(run_two_stage_simulation(s, seed, progress));
+  else
+    report(run_simulation(s, seed, progress, frames, profiler.get()));
   return 0;
 }
 

@@ -9,18 +9,32 @@ namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv);
 int cmd_montecarlo(int argc, char** argv);
+int cmd_record(int argc, char** argv);
+int cmd_calibrate(int argc, char** argv);
 
 const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
-       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
-       "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n",
+       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots] [--intrinsics]\n"
+       "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
+       "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
+       "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
-       "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n",
+       "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n"
+       "              [--intrinsics]  (stage 2: Table III)\n",
        cmd_montecarlo},
+      {"record",
+       "  record      write the simulated rig's data and priors as a EuRoC recording\n"
+       "              --out DIR [--scenario paper] [--seed N]\n",
+       cmd_record},
+      {"calibrate",
+       "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
+       "mirrorcal.yaml)\n"
+       "              DIR [--intrinsics] [--out OUT]\n",
+       cmd_calibrate},
   };
   return table;
 }

@@ -108,7 +108,11 @@ std::vector<std::string> plot_errors(const std::string& dir, const std::string& 
   if (std::system(cmd.c_str()) != 0) {
     error = "gnuplot failed or is not installed (see " + dir + "/gnuplot.log); data left in " + dir;
     written.clear();
+    return written;
   }
+  // The plot data of a large campaign runs to tens of MB: keep only the pictures.
+  for (const char* f : {"/errors.dat", "/band.dat", "/plots.gp", "/gnuplot.log"})
+    std::remove((dir + f).c_str());
   return written;
 }
 

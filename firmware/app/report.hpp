@@ -9,16 +9,20 @@ namespace mirrorcal::app {
 
 // Display value of the truth of each calibration parameter, in the row order of
 // calibration_params(): p and markers in cm, the rotation as the scenario's three angles in deg.
-std::vector<double> truth_display(const sim::Scenario& s);
+std::vector<double> truth_display(const sim::Scenario& s, int intrinsics = 0);
 
-// The paper's Tables I and II, final value and sigma, in our row order (rotation columns read as
+// The paper's Tables I, II and III, final value and sigma, in our row order (rotation columns read as
 // about x, y, z: see paper_scenario()).
 struct PaperRow {
   double final_value, sigma;
 };
 const std::vector<PaperRow>& paper_tables();
 
-// Quantile of the chi-square distribution with k degrees of freedom at p = 0.025 or 0.975
+// A rotation R_b_c as the three angles (deg) the scenarios state it by: R = Rz(c) Ry(b) Rx(a),
+// returned as (a, b, c).
+Eigen::Vector3d display_angles(const Eigen::Quaterniond& q);
+
+// Quantile of the chi-square distribution with k degrees of freedom at probability p
 // (Wilson-Hilferty; accurate to <1 % for k > 10).
 double chi2_quantile(double p, double k);
 

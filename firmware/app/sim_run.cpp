@@ -2,6 +2,7 @@
 
 #include <optional>
 
+#include "mirrorcal/sim_host/simulator.hpp"
 #include "sim_frames.hpp"
 
 namespace mirrorcal::app {
@@ -19,7 +20,7 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   LoopData d;
   d.imu = data.imu;
   d.frames = data.frames;
-  d.imu_period_ns = static_cast<std::int64_t>(1e9 / s.imu_rate_hz);
+  d.imu_period_ns = imu_period_ns(s.imu_rate_hz);
   d.width = s.truth.width;
   d.height = s.truth.height;
   return d;
@@ -39,16 +40,22 @@ State truth_state(const sim::Scenario& s) {
   t.q_b_c = s.truth.q_b_c;
   for (int i = 0; i < State::kMarkers; ++i)
     t.markers.template segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
+  const Pinhole<double>& k = s.truth.intrinsics;
+  const double all[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
+  for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = all[j];
   return t;
 }
 
 }  // namespace
 
+namespace {
+
+// One pass of the loop over the data from (x0, p0).
 template <int NK>
-SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
+SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress) {
+                    const std::function<void(double)>& progress, const LoopHooks& input) {
   using Run = SimRun<NK>;
   using Filter = typename Run::Filter;
   Run run;
@@ -58,12 +65,13 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
 
   sim::VectorImuSource imu(data.imu);
   sim::VectorMarkerSource<kMarkers> listed(data.frames);
-  hal::MarkerSource<kMarkers>& markers = data.camera != nullptr ? *data.camera : listed;
+  hal::MarkerSource<kMarkers>& markers = input.source != nullptr ? *input.source : listed;
   HistorySink<Filter> sink(data.frames.size() + 1, truth != nullptr ? &run.truth : nullptr);
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
+  lc.profiler = input.profiler;
   firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, imu, markers, lc, &sink);
-  loop.set_identifier(data.identifier);
+  if (input.relabeler != nullptr) loop.set_identifier(input.relabeler);
 
   const std::size_t report_every = data.imu.size() / 100 + 1;
   std::size_t n = 0;
@@ -74,6 +82,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   loop.finish();
 
   run.history = sink.rows();
+  run.covariance = filter.covariance();
   run.result = make_result(filter, data.width, data.height);
   run.filter_counters = filter.counters();
   run.loop_counters = loop.counters();
@@ -82,15 +91,47 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   return run;
 }
 
+}  // namespace
+
+template <int NK>
+SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
+                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
+                    const typename SimRun<NK>::State* truth,
+                    const std::function<void(double)>& progress,
+                    const std::function<LoopHooks(int pass)>& hooks, int passes) {
+  using State = typename SimRun<NK>::State;
+  State start = x0;
+  SimRun<NK> run;
+  for (int pass = 0; pass < passes; ++pass) {
+    const auto pass_progress = [&](double f) {
+      if (progress) progress((pass + f) / passes);
+    };
+    run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
+                       hooks ? hooks(pass) : LoopHooks{});
+    // The next pass starts the calibration parameters at this pass's estimate, with the prior's
+    // covariance: the data are linearised about a far better guess (see sim_run.hpp).
+    if (run.history.empty()) break;
+    const State& est = run.history.back().state;
+    start.p_b_c = est.p_b_c;
+    start.q_b_c = est.q_b_c;
+    start.markers = est.markers;
+    start.intrinsics = est.intrinsics;
+  }
+  return run;
+}
+
 template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
                                const SimRun<0>::Filter::Covariance&, const LoopData&,
-                               const SimRun<0>::State*, const std::function<void(double)>&);
+                               const SimRun<0>::State*, const std::function<void(double)>&,
+                               const std::function<LoopHooks(int)>&, int);
 template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
                                const SimRun<5>::Filter::Covariance&, const LoopData&,
-                               const SimRun<5>::State*, const std::function<void(double)>&);
+                               const SimRun<5>::State*, const std::function<void(double)>&,
+                               const std::function<LoopHooks(int)>&, int);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress, const FrameMode& frames) {
+                         const std::function<void(double)>& progress, const FrameMode& frames,
+                         firmware::LoopProfiler* profiler, int passes) {
   using Run = SimRun<0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -98,18 +139,54 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   const Run::State truth = truth_state<Run::State>(s);
-  LoopData loop_input = loop_data(s, data);
+  // With frames, every pass renders and detects them afresh (detection follows the prediction).
   std::optional<RenderedMarkers> rendered;
-  if (frames.enabled) {
-    sim::RenderConfig render;
-    render.format = frames.format;
-    rendered.emplace(s, render, sim::derive_seed(seed, 200));
-    loop_input.camera = &*rendered;
-    loop_input.identifier = &*rendered;
-  }
-  Run run = run_loop<0>(scenario_config(s), x0, p0, loop_input, &truth, progress);
+  const auto hooks = [&](int pass) {
+    LoopHooks h;
+    if (pass == passes - 1) h.profiler = profiler;  // the timing of one pass, the final one
+    if (frames.enabled) {
+      sim::RenderConfig render;
+      render.format = frames.format;
+      rendered.emplace(s, render, sim::derive_seed(seed, 200));
+      h.source = &*rendered;
+      h.relabeler = &*rendered;
+    }
+    return h;
+  };
+  Run run =
+      run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) run.detection = rendered->report();
+  return run;
+}
+
+SimRun<5> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                   const std::function<void(double)>& progress) {
+  const auto half = [&](double offset) {
+    return [&progress, offset](double f) {
+      if (progress) progress(offset + 0.5 * f);
+    };
+  };
+  const SimRun<0> stage1 = run_simulation(s, seed, half(0.0));
+
+  using Run = SimRun<5>;
+  using State = Run::State;
+  const std::uint64_t seed2 = sim::derive_seed(seed, 300);
+  const sim::SimData data = sim::simulate(s, seed2);
+  const Prior<kMarkers> prior = simulation_prior(s, data, seed2);
+  State x0;
+  Run::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
+  const auto& est = stage1.history.back().state;
+  x0.p_b_c = est.p_b_c;
+  x0.q_b_c = est.q_b_c;
+  x0.markers = est.markers;
+  constexpr int B = State::kPbc, L = SimRun<0>::State::kDim - B;
+  p0.block<L, L>(B, B) = stage1.covariance.block<L, L>(B, B);
+  const State truth = truth_state<State>(s);
+  Run run = run_loop<5>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
 }
 

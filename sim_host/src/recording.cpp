@@ -11,6 +11,9 @@
 #include <fstream>
 #include <sstream>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
@@ -349,46 +352,71 @@ bool RecordingWriter::add_imu(const ImuSample& s) {
 }
 
 bool RecordingWriter::add_frame(const ObservedFrame& frame, const GrayImage* image) {
+  if (!begin_frame(frame.t_ns, image)) return false;
+  for (const ObservedMarker& m : frame.markers) add_feature(frame.t_ns, m.id, m.u, m.v);
+  return true;
+}
+
+bool RecordingWriter::begin_frame(std::int64_t t_ns, const GrayImage* image) {
   if (!frames_ || frames_->f == nullptr) return fail("not open", dir_);
-  if (any_frame_ && frame.t_ns <= last_frame_ns_) {
+  if (any_frame_ && t_ns <= last_frame_ns_) {
     errno = 0;
     return fail("frame timestamps must increase", frames_->path);
   }
-  std::fprintf(frames_->f, "%lld,%lld.pgm\n", static_cast<long long>(frame.t_ns),
-               static_cast<long long>(frame.t_ns));
-  for (const ObservedMarker& m : frame.markers) {
-    char line[kLine];
-    char* const end = line + kLine;
-    char* p = put(line, end, frame.t_ns, ',');
-    p = put(p, end, static_cast<std::int64_t>(m.id), ',');
-    p = put(p, end, m.u, ',');
-    p = put(p, end, m.v, '\n');
-    std::fwrite(line, 1, static_cast<std::size_t>(p - line), features_->f);
-  }
-  if (image != nullptr) {
-    const std::string& images = images_path_;
-    if (!images_dir_) {  // created with the first image, so image-less recordings have none
-      std::error_code ec;
-      std::filesystem::create_directories(images, ec);
-      if (ec) {
-        errno = 0;
-        return fail("cannot create the image folder", images);
-      }
-      images_dir_ = true;
-    }
-    char path[4096];
-    std::snprintf(path, sizeof path, "%s/%lld.pgm", images.c_str(),
-                  static_cast<long long>(frame.t_ns));
-    std::FILE* f = std::fopen(path, "wb");
-    if (f == nullptr) return fail("cannot write", path);
-    std::fprintf(f, "P5\n%d %d\n255\n", image->width, image->height);
-    const std::size_t n =
-        static_cast<std::size_t>(image->width) * static_cast<std::size_t>(image->height);
-    const bool ok = std::fwrite(image->pixels, 1, n, f) == n;
-    if (std::fclose(f) != 0 || !ok) return fail("error writing", path);
-  }
-  last_frame_ns_ = frame.t_ns;
+  char line[kLine];
+  char* const end = line + kLine;
+  char* p = put(line, end, t_ns, ',');
+  p = put(p, end, t_ns, '.');
+  p = std::copy_n("pgm\n", 4, p);
+  std::fwrite(line, 1, static_cast<std::size_t>(p - line), frames_->f);
+  last_frame_ns_ = t_ns;
   any_frame_ = true;
+  return image == nullptr || write_image(t_ns, *image);
+}
+
+void RecordingWriter::add_feature(std::int64_t t_ns, int id, double u, double v) {
+  char line[kLine];
+  char* const end = line + kLine;
+  char* p = put(line, end, t_ns, ',');
+  p = put(p, end, static_cast<std::int64_t>(id), ',');
+  p = put(p, end, u, ',');
+  p = put(p, end, v, '\n');
+  std::fwrite(line, 1, static_cast<std::size_t>(p - line), features_->f);
+}
+
+// An 8-bit PGM through POSIX calls, which need no heap (unlike a FILE).
+bool RecordingWriter::write_image(std::int64_t t_ns, const GrayImage& image) {
+  if (!images_dir_) {  // created with the first image, so image-less recordings have none
+    std::error_code ec;
+    std::filesystem::create_directories(images_path_, ec);
+    if (ec) {
+      errno = 0;
+      return fail("cannot create the image folder", images_path_);
+    }
+    images_dir_ = true;
+  }
+  char path[4096];
+  std::snprintf(path, sizeof path, "%s/%lld.pgm", images_path_.c_str(),
+                static_cast<long long>(t_ns));
+  const int fd = ::open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return fail("cannot write", path);
+  char header[64];
+  const int h = std::snprintf(header, sizeof header, "P5\n%d %d\n255\n", image.width, image.height);
+  const std::size_t n =
+      static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height);
+  const auto write_all = [fd](const void* data, std::size_t size) {
+    const char* c = static_cast<const char*>(data);
+    while (size > 0) {
+      const ssize_t w = ::write(fd, c, size);
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) return false;
+      c += w;
+      size -= static_cast<std::size_t>(w);
+    }
+    return true;
+  };
+  const bool ok = write_all(header, static_cast<std::size_t>(h)) && write_all(image.pixels, n);
+  if (::close(fd) != 0 || !ok) return fail("error writing", path);
   return true;
 }
 

@@ -72,19 +72,20 @@ Scenario paper_scenario() {
   r0.col(2) = Eigen::Vector3d(0, 1, 0);
   Motion& m = s.motion;
   m.q0 = Eigen::Quaterniond(r0);
-  m.p0 = Eigen::Vector3d(0.0, 1.3, 0.45);  // 45 cm in front of the mirror
+  m.p0 = Eigen::Vector3d(0.0, 1.3, 0.30);  // 30 cm in front of the mirror
   // Translation on all axes, toward the mirror the most; incommensurate frequencies so the
   // motion does not repeat within the minute.
   m.position[0] = {{0.10, 0.21, 0.3}, {0.04, 0.53, 1.1}};
   m.position[1] = {{0.08, 0.27, 2.0}, {0.03, 0.61, 0.4}};
   m.position[2] = {{0.12, 0.17, 0.0}, {0.04, 0.47, 2.5}};
-  // Rotation about all three body axes; tilts away from the mirror normal stay within the
-  // camera's field of view so the reflections remain in the image.
-  m.angles[0] = {{25 * deg, 0.19, 0.0}, {8 * deg, 0.57, 1.0}};  // about the optical axis
-  // Tilts: the camera position along its optical axis shows only through the centripetal
-  // acceleration of the tilt rates, so they are quick (up to 1.3 Hz) as well as wide.
-  m.angles[1] = {{7 * deg, 0.23, 0.5}, {4 * deg, 1.1, 2.2}};
-  m.angles[2] = {{8 * deg, 0.29, 1.7}, {4 * deg, 1.3, 0.3}};
+  // Rotation about all three body axes. The camera position along its optical axis and the
+  // markers' depths show only through the tilts (their centripetal accelerations and the parallax
+  // they cause), so the tilts are wide and quick (up to 2 Hz); about a fifth of the reflections
+  // leave the image at the widest tilts.
+  m.angles[0] = {{25 * deg, 0.285, 0.0}, {8 * deg, 0.855, 1.0}};  // about the optical axis
+  m.angles[1] = {{10.5 * deg, 0.345, 0.5}, {6 * deg, 1.65, 2.2}};
+  m.angles[2] = {{12 * deg, 0.435, 1.7}, {6 * deg, 1.95, 0.3}};
+  s.camera_rate_hz = 60.0;
   return s;
 }
 

@@ -1,10 +1,10 @@
 // No heap per frame on the camera path: detection, identification and the filter's prediction
-// for it, as the loop runs them, must not allocate (allocations counted by heap_counter).
+// for it, as the loop runs them, must not allocate (allocations counted by tests/support/alloc_counter).
 #include <gtest/gtest.h>
 
 #include <vector>
 
-#include "heap_counter.hpp"
+#include "alloc_counter.hpp"
 #include "mirrorcal/drivers/detecting_marker_source.hpp"
 #include "mirrorcal/estimator/prior.hpp"
 #include "mirrorcal/firmware/marker_prediction.hpp"
@@ -53,11 +53,11 @@ class PrerenderedFrames final : public mc::hal::FrameSource {
 }  // namespace
 
 TEST(DetectionNoHeap, CounterWorks) {
-  ASSERT_TRUE(mc::test::allocation_counting_works());
-  mc::test::CountAllocations armed;
+  ASSERT_TRUE(mc::test::alloc_counter_installed());
+  mc::test::AllocCounter armed;
   std::vector<int> v(10);
   asm volatile("" : : "g"(v.data()) : "memory");
-  EXPECT_GE(armed.disarm().news, 1);
+  EXPECT_GE(armed.stop().news, 1);
 }
 
 TEST(DetectionNoHeap, PollPredictAndRelabelDoNotAllocate) {
@@ -82,7 +82,7 @@ TEST(DetectionNoHeap, PollPredictAndRelabelDoNotAllocate) {
     mc::hal::MarkerPrediction<M> prediction;
     mc::MarkerFrame<M> frame;
 
-    mc::test::CountAllocations armed;
+    mc::test::AllocCounter armed;
     int frames_done = 0, predicted = 0;
     while (source.poll(frame) == mc::hal::SourceStatus::kOk) {
       if (mc::firmware::predict_marker_pixels(filter, prediction)) {
@@ -91,7 +91,7 @@ TEST(DetectionNoHeap, PollPredictAndRelabelDoNotAllocate) {
       }
       ++frames_done;
     }
-    const mc::test::AllocationCounts c = armed.disarm();
+    const mc::test::AllocCounts c = armed.stop();
     EXPECT_EQ(frames_done, 40);
     EXPECT_EQ(predicted, 40);
     EXPECT_GT(source.identifier_counters().identified, 60u);

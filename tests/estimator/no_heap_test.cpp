@@ -1,46 +1,40 @@
 // No heap on the hot path: predict and update of every filter configuration the product compiles
-// must not allocate. The program counts every allocation (tests/support/heap_counter.hpp).
+// must not allocate (counted by tests/support/alloc_counter).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <vector>
 
-#include "heap_counter.hpp"
+#include "alloc_counter.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "test_support.hpp"
 
 namespace mirrorcal {
 namespace {
 
-using Counts = test::AllocationCounts;
-using Armed = test::CountAllocations;
-
-// Opaque to the optimiser, so the self-test's allocations cannot be elided.
-template <class T>
-void escape(T* p) {
-  asm volatile("" : : "g"(p) : "memory");
-}
+using test::AllocCounter;
+using test::AllocCounts;
 
 TEST(NoHeap, CounterSeesAllocations) {
-  ASSERT_TRUE(test::allocation_counting_works()) << "sanitizer allocation hook not installed";
-  Armed armed;
+  ASSERT_TRUE(test::alloc_counter_installed()) << "sanitizer allocation hook not installed";
+  AllocCounter counting;
   int* a = new int(3);
-  escape(a);
+  test::escape(a);
   delete a;
   void* b = std::malloc(64);
-  escape(b);
+  test::escape(b);
   std::free(b);
   std::vector<double> v(100);
-  escape(v.data());
-  const Counts c = armed.disarm();
+  test::escape(v.data());
+  const AllocCounts c = counting.stop();
   EXPECT_GE(c.news, 2);
   EXPECT_GE(c.mallocs, 2);
 }
 
 // Drives one configuration through predicts and every kind of update.
 template <typename S, int NK>
-Counts exercise() {
+AllocCounts exercise() {
   using Filter = CalibrationFilter<S, 3, NK>;
   using State = typename Filter::State;
   const test::SineTrajectory traj = test::wall_mirror_trajectory();
@@ -69,7 +63,7 @@ Counts exercise() {
   warm.predict(imu[0], imu[1]);
   warm.update(frames[0]);
 
-  Armed armed;
+  AllocCounter counting;
   Filter f(cfg);
   f.reset(x0, p0);
   int kind = 0;
@@ -99,7 +93,7 @@ Counts exercise() {
   ImuSample bad = imu[1];
   bad.gyro.x() = std::nan("");
   f.predict(imu[0], bad);
-  const Counts c = armed.disarm();
+  const AllocCounts c = counting.stop();
   // The run did what it was meant to: updates used, gated and refused.
   EXPECT_GT(f.counters().markers_used, 50u);
   EXPECT_GE(f.counters().markers_gated, 10u);
@@ -108,19 +102,19 @@ Counts exercise() {
 }
 
 TEST(NoHeap, DoubleStage1) {
-  const Counts c = exercise<double, 0>();
+  const AllocCounts c = exercise<double, 0>();
   EXPECT_EQ(c.news, 0);
   EXPECT_EQ(c.mallocs, 0);
 }
 
 TEST(NoHeap, DoubleStage2) {
-  const Counts c = exercise<double, 5>();
+  const AllocCounts c = exercise<double, 5>();
   EXPECT_EQ(c.news, 0);
   EXPECT_EQ(c.mallocs, 0);
 }
 
 TEST(NoHeap, FloatStage1) {
-  const Counts c = exercise<float, 0>();
+  const AllocCounts c = exercise<float, 0>();
   EXPECT_EQ(c.news, 0);
   EXPECT_EQ(c.mallocs, 0);
 }

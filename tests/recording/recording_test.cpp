@@ -23,7 +23,8 @@ void expect_same(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const char*
 TEST(Recording, StreamsReadBackBitIdentical) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 21);
-  const std::string dir = temp_dir("streams");
+  const TempDir tmp("streams");
+  const std::string& dir = tmp.path;
   write_recording(dir, s, data, 21);
 
   mc::sim::Recording r;
@@ -68,7 +69,8 @@ TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 4);
   const auto prior = mc::app::simulation_prior(s, data, 4);
-  const std::string dir = temp_dir("priors");
+  const TempDir tmp("priors");
+  const std::string& dir = tmp.path;
   std::string err;
   ASSERT_TRUE(
       mc::sim::write_priors_yaml(dir, mc::sim::from_prior(prior, s.gravity_n, 0.75, true), err))
@@ -118,7 +120,8 @@ TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
 }
 
 TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
-  const std::string dir = temp_dir("writer-order");
+  const TempDir tmp("writer-order");
+  const std::string& dir = tmp.path;
   std::string err;
   mc::sim::RecordingWriter w;
   ASSERT_TRUE(w.open(dir, err)) << err;
@@ -136,7 +139,8 @@ TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
 }
 
 TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
-  const std::string dir = temp_dir("images");
+  const TempDir tmp("images");
+  const std::string& dir = tmp.path;
   std::string err;
   mc::sim::RecordingWriter w;
   ASSERT_TRUE(w.open(dir, err)) << err;
@@ -152,4 +156,30 @@ TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
   EXPECT_EQ(slurp(dir + "/mav0/cam0/data.csv"), "#timestamp [ns],filename\n1234,1234.pgm\n");
   EXPECT_EQ(slurp(dir + "/mav0/cam0/features.csv"),
             "#timestamp [ns],feature_id,u [px],v [px]\n1234,1,10.5,20.25\n");
+}
+
+TEST(Recording, LoopFramesAreWrittenAsTheirObservedFrames) {
+  // The board records the loop's MarkerFrame; the simulator its ObservedFrame: same bytes.
+  mc::MarkerFrame<3> loop_frame;
+  loop_frame.t_ns = 5'000'001;
+  loop_frame.seen = {true, false, true};
+  loop_frame.uv[0] = Eigen::Vector2d(1.25, 479.5);
+  loop_frame.uv[1] = Eigen::Vector2d(7.0, 7.0);  // not seen: not written
+  loop_frame.uv[2] = Eigen::Vector2d(0.1, 1e-3);
+  mc::sim::ObservedFrame observed;
+  observed.t_ns = loop_frame.t_ns;
+  observed.markers = {{0, 1.25, 479.5}, {2, 0.1, 1e-3}};
+
+  const TempDir a("loop-frame"), b("observed-frame");
+  std::string err;
+  mc::sim::RecordingWriter wa, wb;
+  ASSERT_TRUE(wa.open(a.path, err) && wb.open(b.path, err)) << err;
+  ASSERT_TRUE(wa.add_frame(loop_frame));
+  ASSERT_TRUE(wb.add_frame(observed));
+  ASSERT_TRUE(wa.close(err) && wb.close(err)) << err;
+  for (const char* f : {"/mav0/cam0/data.csv", "/mav0/cam0/features.csv"})
+    EXPECT_EQ(slurp(a.path + f), slurp(b.path + f)) << f;
+  EXPECT_EQ(
+      slurp(a.path + "/mav0/cam0/features.csv"),
+      "#timestamp [ns],feature_id,u [px],v [px]\n5000001,0,1.25,479.5\n5000001,2,0.1,0.001\n");
 }

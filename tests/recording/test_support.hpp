@@ -25,6 +25,18 @@ inline std::string temp_dir(const std::string& name) {
   return p.string();
 }
 
+// A temp_dir() removed when the test ends.
+struct TempDir {
+  explicit TempDir(const std::string& name) : path(temp_dir(name)) {}
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  std::string path;
+};
+
 inline std::string slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::ostringstream s;

@@ -53,7 +53,7 @@ class CalibrationFilter {
   // Defined below the class: member functions defined in it would be inline, and an extern
   // template declaration does not stop inline functions from being instantiated in every unit
   // that calls them.
-  FilterStatus predict(const ImuSample& s0, const ImuSample& s1);
+  FilterStatus predict(const ImuSample& s0, const ImuSample& s1, const ImuSample* before = nullptr);
   UpdateResult update(const MarkerFrame<M>& frame);
 
   const State& state() const { return filter_.mean(); }
@@ -71,12 +71,13 @@ class CalibrationFilter {
 };
 
 template <typename S, int M, int NK>
-FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1) {
+FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1,
+                                                  const ImuSample* before) {
   const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
   const auto q = imu_process_noise<S>(config_.imu, dt);
   const Vec3<S> g = gravity_;
   const FilterStatus st = filter_.template predict<State::kDynamicBegin, State::kDynamicDim>(
-      [&](State& x) { propagate_imu(x, s0, s1, g); }, q);
+      [&](State& x) { propagate_imu(x, s0, s1, g, before); }, q);
   ++counters_.predicts;
   if (st != FilterStatus::kOk) ++counters_.failures;
   return st;

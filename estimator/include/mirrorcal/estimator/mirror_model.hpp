@@ -153,26 +153,86 @@ struct MirrorState {
   }
 };
 
-// Integrates the nominal IMU state from sample s0 to s1 (both measured, the interval between).
-// Second order: the rotation uses the mean bias-corrected rate plus the coning term
-// dt^2/12 (w0 x w1) (exact for a linearly varying rate), velocity the trapezoid of the
-// navigation-frame accelerations at both ends, position the matching dt^2 (2 a0 + a1)/6 (exact
-// for linearly varying acceleration). Global errors therefore fall as dt^2.
+// The IMU signal at time t between samples s0 and s1: the parabola through the sample before s0,
+// s0 and s1 when that sample is given (third-order accurate in the sample spacing), else the line
+// through s0 and s1. Any three samples on one parabola give the same parabola, so splitting an
+// interval at a sample taken from it (a frame time) and integrating the pieces with their own
+// "before" samples integrates the same signal.
+inline ImuSample imu_signal_at(const ImuSample* before, const ImuSample& s0, const ImuSample& s1,
+                               std::int64_t t_ns) {
+  const double t = static_cast<double>(t_ns - s0.t_ns);
+  const double h1 = static_cast<double>(s1.t_ns - s0.t_ns);
+  ImuSample out;
+  out.t_ns = t_ns;
+  if (before == nullptr) {
+    const double f = h1 > 0.0 ? t / h1 : 0.0;
+    out.gyro = s0.gyro + f * (s1.gyro - s0.gyro);
+    out.accel = s0.accel + f * (s1.accel - s0.accel);
+    return out;
+  }
+  const double h0 = static_cast<double>(s0.t_ns - before->t_ns);
+  // Lagrange weights on the nodes -h0, 0, h1.
+  const double wb = t * (t - h1) / (h0 * (h0 + h1));
+  const double w0 = (t + h0) * (h1 - t) / (h0 * h1);
+  const double w1 = (t + h0) * t / ((h0 + h1) * h1);
+  out.gyro = wb * before->gyro + w0 * s0.gyro + w1 * s1.gyro;
+  out.accel = wb * before->accel + w0 * s0.accel + w1 * s1.accel;
+  return out;
+}
+
+// Integrates the nominal IMU state from sample s0 to s1.
+// Without the sample before s0: second order. The rotation uses the mean bias-corrected rate plus
+// the coning term dt^2/12 (w0 x w1) (exact for a linearly varying rate), velocity the trapezoid of
+// the navigation-frame accelerations at both ends, position the matching dt^2 (2 a0 + a1)/6 (exact
+// for linearly varying acceleration). Global errors fall as dt^2.
+// With it: classical Runge-Kutta (fourth order) on the parabola through the three samples
+// (imu_signal_at), so the error is the signal reconstruction's, falling as dt^3. On a rig tilting
+// at 2 Hz and 200 Hz sampling the second-order scheme's errors are large enough to make marker
+// depths over-confident at 60 Hz frames (NEES 69 with 0.2 px noise, 15 with this one).
 template <class State>
 void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
-                   const Vec3<typename State::Scalar>& gravity_n) {
+                   const Vec3<typename State::Scalar>& gravity_n,
+                   const ImuSample* before = nullptr) {
   using S = typename State::Scalar;
   const S dt = S(static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9);
-  const Vec3<S> w0 = s0.gyro.cast<S>() - x.b_g;
-  const Vec3<S> w1 = s1.gyro.cast<S>() - x.b_g;
-  const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
-  const Vec3<S> dtheta = (S(0.5) * dt) * (w0 + w1) + (dt * dt / S(12)) * w0.cross(w1);
-  x.q_n_b = (x.q_n_b * so3::exp<S>(dtheta)).normalized();
-  const Mat3<S> r1 = x.q_n_b.toRotationMatrix();
-  const Vec3<S> a0 = r0 * (s0.accel.cast<S>() - x.b_a) + gravity_n;
-  const Vec3<S> a1 = r1 * (s1.accel.cast<S>() - x.b_a) + gravity_n;
-  x.p += dt * x.v + (dt * dt / S(6)) * (S(2) * a0 + a1);
-  x.v += (S(0.5) * dt) * (a0 + a1);
+  if (before == nullptr) {
+    const Vec3<S> w0 = s0.gyro.cast<S>() - x.b_g;
+    const Vec3<S> w1 = s1.gyro.cast<S>() - x.b_g;
+    const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
+    const Vec3<S> dtheta = (S(0.5) * dt) * (w0 + w1) + (dt * dt / S(12)) * w0.cross(w1);
+    x.q_n_b = (x.q_n_b * so3::exp<S>(dtheta)).normalized();
+    const Mat3<S> r1 = x.q_n_b.toRotationMatrix();
+    const Vec3<S> a0 = r0 * (s0.accel.cast<S>() - x.b_a) + gravity_n;
+    const Vec3<S> a1 = r1 * (s1.accel.cast<S>() - x.b_a) + gravity_n;
+    x.p += dt * x.v + (dt * dt / S(6)) * (S(2) * a0 + a1);
+    x.v += (S(0.5) * dt) * (a0 + a1);
+    return;
+  }
+  // y = (q, v, p); y' = (q (0, w/2), R(q) f + g, v) with w, f bias-corrected samples of the signal.
+  struct Rate {
+    Eigen::Matrix<S, 4, 1> q;
+    Vec3<S> v, p;
+  };
+  const ImuSample mid = imu_signal_at(before, s0, s1, s0.t_ns + (s1.t_ns - s0.t_ns) / 2);
+  const auto rate = [&](const ImuSample& sig, const Eigen::Matrix<S, 4, 1>& qc, const Vec3<S>& v) {
+    const Eigen::Quaternion<S> q(qc);  // coeffs order x, y, z, w
+    const Vec3<S> w = sig.gyro.cast<S>() - x.b_g;
+    Rate r;
+    r.q = (q * Eigen::Quaternion<S>(S(0), S(0.5) * w.x(), S(0.5) * w.y(), S(0.5) * w.z())).coeffs();
+    r.v = q.toRotationMatrix() * (sig.accel.cast<S>() - x.b_a) + gravity_n;
+    r.p = v;
+    return r;
+  };
+  const Eigen::Matrix<S, 4, 1> q0 = x.q_n_b.coeffs();
+  const Rate k1 = rate(s0, q0, x.v);
+  const Rate k2 = rate(mid, q0 + S(0.5) * dt * k1.q, x.v + S(0.5) * dt * k1.v);
+  const Rate k3 = rate(mid, q0 + S(0.5) * dt * k2.q, x.v + S(0.5) * dt * k2.v);
+  const Rate k4 = rate(s1, q0 + dt * k3.q, x.v + dt * k3.v);
+  const S sixth = dt / S(6);
+  x.q_n_b =
+      Eigen::Quaternion<S>(q0 + sixth * (k1.q + S(2) * k2.q + S(2) * k3.q + k4.q)).normalized();
+  x.p += sixth * (k1.p + S(2) * k2.p + S(2) * k3.p + k4.p);
+  x.v += sixth * (k1.v + S(2) * k2.v + S(2) * k3.v + k4.v);
 }
 
 // Discrete process noise over the dynamic block [v, b_a, b_g, p, theta] for an interval dt, from

@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/firmware/timing.hpp"
 #include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/hal/sources.hpp"
 
@@ -16,6 +17,8 @@ struct LoopConfig {
   // An interval longer than gap_periods nominal periods is an IMU gap: counted, and propagated
   // across in steps of one nominal period on linearly interpolated samples.
   double gap_periods = 2.5;
+  // Times every stage of the loop when set (see timing.hpp).
+  LoopProfiler* profiler = nullptr;
 };
 
 // What the loop met on its streams; nothing is dropped without being counted here.
@@ -68,6 +71,7 @@ class CalibrationLoop {
  private:
   void propagate_to(const ImuSample& next);
   void apply_frame(const MarkerFrame<M>& frame);
+  hal::SourceStatus poll_markers();
 
   Filter& filter_;
   hal::ImuSource& imu_;
@@ -82,6 +86,12 @@ class CalibrationLoop {
   bool started_ = false;
   bool markers_ended_ = false;
   ImuSample last_{};  // the IMU sample at the filter's current time (possibly interpolated)
+  // The IMU signal between measured samples is the parabola through the last three (estimator's
+  // imu_signal_at): measured_ is the newest measured sample at or before last_, before_ the one
+  // before it, valid unless a gap lies between them.
+  ImuSample measured_{};
+  ImuSample before_{};
+  bool has_before_ = false;
   MarkerFrame<M> pending_{};
   bool pending_valid_ = false;
 };

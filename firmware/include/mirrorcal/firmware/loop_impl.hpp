@@ -8,6 +8,7 @@ namespace mirrorcal::firmware {
 
 template <typename S, int M, int NK>
 void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
+  const StageTimer timer(config_.profiler, Stage::kPropagation);
   const std::int64_t span = next.t_ns - last_.t_ns;
   if (span <= 0) return;
   const auto gap_limit =
@@ -21,45 +22,75 @@ void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
       last_ = mid;
     }
   }
-  if (filter_.predict(last_, next) != FilterStatus::kOk) ++counters_.filter_failures;
+  // The third node of the signal's parabola: the measured sample before the interval's start.
+  const ImuSample* node =
+      !has_before_ ? nullptr : (last_.t_ns == measured_.t_ns ? &before_ : &measured_);
+  if (filter_.predict(last_, next, node) != FilterStatus::kOk) ++counters_.filter_failures;
   last_ = next;
 }
 
 template <typename S, int M, int NK>
 void CalibrationLoop<S, M, NK>::apply_frame(const MarkerFrame<M>& frame) {
   ++counters_.frames;
-  const UpdateResult r = filter_.update(frame);
+  UpdateResult r;
+  {
+    const StageTimer timer(config_.profiler, Stage::kUpdate);
+    r = filter_.update(frame);
+  }
   if (r.status == FilterStatus::kNoMeasurement) {
     ++counters_.frames_without_markers;
   } else if (r.status != FilterStatus::kOk) {
     ++counters_.filter_failures;
   }
-  if (sink_ != nullptr) sink_->publish(frame.t_ns, filter_);
+  if (sink_ != nullptr) {
+    const StageTimer timer(config_.profiler, Stage::kOutput);
+    sink_->publish(frame.t_ns, filter_);
+  }
+  if (config_.profiler != nullptr) config_.profiler->end_frame();
+}
+
+template <typename S, int M, int NK>
+hal::SourceStatus CalibrationLoop<S, M, NK>::poll_markers() {
+  LoopProfiler* const p = config_.profiler;
+  if (p == nullptr) return markers_.poll(pending_);
+  const std::int64_t t0 = p->now_ns();
+  const hal::SourceStatus st = markers_.poll(pending_);
+  p->marker_polled(p->now_ns() - t0, st == hal::SourceStatus::kOk ? markers_.detection_ns() : -1);
+  return st;
 }
 
 template <typename S, int M, int NK>
 bool CalibrationLoop<S, M, NK>::step() {
   ImuSample sample;
-  const hal::SourceStatus st = imu_.next(sample);
+  hal::SourceStatus st;
+  {
+    const StageTimer timer(config_.profiler, Stage::kImuRead);
+    st = imu_.next(sample);
+  }
   if (st != hal::SourceStatus::kOk) {
     end_ = st == hal::SourceStatus::kEndOfStream ? LoopEnd::kEndOfStream : LoopEnd::kImuError;
     return false;
   }
+  const ImuSampleScope sample_scope(config_.profiler);
   ++counters_.imu_samples;
   if (!started_) {  // the filter's prior holds at the first sample's time
     started_ = true;
-    last_ = sample;
+    last_ = measured_ = sample;
     return true;
   }
   if (sample.t_ns <= last_.t_ns) {
     ++counters_.imu_out_of_order;
     return true;
   }
+  // Across a gap the signal is the straight line (propagate_to steps through it).
+  const bool gap = static_cast<double>(sample.t_ns - measured_.t_ns) >
+                   config_.gap_periods * static_cast<double>(config_.imu_period_ns);
+  if (gap) has_before_ = false;
   // Every frame up to this sample's time: propagate to the frame, update, go on.
   for (;;) {
     if (!pending_valid_) {
       if (markers_ended_) break;
-      const hal::SourceStatus ms = markers_.poll(pending_);
+      const hal::SourceStatus ms = poll_markers();
       if (ms == hal::SourceStatus::kEndOfStream) {
         markers_ended_ = true;
         break;
@@ -73,16 +104,21 @@ bool CalibrationLoop<S, M, NK>::step() {
     }
     if (pending_.t_ns > sample.t_ns) break;  // the IMU has not reached it yet
     pending_valid_ = false;
+    if (config_.profiler != nullptr) config_.profiler->begin_frame();
     if (pending_.t_ns < last_.t_ns) {
       ++counters_.frames_before_filter;
+      if (config_.profiler != nullptr) config_.profiler->end_frame();
       continue;
     }
-    propagate_to(interpolate(last_, sample, pending_.t_ns));
+    propagate_to(imu_signal_at(has_before_ ? &before_ : nullptr, measured_, sample, pending_.t_ns));
     if (identifier_ != nullptr && predict_marker_pixels(filter_, prediction_))
       identifier_->relabel(prediction_, pending_);
     apply_frame(pending_);
   }
   propagate_to(sample);
+  before_ = measured_;
+  measured_ = sample;
+  has_before_ = !gap;
   return true;
 }
 

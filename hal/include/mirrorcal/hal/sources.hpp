@@ -40,6 +40,9 @@ class MarkerSource {
   virtual ~MarkerSource() = default;
   virtual SourceStatus poll(MarkerFrame<M>& frame) = 0;
   virtual const char* error() const { return ""; }
+  // How much of the last poll that delivered a frame went into detecting its markers (ns), for
+  // the loop's timing budget; 0 where the markers come ready-made.
+  virtual std::int64_t detection_ns() const { return 0; }
 };
 
 }  // namespace mirrorcal::hal

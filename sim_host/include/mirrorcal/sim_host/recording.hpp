@@ -158,8 +158,9 @@ struct GrayImage {
 };
 
 // Writes the streams of a recording as they come (the simulator here, the board's loop later).
-// open() allocates what it needs; add_imu() and add_frame() only write. Timestamps must increase
-// in each stream, so whatever it writes reads back.
+// open() allocates what it needs; add_imu() and add_frame() only write (fixed buffers, POSIX calls
+// for images; only the first image allocates, creating cam0/data/). Timestamps must increase in
+// each stream, so whatever it writes reads back.
 class RecordingWriter {
  public:
   RecordingWriter();
@@ -172,6 +173,16 @@ class RecordingWriter {
   bool add_imu(const ImuSample& sample);
   // The frame's marker observations; its image too, when there is one (into cam0/data/).
   bool add_frame(const ObservedFrame& frame, const GrayImage* image = nullptr);
+  // The same from the loop's frame type, as a marker source delivers it on the board.
+  template <int M>
+  bool add_frame(const MarkerFrame<M>& frame, const GrayImage* image = nullptr) {
+    if (!begin_frame(frame.t_ns, image)) return false;
+    for (int i = 0; i < M; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      if (frame.seen[k]) add_feature(frame.t_ns, i, frame.uv[k].x(), frame.uv[k].y());
+    }
+    return true;
+  }
   // Flushes and closes the files; false if anything failed since open().
   bool close(std::string& error);
   const std::string& error() const { return error_; }
@@ -179,6 +190,9 @@ class RecordingWriter {
  private:
   struct File;
   bool fail(const char* what, const std::string& path);
+  bool begin_frame(std::int64_t t_ns, const GrayImage* image);  // data.csv row and the image
+  void add_feature(std::int64_t t_ns, int id, double u, double v);
+  bool write_image(std::int64_t t_ns, const GrayImage& image);
 
   std::string dir_, images_path_, error_;
   std::unique_ptr<File> imu_, frames_, features_;

@@ -1,5 +1,7 @@
-// The replacement allocation functions behind heap_counter.hpp.
-#include "heap_counter.hpp"
+// The allocation counter of alloc_counter.hpp: replaces all global operator new forms, and the C
+// allocation functions (forwarding to glibc's __libc_* entry points, which Eigen's aligned_malloc
+// and everything else reach).
+#include "alloc_counter.hpp"
 
 #include <atomic>
 #include <cerrno>
@@ -174,22 +176,25 @@ void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcep
 
 namespace mirrorcal::test {
 
-CountAllocations::CountAllocations() {
+AllocCounter::AllocCounter() {
   g_new_calls = 0;
   g_malloc_calls = 0;
   g_armed = true;
 }
 
-CountAllocations::~CountAllocations() {
+AllocCounter::~AllocCounter() {
   g_armed = false;
 }
 
-AllocationCounts CountAllocations::disarm() {
+AllocCounts AllocCounter::stop() {
   g_armed = false;
-  return {g_new_calls.load(), g_malloc_calls.load()};
+  AllocCounts c;
+  c.news = g_new_calls.load();
+  c.mallocs = g_malloc_calls.load();
+  return c;
 }
 
-bool allocation_counting_works() {
+bool alloc_counter_installed() {
 #ifdef MIRRORCAL_ASAN
   return g_hooks_installed != 0;
 #else

@@ -1,0 +1,91 @@
+// mirrorcal calibrate: the deterministic loop on a EuRoC recording, with Kalibr output.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "cli.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
+#include "recording_run.hpp"
+#include "report.hpp"
+
+namespace mirrorcal::app {
+
+namespace {
+
+template <int NK>
+int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out) {
+  std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
+              rec.imu.size(), rec.sensors.imu_rate_hz, rec.frames.size(),
+              NK > 0 ? "camera intrinsics estimated too" : "camera intrinsics from camchain.yaml");
+  const std::uint64_t burn_in = recording_config(rec).gate_after_frames;
+  if (rec.frames.size() < burn_in)
+    std::fprintf(stderr,
+                 "mirrorcal: note: only %zu frames; the filter gates markers only after %llu, and "
+                 "the calibration will hardly have converged\n",
+                 rec.frames.size(), static_cast<unsigned long long>(burn_in));
+  std::string err;
+  SimRun<NK> run;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!calibrate_recording<NK>(rec, run, err, [](double f) { print_progress("calibrating", f); }))
+    fail(err, 1);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::fprintf(stderr, "\rcalibrating done   \n");
+
+  const CalibrationResult& r = run.result;
+  const auto& first = run.history.front();
+  const auto& last = run.history.back();
+  const Eigen::Vector3d angles = display_angles(r.q_b_c);
+  const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
+  std::printf("\n%-8s %-5s %20s %20s\n", "param", "unit", "after 1st frame +-1s", "final +-1sigma");
+  for (std::size_t j = 0; j < r.params.size(); ++j) {
+    const ParamInfo& p = r.params[j];
+    // Rotations are shown as the final estimate's angles (Rz Ry Rx, as the scenarios state them);
+    // their sigma is of the rotation error vector's components.
+    double value = 0.0, value_first = 0.0;
+    if (j < 3) {
+      value = r.p_b_c(int(j)) * p.scale;
+      value_first = double(first.state.p_b_c(int(j))) * p.scale;
+    } else if (j < 6) {
+      value = angles(int(j) - 3);
+      value_first = angles_first(int(j) - 3);
+    } else if (j < 6 + 3 * std::size_t(kMarkers)) {
+      value = double(last.state.markers(int(j) - 6)) * p.scale;
+      value_first = double(first.state.markers(int(j) - 6)) * p.scale;
+    } else {
+      value = double(last.state.intrinsics(int(j) - 6 - 3 * kMarkers));
+      value_first = double(first.state.intrinsics(int(j) - 6 - 3 * kMarkers));
+    }
+    std::printf("%-8s %-5s %12.4f +-%-6.3f %12.4f +-%-6.4f\n", p.name.c_str(), p.unit.c_str(),
+                value_first, first.sigma(int(j)) * p.scale, value, last.sigma(int(j)) * p.scale);
+  }
+  const auto& lc = run.loop_counters;
+  const auto& fc = run.filter_counters;
+  std::printf(
+      "loop: %llu IMU samples, %llu frames (%llu without markers, %llu outside the IMU data "
+      "skipped), %llu IMU gaps, %llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
+      (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
+      (unsigned long long)lc.frames_without_markers, (unsigned long long)rec.frames_outside_imu,
+      (unsigned long long)lc.imu_gaps, (unsigned long long)fc.markers_used,
+      (unsigned long long)fc.markers_gated, (unsigned long long)fc.failures, wall);
+  if (!write_run_outputs(out, run, err)) fail(err, 1);
+  std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n", out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int cmd_calibrate(int argc, char** argv) {
+  const Options o = parse(argc, argv, 2, {"out"}, {"intrinsics"}, 1);
+  if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
+  const std::string in = o.positional[0];
+  sim::Recording rec;
+  std::string err;
+  if (!sim::read_recording(in, kMarkers, rec, err)) fail(err, 1);
+  for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
+  const std::string out = make_out_dir(o, "out/calibrate");
+  if (o.flag("intrinsics") || rec.priors.estimate_intrinsics) return calibrate<5>(rec, in, out);
+  return calibrate<0>(rec, in, out);
+}
+
+}  // namespace mirrorcal::app

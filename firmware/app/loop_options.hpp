@@ -1,0 +1,34 @@
+// Options of the commands that run the loop (sim, and run on the board): the timing budget
+// (--profile, --budget-imu-us, --budget-frame-us) and real-time scheduling (--rt-priority, --mlock,
+// --cpu).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cli.hpp"
+#include "mirrorcal/firmware/timing.hpp"
+
+namespace mirrorcal::app {
+
+// Option names to add to parse(): these take a value, these are flags.
+extern const std::vector<std::string> kLoopValueOptions;
+extern const std::vector<std::string> kLoopFlagOptions;
+
+// Applies --rt-priority, --mlock and --cpu, printing one line per setting (what was done, or why
+// not: without privileges the run goes on); fails on a value that is wrong in itself.
+void apply_realtime_options(const Options& o);
+
+// The profiler --profile asks for (nullptr without it): budgets from --budget-imu-us and
+// --budget-frame-us, by default the IMU and the frame period. Call before the loop starts.
+std::unique_ptr<firmware::LoopProfiler> make_profiler(const Options& o, hal::Clock& clock,
+                                                      std::int64_t imu_period_ns,
+                                                      std::int64_t frame_period_ns);
+
+// Prints the timing table under a title and writes the histograms to <dir>/timing-histogram.txt.
+void report_profile(const firmware::LoopProfiler& p, const std::string& title,
+                    const std::string& dir);
+
+}  // namespace mirrorcal::app

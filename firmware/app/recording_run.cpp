@@ -1,0 +1,41 @@
+#include "recording_run.hpp"
+
+namespace mirrorcal::app {
+
+CalibrationConfig recording_config(const sim::Recording& r) {
+  CalibrationConfig c;
+  c.gravity_n = r.priors.gravity_n;
+  c.imu = r.sensors.imu;
+  c.pixel_sigma = r.priors.pixel_sigma;
+  c.intrinsics = r.sensors.intrinsics;
+  return c;
+}
+
+LoopData recording_loop_data(const sim::Recording& r) {
+  LoopData d;
+  d.imu = r.imu;
+  d.frames = r.frames;
+  d.imu_period_ns = imu_period_ns(r.sensors.imu_rate_hz);
+  d.width = r.sensors.width;
+  d.height = r.sensors.height;
+  return d;
+}
+
+template <int NK>
+bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& error,
+                         const std::function<void(double)>& progress) {
+  Prior<kMarkers> prior;
+  if (!sim::to_prior(r.priors, prior, error)) return false;
+  typename SimRun<NK>::State x0;
+  typename SimRun<NK>::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  run = run_loop<NK>(recording_config(r), x0, p0, recording_loop_data(r), nullptr, progress);
+  return true;
+}
+
+template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
+                                     const std::function<void(double)>&);
+template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
+                                     const std::function<void(double)>&);
+
+}  // namespace mirrorcal::app

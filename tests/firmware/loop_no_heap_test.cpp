@@ -1,0 +1,60 @@
+// No heap in the whole loop after start-up: a 60 s simulated calibration, with the timing budget
+// on and the estimate published after every frame, must not allocate once the loop runs.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <memory>
+#include <vector>
+
+#include "alloc_counter.hpp"
+#include "history.hpp"
+#include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
+#include "sim_run.hpp"
+
+namespace mc = mirrorcal;
+
+TEST(LoopNoHeap, CounterSeesAllocations) {
+  ASSERT_TRUE(mc::test::alloc_counter_installed());
+  mc::test::AllocCounter counting;
+  auto v = std::make_unique<std::vector<double>>(10);
+  mc::test::escape(v.get());
+  v.reset();
+  void* p = std::malloc(32);
+  mc::test::escape(p);
+  std::free(p);
+  const auto c = counting.stop();
+  EXPECT_GE(c.news, 2);
+  EXPECT_GE(c.mallocs, 1);
+}
+
+TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
+  using Filter = mc::CalibrationFilter<double, 3, 0>;
+  const mc::sim::Scenario s = mc::sim::paper_scenario();
+  const mc::sim::SimData data = mc::sim::simulate(s, 21);
+  const auto prior = mc::sim::draw_prior<3>(s, data, 21);
+  // Start-up: everything the loop needs is made here.
+  Filter filter(mc::app::scenario_config(s));
+  Filter::State x0;
+  Filter::Covariance p0;
+  mc::initialise(prior, x0, p0);
+  filter.reset(x0, p0);
+  mc::sim::VectorImuSource imu(data.imu);
+  mc::sim::VectorMarkerSource<3> markers(data.frames);
+  mc::app::HistorySink<Filter> sink(data.frames.size() + 1, nullptr);
+  mc::firmware::MonotonicClock clock;
+  const auto profiler = std::make_unique<mc::firmware::LoopProfiler>(clock, 5'000'000, 50'000'000);
+  mc::firmware::LoopConfig lc;
+  lc.profiler = profiler.get();
+  mc::firmware::CalibrationLoop<double, 3, 0> loop(filter, imu, markers, lc, &sink);
+
+  mc::test::AllocCounter counting;
+  const auto end = loop.run();
+  const auto c = counting.stop();
+  EXPECT_EQ(end, mc::firmware::LoopEnd::kEndOfStream);
+  EXPECT_EQ(loop.counters().imu_samples, data.imu.size());
+  EXPECT_GT(filter.counters().markers_used, 2000u);
+  EXPECT_EQ(sink.rows().size(), loop.counters().frames + 1);
+  EXPECT_EQ(c.news, 0);
+  EXPECT_EQ(c.mallocs, 0);
+}

@@ -1,0 +1,47 @@
+// What the tables print: the paper's Euler angles of the camera rotation, and chi-square
+// quantiles for the NEES intervals, against published values.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mirrorcal/sim_host/scenario.hpp"
+#include "report.hpp"
+
+namespace {
+
+using mirrorcal::app::chi2_quantile;
+using mirrorcal::app::display_angles;
+
+TEST(Report, PaperRotationShowsThePapersAngles) {
+  const Eigen::Vector3d a = display_angles(mirrorcal::sim::paper_scenario().truth.q_b_c);
+  EXPECT_NEAR(a(0), -90.0, 1e-9);
+  EXPECT_NEAR(a(1), 0.0, 1e-9);
+  EXPECT_NEAR(a(2), -90.0, 1e-9);
+}
+
+TEST(Report, DisplayAnglesRebuildTheRotation) {
+  const double deg = M_PI / 180.0;
+  for (const Eigen::Vector3d& xyz : {Eigen::Vector3d(10, 20, 30), Eigen::Vector3d(-170, 80, 5),
+                                     Eigen::Vector3d(100, -60, -120)}) {
+    const Eigen::Quaterniond q(Eigen::AngleAxisd(xyz(2) * deg, Eigen::Vector3d::UnitZ()) *
+                               Eigen::AngleAxisd(xyz(1) * deg, Eigen::Vector3d::UnitY()) *
+                               Eigen::AngleAxisd(xyz(0) * deg, Eigen::Vector3d::UnitX()));
+    const Eigen::Vector3d a = display_angles(q) * deg;
+    const Eigen::Quaterniond back(Eigen::AngleAxisd(a(2), Eigen::Vector3d::UnitZ()) *
+                                  Eigen::AngleAxisd(a(1), Eigen::Vector3d::UnitY()) *
+                                  Eigen::AngleAxisd(a(0), Eigen::Vector3d::UnitX()));
+    EXPECT_NEAR(std::abs(q.dot(back)), 1.0, 1e-12);
+    EXPECT_LE(std::abs(a(1)), M_PI / 2 + 1e-12);
+  }
+}
+
+// Published chi-square quantiles (e.g. NIST/SEMATECH e-Handbook, table 1.3.6.7.4).
+TEST(Report, ChiSquareQuantilesMatchTables) {
+  EXPECT_NEAR(chi2_quantile(0.025, 15), 6.262, 0.02 * 6.262);
+  EXPECT_NEAR(chi2_quantile(0.975, 15), 27.488, 0.01 * 27.488);
+  EXPECT_NEAR(chi2_quantile(0.001, 100), 61.918, 0.01 * 61.918);
+  EXPECT_NEAR(chi2_quantile(0.999, 100), 149.449, 0.01 * 149.449);
+  EXPECT_NEAR(chi2_quantile(0.05, 50), 34.764, 0.01 * 34.764);
+}
+
+}  // namespace

@@ -1,0 +1,37 @@
+// libFuzzer target: the YAML beside a recording (mirrorcal.yaml, imu.yaml, camchain.yaml), each
+// parser on the same input. Any input gives values or a message, never a crash.
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <string>
+#include <string_view>
+
+#include "mirrorcal/sim_host/recording.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  namespace sim = mirrorcal::sim;
+  const std::string_view text(reinterpret_cast<const char*>(data), size);
+  std::string error;
+  std::vector<std::string> notes;
+  sim::RecordingPriors priors;
+  bool ok =
+      sim::parse_priors_yaml(text, "mirrorcal.yaml", {800, 800, 320, 240, 0}, priors, notes, error);
+  if (ok != error.empty()) std::abort();
+  if (ok) {
+    // Whatever was accepted has positive sigmas and as many sigmas as markers.
+    if (!(priors.sigma_p_b_c.minCoeff() > 0) || !(priors.sigma_rot_n_b.minCoeff() > 0) ||
+        !(priors.pixel_sigma > 0) || priors.features_c.size() != priors.sigma_features_c.size())
+      std::abort();
+    mirrorcal::Prior<3> p;
+    if (sim::to_prior(priors, p, error) == (priors.features_c.size() != 3)) std::abort();
+  }
+  sim::SensorInfo sensors;
+  error.clear();
+  ok = sim::parse_imu_yaml(text, "imu.yaml", sensors, error);
+  if (ok != error.empty()) std::abort();
+  error.clear();
+  ok = sim::parse_camchain_yaml(text, "camchain.yaml", sensors, notes, error);
+  if (ok != error.empty()) std::abort();
+  if (ok && (sensors.width < 1 || sensors.height < 1)) std::abort();
+  return 0;
+}

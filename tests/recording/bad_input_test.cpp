@@ -1,0 +1,353 @@
+// Bad recordings: each kind of damage gives a message naming the file, the line and what is
+// wrong, never a crash or a silent wrong answer; frames outside the IMU data are skipped and
+// counted.
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "test_support.hpp"
+
+using namespace rectest;
+
+namespace {
+
+std::vector<std::string> lines_of(const std::string& path) {
+  std::vector<std::string> v;
+  std::istringstream in(slurp(path));
+  for (std::string l; std::getline(in, l);) v.push_back(l);
+  return v;
+}
+
+void write_lines(const std::string& path, const std::vector<std::string>& lines) {
+  std::string t;
+  for (const auto& l : lines) t += l + "\n";
+  spit(path, t);
+}
+
+// A valid two-second recording of the paper scenario, damaged by each test.
+class BadInput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto s = short_scenario();
+    write_recording(dir(), s, mc::sim::simulate(s, 17), 17);
+    std::string err;
+    ASSERT_TRUE(mc::sim::read_recording(dir(), 3, rec, err)) << err;  // undamaged, it reads
+    frames = rec.frames.size();
+  }
+
+  const std::string& dir() const { return tmp.path; }
+  std::string imu() const { return dir() + "/mav0/imu0/data.csv"; }
+  std::string cam() const { return dir() + "/mav0/cam0/data.csv"; }
+  std::string features() const { return dir() + "/mav0/cam0/features.csv"; }
+  std::string priors() const { return dir() + "/mirrorcal.yaml"; }
+
+  // Replaces line n (1-based) of a file.
+  void set_line(const std::string& path, std::size_t n, const std::string& text) {
+    auto l = lines_of(path);
+    ASSERT_LE(n, l.size());
+    l[n - 1] = text;
+    write_lines(path, l);
+  }
+  std::string line(const std::string& path, std::size_t n) { return lines_of(path).at(n - 1); }
+  // Replaces the first line of a YAML file that starts with key.
+  void set_key(const std::string& path, const std::string& key, const std::string& text) {
+    auto l = lines_of(path);
+    for (auto& s : l)
+      if (s.rfind(key + ":", 0) == 0) s = text;
+    write_lines(path, l);
+  }
+  void drop_key(const std::string& path, const std::string& key) { set_key(path, key, ""); }
+
+  // Reading fails with a message holding each of parts.
+  void expect_error(const std::vector<std::string>& parts) {
+    mc::sim::Recording r;
+    std::string err;
+    EXPECT_FALSE(mc::sim::read_recording(dir(), 3, r, err));
+    for (const auto& p : parts)
+      EXPECT_NE(err.find(p), std::string::npos) << err << "\nlacks: " << p;
+  }
+
+  TempDir tmp{"bad-input-" +
+              std::string(::testing::UnitTest::GetInstance()->current_test_info()->name())};
+  mc::sim::Recording rec;
+  std::size_t frames = 0;
+};
+
+}  // namespace
+
+TEST_F(BadInput, MissingFile) {
+  for (const char* f : {"/mav0/imu0/data.csv", "/mav0/cam0/data.csv", "/mav0/cam0/features.csv",
+                        "/imu.yaml", "/camchain.yaml", "/mirrorcal.yaml"}) {
+    const std::string path = dir() + f;
+    const std::string keep = slurp(path);
+    fs::remove(path);
+    expect_error({path + ": cannot open"});
+    spit(path, keep);
+  }
+}
+
+TEST_F(BadInput, EmptyFile) {
+  spit(imu(), "");
+  expect_error({imu() + ":1: empty file"});
+}
+
+TEST_F(BadInput, MalformedLine) {
+  set_line(imu(), 5, "20000000,0.1,abc,0.3,0.4,0.5,9.8");
+  expect_error({imu() + ":5:", "w_RS_S_y", "'abc' is not a number"});
+}
+
+TEST_F(BadInput, NumberWithTrailingGarbage) {
+  set_line(features(), 3, line(features(), 3) + "px");
+  expect_error({features() + ":3:", "v: ", "is not a number"});
+}
+
+TEST_F(BadInput, TimestampThatIsNotAnInteger) {
+  set_line(cam(), 2, "2.5e6,x.pgm");
+  expect_error({cam() + ":2:", "timestamp: '2.5e6' is not an integer"});
+}
+
+TEST_F(BadInput, TruncatedLastLine) {
+  auto l = lines_of(imu());
+  l.back() = l.back().substr(0, l.back().find(',', l.back().find(',') + 1));  // two fields left
+  spit(imu(), [&] {
+    std::string t;
+    for (std::size_t i = 0; i + 1 < l.size(); ++i) t += l[i] + "\n";
+    return t + l.back();  // no final newline: the file was cut off
+  }());
+  expect_error({imu() + ":" + std::to_string(l.size()) + ":",
+                "expected 7 comma-separated fields, found 2 (truncated file?)"});
+}
+
+TEST_F(BadInput, LineWithTooManyFields) {
+  set_line(features(), 4, line(features(), 4) + ",7");
+  expect_error({features() + ":4:", "expected 4 comma-separated fields, found 5"});
+}
+
+TEST_F(BadInput, HeaderThatIsNotEuroc) {
+  set_line(imu(), 1, "timestamp,gx,gy,gz,ax,ay,az");
+  expect_error({imu() + ":1:", "header 'timestamp,gx,gy,gz,ax,ay,az' is not EuRoC's"});
+}
+
+TEST_F(BadInput, FeaturesHeaderThatIsNotOurs) {
+  set_line(features(), 1, "#timestamp [ns],id,u,v");
+  expect_error({features() + ":1:", "is not EuRoC's"});
+}
+
+TEST_F(BadInput, NanInImu) {
+  set_line(imu(), 7, "30000000,0.1,0.2,nan,0.4,0.5,9.8");
+  expect_error({imu() + ":7:", "w_RS_S_z: 'nan' is not finite"});
+}
+
+TEST_F(BadInput, InfinityInFeatures) {
+  std::string l = line(features(), 2);
+  l = l.substr(0, l.rfind(',')) + ",-inf";
+  set_line(features(), 2, l);
+  expect_error({features() + ":2:", "v: '-inf' is not finite"});
+}
+
+TEST_F(BadInput, NanInPriors) {
+  set_key(priors(), "p_b_c", "p_b_c: [0.01, nan, 0.1]");
+  expect_error({priors() + ":", "p_b_c: 'nan' is not finite"});
+}
+
+TEST_F(BadInput, ImuTimestampRepeats) {
+  const std::string prev = line(imu(), 3);
+  set_line(imu(), 4,
+           prev.substr(0, prev.find(',')) + line(imu(), 4).substr(line(imu(), 4).find(',')));
+  expect_error({imu() + ":4:", "repeats"});
+}
+
+TEST_F(BadInput, ImuTimestampGoesBackwards) {
+  set_line(imu(), 6, "1" + line(imu(), 6).substr(line(imu(), 6).find(',')));
+  expect_error({imu() + ":6:", "timestamp 1 goes backwards"});
+}
+
+TEST_F(BadInput, FrameTimestampRepeats) {
+  set_line(cam(), 3, line(cam(), 2));
+  expect_error({cam() + ":3:", "repeats"});
+}
+
+TEST_F(BadInput, FeatureTimestampGoesBackwards) {
+  // Swap the first feature row with one of a later frame.
+  auto l = lines_of(features());
+  std::swap(l[1], l.back());
+  write_lines(features(), l);
+  expect_error({features() + ":3:", "goes backwards"});
+}
+
+TEST_F(BadInput, FeatureOfNoFrame) {
+  std::string l = line(features(), 2);
+  set_line(features(), 2, "1" + l.substr(l.find(',')));  // t = 1 ns: not in data.csv
+  expect_error({features() + ":2:", "timestamp 1 is not a frame of cam0/data.csv"});
+}
+
+TEST_F(BadInput, MarkerTwiceInAFrame) {
+  auto l = lines_of(features());
+  l.insert(l.begin() + 2, l[1]);
+  write_lines(features(), l);
+  expect_error({features() + ":3:", "repeats in the frame"});
+}
+
+TEST_F(BadInput, MarkerIdAtOrAboveM) {
+  std::string l = line(features(), 2);
+  const auto a = l.find(','), b = l.find(',', a + 1);
+  set_line(features(), 2, l.substr(0, a + 1) + "3" + l.substr(b));
+  expect_error({features() + ":2:", "feature_id 3 is not a marker of this calibration", "M = 3"});
+}
+
+TEST_F(BadInput, NegativeMarkerId) {
+  std::string l = line(features(), 2);
+  const auto a = l.find(','), b = l.find(',', a + 1);
+  set_line(features(), 2, l.substr(0, a + 1) + "-1" + l.substr(b));
+  expect_error({features() + ":2:", "feature_id -1"});
+}
+
+TEST_F(BadInput, MarkerSeenInNoFrame) {
+  auto l = lines_of(features());
+  std::vector<std::string> kept;
+  for (const auto& s : l)
+    if (s.find(",2,") == std::string::npos || s[0] == '#') kept.push_back(s);
+  ASSERT_LT(kept.size(), l.size());
+  write_lines(features(), kept);
+  expect_error({features() + ": marker 2 is seen in no frame"});
+}
+
+TEST_F(BadInput, RecordingShorterThanTheFilterNeeds) {
+  auto l = lines_of(imu());
+  write_lines(imu(), {l[0], l[1]});  // one IMU sample: nothing to propagate over
+  expect_error({imu() + ": 1 IMU samples; the filter needs at least 2"});
+}
+
+TEST_F(BadInput, NoFrameWithinTheImuData) {
+  // IMU data only after the last frame.
+  auto l = lines_of(imu());
+  const auto cams = lines_of(cam());
+  const std::int64_t last_frame = std::stoll(cams.back().substr(0, cams.back().find(',')));
+  std::vector<std::string> kept = {l[0]};
+  for (std::size_t i = 1; i < l.size(); ++i)
+    if (std::stoll(l[i].substr(0, l[i].find(','))) > last_frame) kept.push_back(l[i]);
+  kept.push_back("999999999999," + l[1].substr(l[1].find(',') + 1));
+  write_lines(imu(), kept);
+  expect_error({cam() + ": no frame within the IMU data"});
+}
+
+TEST_F(BadInput, FramesOutsideTheImuDataAreSkippedAndCounted) {
+  // One frame (with a marker) before the first IMU sample and one after the last.
+  auto c = lines_of(cam());
+  c.insert(c.begin() + 1, "-5000,early.pgm");
+  c.push_back("999999999999,late.pgm");
+  write_lines(cam(), c);
+  auto f = lines_of(features());
+  f.insert(f.begin() + 1, "-5000,0,300,200");
+  f.push_back("999999999999,1,300,200");
+  write_lines(features(), f);
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  EXPECT_EQ(r.frames_outside_imu, 2u);
+  EXPECT_EQ(r.frames.size(), frames);
+  EXPECT_EQ(r.frames.front().t_ns, rec.frames.front().t_ns);
+  EXPECT_EQ(r.frames.back().t_ns, rec.frames.back().t_ns);
+  ASSERT_FALSE(r.notes.empty());
+  EXPECT_NE(r.notes.back().find("2 frames outside the IMU data"), std::string::npos);
+}
+
+TEST_F(BadInput, InvalidYaml) {
+  set_key(priors(), "gravity_n", "gravity_n: [0, -9.81");
+  expect_error({priors() + ":", "not valid YAML"});
+}
+
+TEST_F(BadInput, MissingRequiredPrior) {
+  drop_key(priors(), "gravity_n");
+  expect_error({priors() + ": missing required key 'gravity_n'"});
+  write_recording(dir(), short_scenario(), mc::sim::simulate(short_scenario(), 17), 17);
+  drop_key(priors(), "sigma_rot_b_c");
+  expect_error({"missing required key 'sigma_rot_b_c'"});
+}
+
+TEST_F(BadInput, MissingOptionalPriorsUseTheirDefaultsAndSaySo) {
+  drop_key(priors(), "b_a");
+  drop_key(priors(), "sigma_b_g");
+  drop_key(priors(), "pixel_sigma");
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  EXPECT_EQ(r.priors.b_a, Eigen::Vector3d::Zero());
+  EXPECT_EQ(r.priors.sigma_b_g, Eigen::Vector3d::Constant(0.002));
+  EXPECT_EQ(r.priors.pixel_sigma, 1.0);
+  std::string all;
+  for (const auto& n : r.notes) all += n + "\n";
+  for (const char* k : {"b_a not given", "sigma_b_g not given", "pixel_sigma not given"})
+    EXPECT_NE(all.find(k), std::string::npos) << all;
+}
+
+TEST_F(BadInput, WrongShapeOfAPrior) {
+  set_key(priors(), "p_b_c", "p_b_c: [0.01, 0.02]");
+  expect_error({priors() + ":", "p_b_c: expected a list of 3 numbers"});
+}
+
+TEST_F(BadInput, SigmaThatIsNotPositive) {
+  set_key(priors(), "sigma_p_b_c", "sigma_p_b_c: [0.01, 0, 0.01]");
+  expect_error({priors() + ":", "sigma_p_b_c: every 1-sigma must be > 0"});
+}
+
+TEST_F(BadInput, QuaternionThatIsNotUnit) {
+  set_key(priors(), "q_b_c_wxyz", "q_b_c_wxyz: [1, 1, 0, 0]");
+  expect_error({priors() + ":", "q_b_c_wxyz: expected a unit quaternion"});
+}
+
+TEST_F(BadInput, SigmaListOfAnotherLengthThanTheMarkers) {
+  auto l = lines_of(priors());
+  for (std::size_t i = 0; i < l.size(); ++i)
+    if (l[i] == "sigma_features_c:") l.erase(l.begin() + long(i) + 1);
+  write_lines(priors(), l);
+  expect_error({priors() + ":", "sigma_features_c: lists 2 entries, features_c lists 3"});
+}
+
+TEST_F(BadInput, PriorsForAnotherNumberOfMarkers) {
+  auto l = lines_of(priors());
+  for (std::size_t i = 0; i < l.size(); ++i)
+    if (l[i] == "features_c:" || l[i] == "sigma_features_c:")
+      l.insert(l.begin() + long(i) + 1, l[i + 1]);
+  write_lines(priors(), l);
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  mc::Prior<3> p;
+  EXPECT_FALSE(mc::sim::to_prior(r.priors, p, err));
+  EXPECT_NE(err.find("lists 4 markers; this build calibrates M = 3"), std::string::npos) << err;
+}
+
+TEST_F(BadInput, UnknownKeyIsNoted) {
+  auto l = lines_of(priors());
+  l.push_back("sigma_pbc: 0.5");
+  write_lines(priors(), l);
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  ASSERT_FALSE(r.notes.empty());
+  EXPECT_NE(r.notes.front().find(":" + std::to_string(l.size()) + ": unknown key 'sigma_pbc'"),
+            std::string::npos)
+      << r.notes.front();
+}
+
+TEST_F(BadInput, ImuYamlWithoutUpdateRate) {
+  drop_key(dir() + "/imu.yaml", "update_rate");
+  expect_error({dir() + "/imu.yaml: missing required key 'update_rate'"});
+}
+
+TEST_F(BadInput, CameraModelThatIsNotPinhole) {
+  auto l = lines_of(dir() + "/camchain.yaml");
+  for (auto& s : l)
+    if (s.find("camera_model") != std::string::npos) s = "  camera_model: omni";
+  write_lines(dir() + "/camchain.yaml", l);
+  expect_error({dir() + "/camchain.yaml:", "cam0.camera_model: 'omni' is not supported"});
+}
+
+TEST_F(BadInput, LensDistortionIsRefused) {
+  auto l = lines_of(dir() + "/camchain.yaml");
+  for (auto& s : l)
+    if (s.find("distortion_coeffs") != std::string::npos) s = "  distortion_coeffs: [0.1, 0, 0, 0]";
+  write_lines(dir() + "/camchain.yaml", l);
+  expect_error({dir() + "/camchain.yaml:", "distortion_coeffs: must all be 0"});
+}

@@ -1,0 +1,119 @@
+// The command line end to end: a recording made by `record` and calibrated by `calibrate` gives
+// the bytes `sim` gives with the same seed; the Kalibr file it writes means what Kalibr reads.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cstdlib>
+
+#include "test_support.hpp"
+
+using namespace rectest;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string output;  // stdout and stderr
+};
+
+Result run_mirrorcal(const std::string& args, const std::string& scratch) {
+  const std::string log = scratch + "/command.log";
+  const std::string cmd = std::string(MIRRORCAL_BIN) + " " + args + " > " + log + " 2>&1";
+  const int status = std::system(cmd.c_str());
+  Result r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  r.output = slurp(log);
+  return r;
+}
+
+Eigen::Matrix4d matrix4(const YAML::Node& rows) {
+  Eigen::Matrix4d t;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) t(i, j) = rows[i][j].as<double>();
+  return t;
+}
+
+}  // namespace
+
+TEST(Cli, RecordThenCalibrateIsBitIdenticalToSim) {
+  TempDir dir("cli-roundtrip");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal("sim --seed 5 --no-plots --out " + d + "/sim", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("record --seed 5 --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
+    const std::string a = slurp(d + "/sim/" + f), b = slurp(d + "/cal/" + f);
+    EXPECT_FALSE(a.empty()) << f;
+    EXPECT_TRUE(a == b) << f << " differs between sim and record -> calibrate";
+  }
+  // A different seed is a different run: the comparison above can fail.
+  r = run_mirrorcal("sim --seed 6 --no-plots --out " + d + "/sim6", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(slurp(d + "/sim6/estimates.csv"), slurp(d + "/cal/estimates.csv"));
+}
+
+TEST(Cli, CamchainTCamImuIsTheInverseOfTheCameraPoseInTheImuFrame) {
+  TempDir dir("cli-camchain");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 8 --out " + d + "/rec", d).code, 0);
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+
+  const YAML::Node chain = YAML::LoadFile(d + "/cal/camchain-imucam.yaml");
+  const YAML::Node result = YAML::LoadFile(d + "/cal/mirrorcal-result.yaml");
+  const Eigen::Matrix4d t_cam_imu = matrix4(chain["cam0"]["T_cam_imu"]);
+  // The camera pose in the IMU frame, from the estimate written beside it.
+  const YAML::Node q = result["q_b_c_wxyz"];
+  const Eigen::Quaterniond q_b_c(q[0].as<double>(), q[1].as<double>(), q[2].as<double>(),
+                                 q[3].as<double>());
+  const YAML::Node p = result["p_b_c"];
+  Eigen::Matrix4d t_imu_cam = Eigen::Matrix4d::Identity();
+  t_imu_cam.topLeftCorner<3, 3>() = q_b_c.toRotationMatrix();
+  t_imu_cam.topRightCorner<3, 1>() =
+      Eigen::Vector3d(p[0].as<double>(), p[1].as<double>(), p[2].as<double>());
+  EXPECT_LT((t_cam_imu * t_imu_cam - Eigen::Matrix4d::Identity()).cwiseAbs().maxCoeff(), 1e-9);
+  // The camera's origin, seen from the IMU at p_b_c, is the camera frame's origin.
+  const Eigen::Vector4d origin = t_cam_imu * t_imu_cam.col(3);
+  EXPECT_LT(origin.head<3>().norm(), 1e-9);
+  // Stage 1 calibrates with the camera of camchain.yaml: the same intrinsics come out.
+  const YAML::Node cam_in = YAML::LoadFile(d + "/rec/camchain.yaml")["cam0"];
+  for (int i = 0; i < 4; ++i)
+    EXPECT_NEAR(chain["cam0"]["intrinsics"][i].as<double>(), cam_in["intrinsics"][i].as<double>(),
+                1e-6);
+  EXPECT_EQ(chain["cam0"]["resolution"][0].as<int>(), 640);
+  EXPECT_EQ(chain["cam0"]["resolution"][1].as<int>(), 480);
+}
+
+TEST(Cli, CalibrateWithIntrinsicsRunsTheStage2Filter) {
+  TempDir dir("cli-intrinsics");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 9 --out " + d + "/rec", d).code, 0);
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --intrinsics --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const YAML::Node result = YAML::LoadFile(d + "/cal/mirrorcal-result.yaml");
+  EXPECT_TRUE(result["intrinsics_estimated"].as<bool>());
+  for (const char* k : {"fu", "fv", "cu", "cv", "skew"}) EXPECT_TRUE(result["sigma"][k]) << k;
+  // estimates.csv has the intrinsics' columns.
+  const std::string csv = slurp(d + "/cal/estimates.csv");
+  EXPECT_NE(csv.find("sigma_skew [px]"), std::string::npos);
+}
+
+TEST(Cli, CalibrateOnAMissingRecordingNamesTheFileAndFails) {
+  TempDir dir("cli-missing");
+  const Result r =
+      run_mirrorcal("calibrate " + dir.path + "/nothing-here --out " + dir.path, dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(dir.path + "/nothing-here/imu.yaml: cannot open"), std::string::npos)
+      << r.output;
+}
+
+TEST(Cli, RecordNeedsAnOutputFolder) {
+  TempDir dir("cli-record-usage");
+  const Result r = run_mirrorcal("record --seed 1", dir.path);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
+}
