@@ -289,9 +289,13 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
   }
   held_ = static_cast<int>(b.index);
 
-  // Gaps in the sequence numbers are frames the device dropped (unsigned arithmetic wraps).
-  if (have_sequence_ && b.sequence != last_sequence_ + 1u)
-    counters_.dropped += static_cast<std::uint32_t>(b.sequence - last_sequence_ - 1u);
+  // Gaps in the sequence numbers are frames the device dropped (the difference taken modulo 2^32,
+  // so a wrap is no gap); a step back means the device restarted its count, not a loss.
+  if (have_sequence_) {
+    const auto step = static_cast<std::int32_t>(b.sequence - last_sequence_);
+    if (step > 1) counters_.dropped += static_cast<std::uint64_t>(step - 1);
+    if (step <= 0) ++counters_.restarts;
+  }
   have_sequence_ = true;
   last_sequence_ = b.sequence;
   ++counters_.frames;
@@ -339,6 +343,14 @@ bool V4l2Output::reclaim() {
     }
     free_[b.index] = true;
   }
+}
+
+int V4l2Output::free_buffers() {
+  if (fd_ < 0) return -1;
+  if (streaming_ && !reclaim()) return -1;
+  int n = 0;
+  for (int i = 0; i < count_; ++i) n += free_[static_cast<std::size_t>(i)] ? 1 : 0;
+  return n;
 }
 
 bool V4l2Output::write(const std::uint8_t* image, int src_bytes_per_line, int timeout_ms) {

@@ -115,6 +115,9 @@ class V4l2Output final : public V4l2Stream {
   // a free buffer and queues it, waiting up to timeout_ms for the device to free one.
   bool write(const std::uint8_t* image, int src_bytes_per_line, int timeout_ms);
 
+  // Buffers free for write() now (the device's finished ones taken back); -1 on error.
+  int free_buffers();
+
   std::uint64_t frames_written() const { return written_; }
 
  private:

@@ -50,9 +50,10 @@ struct FrameView {
 
 // What a source met on its stream; nothing is dropped without being counted here.
 struct FrameCounters {
-  std::uint64_t frames = 0;   // frames delivered
-  std::uint64_t dropped = 0;  // frames missing from the sequence numbers
-  std::uint64_t corrupt = 0;  // frames the device flagged as damaged (delivered, flagged)
+  std::uint64_t frames = 0;    // frames delivered
+  std::uint64_t dropped = 0;   // frames missing from the sequence numbers
+  std::uint64_t corrupt = 0;   // frames the device flagged as damaged (delivered, flagged)
+  std::uint64_t restarts = 0;  // sequence numbers that stepped back (the device restarted)
 };
 
 // Frames in timestamp order. poll() does not block: kOk with a view valid until the next poll,
