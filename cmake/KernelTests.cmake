@@ -11,11 +11,13 @@
 #     directories of estimator/, hal/ and drivers/ and Eigen; ARM64_PACKAGES (e.g. libgpiod-dev
 #     libgpiod2) are unpacked into an arm64 sysroot in the cache for headers and static libraries.
 #
-#   mirrorcal_kernel_test(NAME PROGRAM guest [ARCH amd64|arm64] [ARGS arg...]
+#   mirrorcal_kernel_test(NAME (PROGRAM guest | SCRIPT file [ARCH amd64|arm64]) [ARGS arg...]
 #                         [MODULES "name [param=value ...]"...] [SETUP "shell command"...]
 #                         [HOST_TOOLS /usr/bin/cansend ...] [FILES file...] [MONITOR] [TIMEOUT s])
 #     A CTest test labelled `kernel` running PROGRAM ARGS in the guest after loading MODULES (their
 #     dependencies first) and running SETUP; its exit status is the test's. See run-in-qemu.
+#     SCRIPT runs a busybox shell script instead (e.g. to start a peer beside a host tool such as
+#     the mirrorcal program, which HOST_TOOLS copies in with its shared libraries; amd64 only).
 #
 # Not available in the sanitizer build (static linking and ASan do not mix): there the functions
 # do nothing and MIRRORCAL_KERNEL_TESTS is OFF.
@@ -104,15 +106,23 @@ function(mirrorcal_kernel_test)
   if(NOT MIRRORCAL_KERNEL_TESTS)
     return()
   endif()
-  cmake_parse_arguments(PARSE_ARGV 0 K "MONITOR" "NAME;PROGRAM;TIMEOUT"
+  cmake_parse_arguments(PARSE_ARGV 0 K "MONITOR" "NAME;PROGRAM;SCRIPT;ARCH;TIMEOUT"
                         "ARGS;MODULES;SETUP;HOST_TOOLS;FILES")
-  if(NOT K_NAME OR NOT K_PROGRAM)
-    message(FATAL_ERROR "mirrorcal_kernel_test: NAME and PROGRAM are required")
+  if(NOT K_NAME OR (NOT K_PROGRAM AND NOT K_SCRIPT))
+    message(FATAL_ERROR "mirrorcal_kernel_test: NAME and PROGRAM or SCRIPT are required")
   endif()
-  get_target_property(file ${K_PROGRAM} MIRRORCAL_GUEST_FILE)
-  get_target_property(arch ${K_PROGRAM} MIRRORCAL_GUEST_ARCH)
-  if(NOT file)
-    message(FATAL_ERROR "mirrorcal_kernel_test(${K_NAME}): ${K_PROGRAM} is no mirrorcal_guest_program")
+  if(K_SCRIPT)
+    get_filename_component(file "${K_SCRIPT}" ABSOLUTE)
+    set(arch amd64)
+    if(K_ARCH)
+      set(arch ${K_ARCH})
+    endif()
+  else()
+    get_target_property(file ${K_PROGRAM} MIRRORCAL_GUEST_FILE)
+    get_target_property(arch ${K_PROGRAM} MIRRORCAL_GUEST_ARCH)
+    if(NOT file)
+      message(FATAL_ERROR "mirrorcal_kernel_test(${K_NAME}): ${K_PROGRAM} is no mirrorcal_guest_program")
+    endif()
   endif()
   if(NOT K_TIMEOUT)
     set(K_TIMEOUT 90)
@@ -137,7 +147,7 @@ function(mirrorcal_kernel_test)
   add_test(NAME ${K_NAME} COMMAND ${cmd} -- ${file} ${K_ARGS})
   _mirrorcal_kernel_fixture(${arch})
   set(fixtures kernel_${arch})
-  if(arch STREQUAL "arm64")
+  if(arch STREQUAL "arm64" AND K_PROGRAM)
     list(APPEND fixtures guest_${K_PROGRAM})
   endif()
   math(EXPR ctest_timeout "${K_TIMEOUT} + 30")

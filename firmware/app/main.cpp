@@ -11,6 +11,7 @@ int cmd_sim(int argc, char** argv);
 int cmd_montecarlo(int argc, char** argv);
 int cmd_record(int argc, char** argv);
 int cmd_calibrate(int argc, char** argv);
+int cmd_run(int argc, char** argv);
 
 const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
@@ -35,6 +36,14 @@ const std::vector<Command>& commands() {
        "mirrorcal.yaml)\n"
        "              DIR [--intrinsics] [--out OUT]\n",
        cmd_calibrate},
+      {"run",
+       "  run         calibrate on the board's devices (IMU only until the camera is wired in)\n"
+       "              --imu spi:/dev/spidevB.C | i2c:/dev/i2c-N[:ADDR] | can:IFACE\n"
+       "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml) [--drdy CHIP:LINE]\n"
+       "              [--camera /dev/videoN] [--out DIR] [--duration S] [--rate HZ]\n"
+       "              [--gyro-range DPS] [--accel-range G] [--config FILE] [--profile]\n"
+       "              [--rt-priority P] [--mlock] [--cpu C]\n",
+       cmd_run},
   };
   return table;
 }

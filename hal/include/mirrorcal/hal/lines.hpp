@@ -1,0 +1,31 @@
+// Digital lines the loop may use beside the sensor streams: the IMU's data-ready output (the loop
+// wakes on its rising edges, timestamped by the kernel) and a camera trigger input driven by the
+// board. Implemented by drivers/ (libgpiod) on the board and by fakes in tests; no Linux headers.
+#pragma once
+
+#include <cstdint>
+
+#include "mirrorcal/hal/sources.hpp"
+
+namespace mirrorcal::hal {
+
+// Rising edges of a data-ready line, in order, each with its time on the loop's clock.
+class DataReadyLine {
+ public:
+  virtual ~DataReadyLine() = default;
+  // Waits up to timeout_ns for the next rising edge: kOk with its time in t_ns, kNotReady when
+  // none came in time, kError when the line failed (error() says why).
+  virtual SourceStatus wait_rising(std::int64_t timeout_ns, std::int64_t& t_ns) = 0;
+  virtual const char* error() const { return ""; }
+};
+
+// An output line, e.g. the camera's trigger input.
+class TriggerLine {
+ public:
+  virtual ~TriggerLine() = default;
+  // Drives the line (true: active); false when the line failed (error() says why).
+  virtual bool set(bool active) = 0;
+  virtual const char* error() const { return ""; }
+};
+
+}  // namespace mirrorcal::hal

@@ -1,0 +1,229 @@
+// The MM7.10 frame layout, the assembly of samples from frames with its loss accounting, and the
+// CAN IMU source on a socket pair that carries struct can_frame records like a CAN_RAW socket.
+#include <gtest/gtest.h>
+#include <linux/can.h>
+#include <linux/can/error.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <random>
+
+#include "mirrorcal/drivers/can_imu.hpp"
+#include "mirrorcal/drivers/monotonic_clock.hpp"
+
+namespace mirrorcal::drivers {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kG = 9.80665;
+constexpr double kRateBit = 0.005 * kPi / 180;  // rad/s per bit
+constexpr double kAccelBit = 0.000127465 * kG;  // m/s^2 per bit
+
+ImuSample sample_of(double gx, double gy, double gz, double ax, double ay, double az) {
+  ImuSample s;
+  s.gyro = Eigen::Vector3d(gx, gy, gz);
+  s.accel = Eigen::Vector3d(ax, ay, az);
+  return s;
+}
+
+TEST(Mm710, FramesMatchTheLayoutWorkedByHand) {
+  const double dps = kPi / 180;
+  mm710::Frame f[3];
+  ASSERT_TRUE(mm710::encode(sample_of(10 * dps, -2 * dps, 10 * dps, -0.5 * kG, 1 * kG, 0), 5, f));
+  // TX1 0x174: yaw +10 deg/s = 0x8000 + 2000 = 0x87D0; AY 1 g = 0x8000 + 7845 = 0x9EA5.
+  EXPECT_EQ(f[0].id, 0x174u);
+  EXPECT_EQ(f[0].data[0], 0xD0);
+  EXPECT_EQ(f[0].data[1], 0x87);
+  EXPECT_EQ(f[0].data[4], 0xA5);
+  EXPECT_EQ(f[0].data[5], 0x9E);
+  EXPECT_EQ(f[0].data[6] & 0x0f, 5) << "message counter in bits 48-51";
+  // TX2 0x178: roll is sent against the right-hand rule: +10 deg/s goes out as -10 = 0x7830;
+  // AX -0.5 g = 0x8000 - 3923 (3922.6 rounded) = 0x70AD.
+  EXPECT_EQ(f[1].id, 0x178u);
+  EXPECT_EQ(f[1].data[0], 0x30);
+  EXPECT_EQ(f[1].data[1], 0x78);
+  EXPECT_EQ(f[1].data[4], 0xAD);
+  EXPECT_EQ(f[1].data[5], 0x70);
+  // TX3 0x17C: pitch -2 deg/s = 0x8000 - 400 = 0x7E70; AZ 0 = 0x8000.
+  EXPECT_EQ(f[2].id, 0x17Cu);
+  EXPECT_EQ(f[2].data[0], 0x70);
+  EXPECT_EQ(f[2].data[1], 0x7E);
+  EXPECT_EQ(f[2].data[4], 0x00);
+  EXPECT_EQ(f[2].data[5], 0x80);
+  for (const auto& frame : f) EXPECT_EQ(frame.len, 8);
+}
+
+TEST(Mm710, RoundTripIsWithinHalfABit) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> rate(-2.8, 2.8), accel(-40, 40);
+  for (int i = 0; i < 1000; ++i) {
+    const ImuSample in =
+        sample_of(rate(rng), rate(rng), rate(rng), accel(rng), accel(rng), accel(rng));
+    mm710::Frame f[3];
+    ASSERT_TRUE(mm710::encode(in, static_cast<std::uint8_t>(i), f));
+    mm710::Assembler a;
+    ImuSample out;
+    mm710::Part p;
+    for (int m = 0; m < 3; ++m) {
+      ASSERT_TRUE(mm710::decode(f[m], p));
+      EXPECT_EQ(p.message, m);
+      EXPECT_EQ(p.counter, i & 0x0f);
+      EXPECT_EQ(a.add(p, 42, out), m == 2);
+    }
+    EXPECT_EQ(out.t_ns, 42);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(out.gyro[k], in.gyro[k], kRateBit / 2 + 1e-12);
+      EXPECT_NEAR(out.accel[k], in.accel[k], kAccelBit / 2 + 1e-12);
+    }
+  }
+}
+
+TEST(Mm710, ValuesBeyondTheRangeAreClampedAndReported) {
+  mm710::Frame f[3];
+  EXPECT_FALSE(mm710::encode(sample_of(0, 0, 4.0, 0, 0, 0), 0, f));  // 229 deg/s > 163.8
+  EXPECT_EQ(f[0].data[0], 0xff);
+  EXPECT_EQ(f[0].data[1], 0xff);
+  mm710::Frame bad = f[0];
+  bad.len = 6;
+  mm710::Part p;
+  EXPECT_FALSE(mm710::decode(bad, p));
+  bad = f[0];
+  bad.id = 0x175;
+  EXPECT_FALSE(mm710::decode(bad, p));
+}
+
+// Feeds the frames of samples with the given counters, skipping listed (sample, message) pairs.
+struct Feed {
+  mm710::Assembler a;
+  int delivered = 0;
+  void sample(std::uint8_t counter, int skip_message = -1, bool flag = false) {
+    mm710::Frame f[3];
+    mm710::encode(sample_of(0.1, 0.2, 0.3, 1, 2, 3), counter, f);
+    if (flag) f[1].data[2] |= 0x10;  // roll rate status: the sensor distrusts it
+    for (int m = 0; m < 3; ++m) {
+      if (m == skip_message) continue;
+      mm710::Part p;
+      mm710::decode(f[m], p);
+      ImuSample s;
+      if (a.add(p, 0, s)) ++delivered;
+    }
+  }
+};
+
+TEST(Mm710, LostFramesAreCountedPerMessageAndTheirSamplesDropped) {
+  Feed feed;
+  for (std::uint8_t c = 0; c < 4; ++c) feed.sample(c);
+  feed.sample(4, 1);                                            // TX2 of sample 4 lost
+  feed.sample(5, 0);                                            // TX1 of sample 5 lost
+  feed.sample(6, 2);                                            // TX3 of sample 6 lost
+  for (std::uint8_t c = 7; c < 40; ++c) feed.sample(c & 0x0f);  // counters wrap at 16
+  EXPECT_EQ(feed.delivered, 4 + 33);
+  const auto& n = feed.a.counters();
+  EXPECT_EQ(n.lost_frames[0], 1u);
+  EXPECT_EQ(n.lost_frames[1], 1u);
+  EXPECT_EQ(n.lost_frames[2], 1u);
+  EXPECT_EQ(n.incomplete_samples, 3u);
+}
+
+TEST(Mm710, AWholeLostSampleShowsInEveryMessagesCounter) {
+  Feed feed;
+  feed.sample(0);
+  feed.sample(3);  // samples 1 and 2 never came
+  EXPECT_EQ(feed.delivered, 2);
+  for (int m = 0; m < 3; ++m) EXPECT_EQ(feed.a.counters().lost_frames[m], 2u);
+  EXPECT_EQ(feed.a.counters().incomplete_samples, 0u);
+}
+
+TEST(Mm710, SamplesTheSensorFlagsAreDropped) {
+  Feed feed;
+  feed.sample(0);
+  feed.sample(1, -1, true);
+  feed.sample(2);
+  EXPECT_EQ(feed.delivered, 2);
+  EXPECT_EQ(feed.a.counters().flagged_samples, 1u);
+}
+
+// A socket pair carrying can_frame records, as a CAN_RAW socket delivers them.
+struct Pair {
+  int tx = -1, rx = -1;
+  Pair() {
+    int fds[2];
+    if (socketpair(AF_UNIX, SOCK_SEQPACKET, 0, fds) == 0) {
+      tx = fds[0];
+      rx = fds[1];
+    }
+  }
+  ~Pair() {
+    if (tx >= 0) close(tx);
+  }
+  void raw(canid_t id, std::uint8_t len, std::uint8_t first = 0) {
+    can_frame f{};
+    f.can_id = id;
+    f.len = len;
+    f.data[0] = first;
+    ASSERT_EQ(write(tx, &f, sizeof(f)), static_cast<ssize_t>(sizeof(f)));
+  }
+};
+
+TEST(CanImu, DeliversSamplesAndSurvivesGarbageAndBusOff) {
+  Pair pair;
+  ASSERT_GE(pair.rx, 0);
+  CanImu imu(pair.rx, "pair", 200'000'000);
+  CanImuSender sender(pair.tx);
+  const ImuSample in = sample_of(0.5, -0.25, 1.0, 0.1, -9.8, 0.3);
+  ImuSample out;
+
+  const std::int64_t before = monotonic_ns();
+  ASSERT_TRUE(sender.send(in));
+  ASSERT_EQ(imu.next(out), hal::SourceStatus::kOk);
+  EXPECT_GE(out.t_ns, before);
+  EXPECT_LE(out.t_ns, monotonic_ns());
+  EXPECT_NEAR(out.gyro.x(), 0.5, kRateBit);
+
+  pair.raw(mm710::kTx1, 3);                 // too short
+  pair.raw(mm710::kTx2 | CAN_RTR_FLAG, 0);  // remote frame
+  pair.raw(mm710::kTx3 | CAN_EFF_FLAG, 8);  // extended id with the same low bits
+  pair.raw(0x123, 8);                       // someone else's message
+  pair.raw(CAN_ERR_FLAG | CAN_ERR_BUSOFF, CAN_ERR_DLC);
+  ASSERT_TRUE(sender.send(in));
+  ASSERT_EQ(imu.next(out), hal::SourceStatus::kOk);
+  const CanImuCounters& n = imu.counters();
+  EXPECT_EQ(n.rejected_frames, 4u);
+  EXPECT_EQ(n.error_frames, 1u);
+  EXPECT_EQ(n.bus_off, 1u);
+  EXPECT_EQ(n.recoveries, 1u) << "frames flowing again end the bus-off";
+  EXPECT_FALSE(imu.bus_off());
+  EXPECT_STREQ(imu.last_bus_error(), "bus-off");
+  EXPECT_EQ(n.samples, 2u);
+  EXPECT_EQ(n.lost_frames(), 0u);
+
+  pair.raw(CAN_ERR_FLAG | CAN_ERR_BUSOFF, CAN_ERR_DLC);
+  EXPECT_EQ(imu.next(out), hal::SourceStatus::kError);
+  EXPECT_NE(std::string(imu.error()).find("bus-off"), std::string::npos) << imu.error();
+  EXPECT_NE(std::string(imu.error()).find("restart-ms"), std::string::npos) << imu.error();
+}
+
+TEST(CanImu, ASilentBusIsReportedAsNotAnswering) {
+  Pair pair;
+  CanImu imu(pair.rx, "pair", 50'000'000);
+  ImuSample out;
+  const std::int64_t t0 = monotonic_ns();
+  EXPECT_EQ(imu.next(out), hal::SourceStatus::kError);
+  EXPECT_GE(monotonic_ns() - t0, 50'000'000);
+  EXPECT_NE(std::string(imu.error()).find("stops answering"), std::string::npos) << imu.error();
+}
+
+TEST(CanImu, OpeningAMissingInterfaceSaysSo) {
+  try {
+    open_mm710_socket("nosuchcan7");
+    ADD_FAILURE() << "opened";
+  } catch (const DriverError& e) {
+    // Without CAN in the host's kernel the socket itself is missing; either way: kMissing.
+    EXPECT_EQ(e.fault(), Fault::kMissing) << e.what();
+    EXPECT_NE(std::string(e.what()).find("nosuchcan7"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace mirrorcal::drivers

@@ -1,0 +1,196 @@
+// The register IMUs against fakes of the parts: identification, configuration as the data sheets
+// ask, conversion with their scales, data-ready pacing and the failures a user meets.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "fakes.hpp"
+#include "mirrorcal/drivers/register_imu.hpp"
+
+namespace mirrorcal::drivers {
+namespace {
+
+using test::FakeDataReady;
+using test::FakeIcm42688;
+using test::FakeMpu6050;
+using test::kG;
+using test::kPi;
+
+RegisterImuConfig unpaced(double rate_hz = 200, double gyro_dps = 500, double accel_g = 4) {
+  RegisterImuConfig c;
+  c.rate_hz = rate_hz;
+  c.gyro_range_dps = gyro_dps;
+  c.accel_range_g = accel_g;
+  c.pace = false;
+  return c;
+}
+
+template <class Fn>
+DriverError expect_throw(Fn fn) {
+  try {
+    fn();
+  } catch (const DriverError& e) {
+    return e;
+  }
+  ADD_FAILURE() << "no DriverError";
+  return DriverError(Fault::kIo, "");
+}
+
+TEST(Mpu6050, ConfiguresAndConvertsWithTheDataSheetScales) {
+  auto bus = std::make_unique<FakeMpu6050>();
+  FakeMpu6050& part = *bus;
+  Mpu6050 imu(std::move(bus), unpaced(200, 400, 3));
+  // 400 deg/s needs +-500 (FS_SEL 1), 3 g needs +-4 g (AFS_SEL 1); 1 kHz / (1 + 4) = 200 Hz.
+  EXPECT_EQ(part.regs_[0x1B], 1 << 3);
+  EXPECT_EQ(part.regs_[0x1C], 1 << 3);
+  EXPECT_EQ(part.regs_[0x19], 4);
+  EXPECT_EQ(part.regs_[0x6B] & 0x40, 0) << "left asleep";
+  EXPECT_EQ(part.regs_[0x38] & 1, 1) << "data-ready interrupt off";
+  EXPECT_EQ(imu.period_ns(), 5'000'000);
+
+  const double gyro[3] = {123.4, -56.7, 0.25}, accel[3] = {0.5, -1.25, 2.9};
+  for (int i = 0; i < 3; ++i) {
+    part.gyro_dps[i] = gyro[i];
+    part.accel_g[i] = accel[i];
+  }
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  for (int i = 0; i < 3; ++i) {
+    // Within half a count of the data sheet's sensitivity (65.5 LSB/(deg/s), 8192 LSB/g).
+    EXPECT_NEAR(s.gyro[i], gyro[i] * kPi / 180, 0.5 / 65.5 * kPi / 180 + 1e-12);
+    EXPECT_NEAR(s.accel[i], accel[i] * kG, 0.5 / 8192 * kG + 1e-12);
+  }
+  EXPECT_LE(part.largest_read, 32u) << "an SMBus block read carries at most 32 bytes";
+}
+
+TEST(Mpu6050, RefusesOtherPartsAndSilentBuses) {
+  auto other = std::make_unique<FakeMpu6050>();
+  other->regs_[0x75] = 0x71;  // an MPU-9250
+  const DriverError wrong = expect_throw([&] { Mpu6050 imu(std::move(other), unpaced()); });
+  EXPECT_EQ(wrong.fault(), Fault::kWrongKind);
+  EXPECT_NE(std::string(wrong.what()).find("0x71"), std::string::npos) << wrong.what();
+
+  auto dead = std::make_unique<FakeMpu6050>();
+  dead->dead = true;
+  const DriverError silent = expect_throw([&] { Mpu6050 imu(std::move(dead), unpaced()); });
+  EXPECT_EQ(silent.fault(), Fault::kNotAnswering) << silent.what();
+  EXPECT_NE(std::string(silent.what()).find("fake-mpu6050"), std::string::npos);
+
+  auto fine = std::make_unique<FakeMpu6050>();
+  EXPECT_EQ(expect_throw([&] { Mpu6050 imu(std::move(fine), unpaced(200, 2500)); }).fault(),
+            Fault::kBadSpec);
+}
+
+TEST(Mpu6050, ReportsAPartThatStopsAnswering) {
+  auto bus = std::make_unique<FakeMpu6050>();
+  FakeMpu6050& part = *bus;
+  Mpu6050 imu(std::move(bus), unpaced());
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  part.dead = true;
+  EXPECT_EQ(imu.next(s), hal::SourceStatus::kError);
+  EXPECT_NE(std::string(imu.error()).find("stops answering"), std::string::npos) << imu.error();
+}
+
+TEST(Mpu6050, DataReadyEdgesTimeTheSamplesAndRevealMissedOnes) {
+  auto bus = std::make_unique<FakeMpu6050>();
+  FakeDataReady drdy;
+  Mpu6050 imu(std::move(bus), unpaced(), &drdy);
+  const std::int64_t p = 5'000'000;
+  // Edges at 0, 1, 2, then 5 periods (3 and 4 were never seen), then 6.
+  for (const std::int64_t k : {0, 1, 2, 5, 6}) drdy.edges.push_back(1'000'000'000 + k * p);
+  std::int64_t expected[] = {0, 1, 2, 5, 6};
+  for (const std::int64_t k : expected) {
+    ImuSample s;
+    ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+    EXPECT_EQ(s.t_ns, 1'000'000'000 + k * p);
+  }
+  EXPECT_EQ(imu.counters().missed_samples, 2u);
+  EXPECT_EQ(imu.counters().samples, 5u);
+  ImuSample s;
+  EXPECT_EQ(imu.next(s), hal::SourceStatus::kError);  // no more edges: the part went quiet
+  EXPECT_NE(std::string(imu.error()).find("no data-ready edge"), std::string::npos) << imu.error();
+}
+
+TEST(Icm42688, ConfiguresOverSpiAndConvertsWithTheDataSheetScales) {
+  auto transport = std::make_unique<FakeIcm42688>();
+  FakeIcm42688& part = *transport;
+  part.bank = 2;  // left in another register bank by someone
+  Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), unpaced(1000, 250, 2));
+  EXPECT_EQ(part.resets, 2u) << "one soft reset (plus the fake's power-on)";
+  EXPECT_EQ(part.bank0[0x4E], 0x0F) << "gyro and accelerometer in low-noise mode";
+  EXPECT_EQ(part.bank0[0x4F], (3 << 5) | 6) << "+-250 deg/s at 1 kHz";
+  EXPECT_EQ(part.bank0[0x50], (3 << 5) | 6) << "+-2 g at 1 kHz";
+  EXPECT_EQ(part.bank0[0x65] & 0x08, 0x08) << "data ready on INT1";
+  EXPECT_EQ(imu.period_ns(), 1'000'000);
+  // SPI framing: every transfer starts with a register address, bit 7 set for reads only.
+  for (const std::uint8_t b : part.first_bytes) EXPECT_TRUE((b & 0x7f) <= 0x76);
+
+  const double gyro[3] = {-200.0, 17.125, 249.0}, accel[3] = {1.999, -0.001, -1.5};
+  for (int i = 0; i < 3; ++i) {
+    part.gyro_dps[i] = gyro[i];
+    part.accel_g[i] = accel[i];
+  }
+  ImuSample s;
+  const std::size_t before = part.transfers;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  EXPECT_EQ(part.transfers, before + 1) << "one burst read per sample";
+  EXPECT_EQ(part.first_bytes.back(), 0x80 | 0x1F);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(s.gyro[i], gyro[i] * kPi / 180, 0.5 / 131 * kPi / 180 + 1e-12);
+    EXPECT_NEAR(s.accel[i], accel[i] * kG, 0.5 / 16384 * kG + 1e-12);
+  }
+}
+
+TEST(Icm42688, SensorsLeftOffWouldShowAsFullScaleNegative) {
+  // The fake's own check: data read with PWR_MGMT0 off is -32768, which the test above rules out.
+  FakeIcm42688 part;
+  const std::uint8_t tx[3] = {0x80 | 0x1F, 0, 0};
+  std::uint8_t rx[3];
+  part.transfer(tx, rx, 3);
+  EXPECT_EQ(rx[1], 0x80);
+  EXPECT_EQ(rx[2], 0x00);
+}
+
+TEST(Icm42688, RefusesUnsupportedRatesAndAnUnpluggedPart) {
+  auto t1 = std::make_unique<FakeIcm42688>();
+  const DriverError rate = expect_throw(
+      [&] { Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(t1)), unpaced(300)); });
+  EXPECT_EQ(rate.fault(), Fault::kBadSpec);
+  EXPECT_NE(std::string(rate.what()).find("200, 500"), std::string::npos) << rate.what();
+
+  auto t2 = std::make_unique<FakeIcm42688>();
+  t2->unplugged = true;
+  const DriverError gone = expect_throw(
+      [&] { Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(t2)), unpaced()); });
+  EXPECT_EQ(gone.fault(), Fault::kNotAnswering);
+  EXPECT_NE(std::string(gone.what()).find("0xff"), std::string::npos) << gone.what();
+}
+
+TEST(Icm42688, NoticesWithinASecondWhenThePartIsUnplugged) {
+  auto transport = std::make_unique<FakeIcm42688>();
+  FakeIcm42688& part = *transport;
+  Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), unpaced(200));
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  part.unplugged = true;  // reads now give 0xffff everywhere: plausible-looking -1 counts
+  int delivered = 0;
+  while (imu.next(s) == hal::SourceStatus::kOk && delivered < 1000) ++delivered;
+  EXPECT_LT(delivered, 200) << "a second of samples at 200 Hz";
+  EXPECT_NE(std::string(imu.error()).find("WHO_AM_I reads 0xff"), std::string::npos) << imu.error();
+}
+
+TEST(Icm42688, PacedByTheClockWithoutDataReady) {
+  auto transport = std::make_unique<FakeIcm42688>();
+  RegisterImuConfig c = unpaced(1000);
+  c.pace = true;
+  Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), c);
+  ImuSample first, s;
+  ASSERT_EQ(imu.next(first), hal::SourceStatus::kOk);
+  for (int i = 0; i < 20; ++i) ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  // 20 periods of 1 ms: never faster than the part's rate.
+  EXPECT_GE(s.t_ns - first.t_ns, 20 * 1'000'000 - 100'000);
+}
+
+}  // namespace
+}  // namespace mirrorcal::drivers
