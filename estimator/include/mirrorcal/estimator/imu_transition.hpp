@@ -1,0 +1,110 @@
+// The Jacobian F of one step of propagate_imu with respect to the error state of the IMU block
+// [v, b_a, b_g, p, theta] (rotations perturbed on the right, as MirrorState does), at the
+// estimate the step starts from. With it the covariance propagates as P_dd <- F P_dd F^T + Q and
+// the cross-covariance with the constant calibration states as P_dc <- F P_dc.
+//
+// Derivation, for the mid-point scheme of propagate_imu: with u_i = f_i - b_a, w_i = g_i - b_g,
+// dtheta = dt/2 (w0 + w1) + dt^2/12 (w0 x w1), R_d = Exp(dtheta), R1 = R0 R_d:
+//   theta'  = R_d^T theta + J_r(dtheta) D db_g,   D = -dt I + dt^2/12 ([w1]x - [w0]x)
+//   da_0    = -R0 [u0]x theta - R0 db_a
+//   da_1    = -R1 [u1]x theta' - R1 db_a
+//   dv'     = dv + dt/2 (da_0 + da_1)
+//   dp'     = dp + dt dv + dt^2/6 (2 da_0 + da_1)
+// and the biases are unchanged.
+#pragma once
+
+#include "mirrorcal/estimator/mirror_model.hpp"
+
+namespace mirrorcal {
+
+// Right Jacobian of SO(3): Exp(phi + d) = Exp(phi) Exp(J_r(phi) d) to first order in d.
+template <typename S>
+Mat3<S> so3_right_jacobian(const Vec3<S>& phi) {
+  const S a2 = phi.squaredNorm();
+  const Mat3<S> h = so3::hat<S>(phi);
+  S c1, c2;  // J_r = I - c1 [phi]x + c2 [phi]x^2
+  if (a2 < so3::small_angle<S>() * so3::small_angle<S>()) {
+    c1 = S(0.5) - a2 / S(24);
+    c2 = S(1) / S(6) - a2 / S(120);
+  } else {
+    const S a = std::sqrt(a2);
+    c1 = (S(1) - std::cos(a)) / a2;
+    c2 = (a - std::sin(a)) / (a2 * a);
+  }
+  return Mat3<S>::Identity() - c1 * h + c2 * (h * h);
+}
+
+// F in its 3x3 blocks. In block rows and columns [v, b_a, b_g, p, theta]:
+//   v'     = [ I     v_ba   v_bg   0   v_theta ]
+//   b_a'   = [ 0     I      0      0   0       ]
+//   b_g'   = [ 0     0      I      0   0       ]
+//   p'     = [ dt I  p_ba   p_bg   I   p_theta ]
+//   theta' = [ 0     0      th_bg  0   th_th   ]
+// so applying it costs 8 products of 3x3 blocks instead of a dense 15x15 one.
+template <typename S>
+struct ImuTransition {
+  S dt;
+  Mat3<S> v_ba, v_bg, v_theta, p_ba, p_bg, p_theta, theta_bg, theta_theta;
+
+  // out = F x, for x with the 15 rows of the IMU block; out must not alias x.
+  template <class In, class Out>
+  void left_multiply(const Eigen::MatrixBase<In>& x, Eigen::MatrixBase<Out>& out) const {
+    const auto xv = x.template middleRows<3>(0), xba = x.template middleRows<3>(3),
+               xbg = x.template middleRows<3>(6), xp = x.template middleRows<3>(9),
+               xth = x.template middleRows<3>(12);
+    // lazyProduct: coefficient-wise, which for a 3x3 factor beats the general matrix product.
+    out.template middleRows<3>(0) =
+        xv + v_ba.lazyProduct(xba) + v_bg.lazyProduct(xbg) + v_theta.lazyProduct(xth);
+    out.template middleRows<3>(3) = xba;
+    out.template middleRows<3>(6) = xbg;
+    out.template middleRows<3>(9) =
+        dt * xv + p_ba.lazyProduct(xba) + p_bg.lazyProduct(xbg) + xp + p_theta.lazyProduct(xth);
+    out.template middleRows<3>(12) = theta_bg.lazyProduct(xbg) + theta_theta.lazyProduct(xth);
+  }
+
+  Eigen::Matrix<S, 15, 15> dense() const {
+    Eigen::Matrix<S, 15, 15> f;
+    left_multiply(Eigen::Matrix<S, 15, 15>::Identity(), f);
+    return f;
+  }
+};
+
+template <class State>
+ImuTransition<typename State::Scalar> imu_transition(const State& x, const ImuSample& s0,
+                                                     const ImuSample& s1) {
+  using S = typename State::Scalar;
+  static_assert(State::kDynamicBegin == 0 && State::kDynamicDim == 15 && State::kV == 0 &&
+                    State::kBa == 3 && State::kBg == 6 && State::kP == 9 && State::kTheta == 12,
+                "IMU block layout");
+  const S dt = S(static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9);
+  const Vec3<S> w0 = s0.gyro.cast<S>() - x.b_g;
+  const Vec3<S> w1 = s1.gyro.cast<S>() - x.b_g;
+  const Vec3<S> dtheta = (S(0.5) * dt) * (w0 + w1) + (dt * dt / S(12)) * w0.cross(w1);
+  const Mat3<S> r_d = so3::exp<S>(dtheta).toRotationMatrix();
+  const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
+  const Mat3<S> r1 = r0 * r_d;
+
+  ImuTransition<S> f;
+  f.dt = dt;
+  // theta' = theta_theta theta + theta_bg db_g
+  f.theta_theta = r_d.transpose();
+  f.theta_bg =
+      so3_right_jacobian<S>(dtheta) *
+      (-dt * Mat3<S>::Identity() + (dt * dt / S(12)) * (so3::hat<S>(w1) - so3::hat<S>(w0)));
+  // da_i = a_i_theta theta + a_i_ba db_a (+ a1_bg db_g)
+  const Mat3<S> a0_theta = -r0 * so3::hat<S>(s0.accel.cast<S>() - x.b_a);
+  const Mat3<S> a1_theta_prime = -r1 * so3::hat<S>(s1.accel.cast<S>() - x.b_a);
+  const Mat3<S> a1_theta = a1_theta_prime * f.theta_theta;
+  const Mat3<S> a1_bg = a1_theta_prime * f.theta_bg;
+
+  const S h = S(0.5) * dt, k = dt * dt / S(6);
+  f.v_ba = -h * (r0 + r1);
+  f.v_bg = h * a1_bg;
+  f.v_theta = h * (a0_theta + a1_theta);
+  f.p_ba = -k * (S(2) * r0 + r1);
+  f.p_bg = k * a1_bg;
+  f.p_theta = k * (S(2) * a0_theta + a1_theta);
+  return f;
+}
+
+}  // namespace mirrorcal

@@ -1,0 +1,62 @@
+// Google Benchmark of the filter's operations and of the whole loop:
+//   predict/<float|double>/M, update/<float|double>/M  one operation, timed alone (manual time:
+//                                                       the filter is restored between them)
+//   recording_60s                                       the whole loop over the 60 s recording
+// The counters report the error-state dimension and sizeof the filter.
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <memory>
+#include <string>
+
+#include "filter_ops.hpp"
+#include "recording.hpp"
+
+namespace mb = mirrorcal::bench;
+
+namespace {
+
+template <bool kUpdate>
+void time_operation(benchmark::State& state, mb::FilterOps* ops) {
+  bool ok = true;
+  for (auto _ : state) {
+    ops->restore();
+    const auto t0 = std::chrono::steady_clock::now();
+    ok &= kUpdate ? ops->update() : ops->predict();
+    const auto t1 = std::chrono::steady_clock::now();
+    state.SetIterationTime(std::chrono::duration<double>(t1 - t0).count());
+  }
+  if (!ok) state.SkipWithError("the operation failed");
+  state.counters["dim"] = ops->dim();
+  state.counters["filter_bytes"] = double(ops->filter_bytes());
+}
+
+void recording(benchmark::State& state, const mb::Recording* r) {
+  std::uint64_t used = 0;
+  for (auto _ : state) used = mb::calibrate(*r);
+  if (used == 0) state.SkipWithError("no marker used");
+  state.counters["markers_used"] = double(used);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  std::vector<std::unique_ptr<mb::FilterOps>> keep;
+  for (const bool single : {false, true}) {
+    for (const int m : mb::built_marker_counts()) {
+      keep.push_back(mb::make_filter_ops(m, single));
+      mb::FilterOps* ops = keep.back().get();
+      const std::string suffix = std::string(single ? "float/" : "double/") + std::to_string(m);
+      benchmark::RegisterBenchmark(("predict/" + suffix).c_str(), time_operation<false>, ops)
+          ->UseManualTime();
+      benchmark::RegisterBenchmark(("update/" + suffix).c_str(), time_operation<true>, ops)
+          ->UseManualTime();
+    }
+  }
+  const mb::Recording rec = mb::paper_recording();
+  benchmark::RegisterBenchmark("recording_60s", recording, &rec)->Unit(benchmark::kMillisecond);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

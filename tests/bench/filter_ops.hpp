@@ -1,0 +1,33 @@
+// Single filter operations of one configuration (M markers, float or double), prepared so that a
+// benchmark or an instruction count can run them one at a time: a filter near convergence in
+// front of the mirror, the IMU samples of one step and a frame seeing every marker.
+//
+// One translation unit per marker count (filter_ops_m*.cpp): each configuration is a heavy Eigen
+// instantiation, so they build in parallel and the large ones only when asked for
+// (-DMIRRORCAL_BENCH_LARGE_M=ON).
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+namespace mirrorcal::bench {
+
+class FilterOps {
+ public:
+  virtual ~FilterOps() = default;
+  virtual int markers() const = 0;
+  virtual int dim() const = 0;                   // error-state dimension
+  virtual std::size_t filter_bytes() const = 0;  // sizeof the filter object
+  virtual void restore() = 0;                    // back to the prepared filter
+  virtual bool predict() = 0;                    // one IMU step (5 ms); true if it succeeded
+  virtual bool update() = 0;                     // one frame, every marker seen
+};
+
+// The configuration, or nullptr if it is not built.
+std::unique_ptr<FilterOps> make_filter_ops(int markers, bool single_precision);
+
+// The marker counts built into this program, ascending.
+std::vector<int> built_marker_counts();
+
+}  // namespace mirrorcal::bench

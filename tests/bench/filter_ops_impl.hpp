@@ -1,0 +1,77 @@
+// FilterOps for one configuration; included by the filter_ops_m*.cpp units only.
+#pragma once
+
+#include <cmath>
+
+#include "filter_ops.hpp"
+#include "mirrorcal/estimator/calibration_filter.hpp"
+
+namespace mirrorcal::bench {
+
+template <typename S, int M>
+class FilterOpsOf final : public FilterOps {
+ public:
+  using Filter = CalibrationFilter<S, M, 0>;
+  using State = typename Filter::State;
+
+  FilterOpsOf() : prepared_(config()), filter_(config()) {
+    // The IMU 45 cm in front of a wall mirror (the mirror plane is z = 0 of n, the camera looks
+    // along body x): body x along -z of n, body z up along n's y.
+    State x;
+    Eigen::Matrix3d r_n_b;
+    r_n_b << 0, 1, 0, 0, 0, 1, -1, 0, 0;
+    r_n_b.transposeInPlace();
+    r_n_b = Eigen::Matrix3d(Eigen::Quaterniond(r_n_b).normalized());
+    x.q_n_b = Eigen::Quaterniond(r_n_b).cast<S>();
+    x.p = Vec3<S>(S(0), S(0), S(0.45));
+    x.v = Vec3<S>(S(0.05), S(-0.02), S(0.01));
+    x.p_b_c = Vec3<S>(S(0.01), S(-0.05), S(0.10));
+    Eigen::Matrix3d r_b_c;  // optical axis along body x, image x along body -y
+    r_b_c << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+    x.q_b_c = Eigen::Quaterniond(r_b_c).cast<S>();
+    for (int i = 0; i < M; ++i) {  // markers spread around the lens, a few cm off
+      const double a = 2.0 * 3.14159265358979 * i / M;
+      x.markers.template segment<3>(3 * i) =
+          Vec3<S>(S(0.06 * std::cos(a)), S(0.06 * std::sin(a)), S(-0.01 * (i % 3)));
+    }
+    typename Filter::Covariance p = Filter::Covariance::Zero();
+    p.diagonal().setConstant(S(1e-8));  // converged: one plain step per update
+    prepared_.reset(x, p);
+    // The frame: every marker where the estimate sees it, a pixel off.
+    frame_.t_ns = 0;
+    Eigen::Matrix<S, 2 * M, 1> z;
+    std::array<bool, M> ok;
+    ok.fill(true);
+    predict_markers(x, Pinhole<S>{S(833.33), S(833.33), S(322), S(248), S(0)}, z, ok);
+    for (int i = 0; i < M; ++i) {
+      frame_.seen[i] = ok[i];
+      frame_.uv[i] = z.template segment<2>(2 * i).template cast<double>() + Eigen::Vector2d(1, -1);
+    }
+    s0_.t_ns = 0;
+    s1_.t_ns = 5'000'000;
+    s0_.gyro = Eigen::Vector3d(0.1, -0.2, 0.3);
+    s1_.gyro = Eigen::Vector3d(0.12, -0.19, 0.28);
+    s0_.accel = Eigen::Vector3d(0.2, 9.81, -0.1);
+    s1_.accel = Eigen::Vector3d(0.25, 9.79, -0.12);
+    restore();
+  }
+
+  int markers() const override { return M; }
+  int dim() const override { return Filter::kDim; }
+  std::size_t filter_bytes() const override { return sizeof(Filter); }
+  void restore() override { filter_ = prepared_; }
+  bool predict() override { return filter_.predict(s0_, s1_) == FilterStatus::kOk; }
+  bool update() override { return filter_.update(frame_).status == FilterStatus::kOk; }
+
+ private:
+  static CalibrationConfig config() {
+    CalibrationConfig c;
+    c.intrinsics = Pinhole<double>{833.33, 833.33, 322.0, 248.0, 0.0};
+    return c;
+  }
+  Filter prepared_, filter_;
+  MarkerFrame<M> frame_{};
+  ImuSample s0_{}, s1_{};
+};
+
+}  // namespace mirrorcal::bench

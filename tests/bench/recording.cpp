@@ -1,0 +1,35 @@
+#include "recording.hpp"
+
+#include "mirrorcal/firmware/loop.hpp"
+#include "sim_run.hpp"
+
+namespace mirrorcal::bench {
+
+Recording paper_recording() {
+  Recording r;
+  r.scenario = sim::paper_scenario();
+  r.data = sim::simulate(r.scenario, 1);
+  return r;
+}
+
+std::uint64_t calibrate(const Recording& r) {
+  using Filter = CalibrationFilter<double, 3, 0>;
+  const auto prior = sim::draw_prior<3>(r.scenario, r.data, 1);
+  Filter filter(app::scenario_config(r.scenario));
+  Filter::State x0;
+  Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  filter.reset(x0, p0);
+  sim::VectorImuSource imu(r.data.imu);
+  sim::VectorMarkerSource<3> markers(r.data.frames);
+  struct DropSink final : firmware::EstimateSink<Filter> {
+    void publish(std::int64_t, const Filter&) override {}
+  } sink;
+  firmware::LoopConfig lc;
+  lc.imu_period_ns = static_cast<std::int64_t>(1e9 / r.scenario.imu_rate_hz);
+  firmware::CalibrationLoop<double, 3, 0> loop(filter, imu, markers, lc, &sink);
+  loop.run();
+  return filter.counters().markers_used;
+}
+
+}  // namespace mirrorcal::bench

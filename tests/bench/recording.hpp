@@ -1,0 +1,22 @@
+// The whole loop over one simulated recording (the paper scenario: 60 s, M = 3, IMU 200 Hz,
+// camera 20 Hz), from the filter's construction to the final estimate; the data are simulated
+// beforehand and the estimate is published to a sink that drops it.
+#pragma once
+
+#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
+
+namespace mirrorcal::bench {
+
+struct Recording {
+  sim::Scenario scenario;
+  sim::SimData data;
+};
+
+Recording paper_recording();
+
+// Calibrates from the recording; returns the number of markers used (so the work cannot be
+// optimised away, and a caller can check it did something).
+std::uint64_t calibrate(const Recording& r);
+
+}  // namespace mirrorcal::bench
