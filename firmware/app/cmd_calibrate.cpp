@@ -37,7 +37,8 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const auto& last = run.history.back();
   const Eigen::Vector3d angles = display_angles(r.q_b_c);
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
-  std::printf("\n%-8s %-5s %20s %20s\n", "param", "unit", "after 1st frame +-1s", "final +-1sigma");
+  std::printf("\n%-8s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
+              "final +-1sigma", rec.has_truth ? "  error/sig (truth.yaml)" : "");
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
     // Rotations are shown as the final estimate's angles (Rz Ry Rx, as the scenarios state them);
@@ -56,9 +57,17 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
       value = double(last.state.intrinsics(int(j) - 6 - 3 * kMarkers));
       value_first = double(first.state.intrinsics(int(j) - 6 - 3 * kMarkers));
     }
-    std::printf("%-8s %-5s %12.4f +-%-6.3f %12.4f +-%-6.4f\n", p.name.c_str(), p.unit.c_str(),
+    std::printf("%-8s %-5s %12.4f +-%-6.3f %12.4f +-%-6.4f", p.name.c_str(), p.unit.c_str(),
                 value_first, first.sigma(int(j)) * p.scale, value, last.sigma(int(j)) * p.scale);
+    if (rec.has_truth) std::printf(" %+10.2f", last.error(int(j)) / last.sigma(int(j)));
+    std::printf("\n");
   }
+  if (rec.has_truth)
+    std::printf(
+        "\nNEES of the %zu calibration states against truth.yaml: %.2f (95 %% interval "
+        "%.2f..%.2f)\n",
+        r.params.size(), last.nees, chi2_quantile(0.025, double(r.params.size())),
+        chi2_quantile(0.975, double(r.params.size())));
   const auto& lc = run.loop_counters;
   const auto& fc = run.filter_counters;
   std::printf(

@@ -39,12 +39,18 @@ int cmd_record(int argc, char** argv) {
   // Table III errors) rather than camchain.yaml's calibrated camera.
   const sim::RecordingPriors priors =
       sim::from_prior(prior, s.gravity_n, s.pixel_sigma, o.flag("intrinsics"));
-  if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err))
+  sim::RecordingTruth truth;
+  truth.p_b_c = s.truth.p_b_c;
+  truth.q_b_c = s.truth.q_b_c;
+  truth.features_c = s.truth.markers;
+  truth.intrinsics = s.truth.intrinsics;
+  if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
+      !sim::write_truth_yaml(dir, truth, err))
     fail(err, 1);
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
       "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv, imu.yaml, "
-      "camchain.yaml, mirrorcal.yaml\n",
+      "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
       s.duration_s, dir.c_str());
   return 0;

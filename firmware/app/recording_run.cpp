@@ -29,7 +29,26 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
   typename SimRun<NK>::State x0;
   typename SimRun<NK>::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  run = run_loop<NK>(recording_config(r), x0, p0, recording_loop_data(r), nullptr, progress);
+  // A simulated recording's truth: each history row gets the error and NEES against it.
+  typename SimRun<NK>::State truth;
+  if (r.has_truth) {
+    if (r.truth.features_c.size() != static_cast<std::size_t>(kMarkers)) {
+      error = "truth.yaml lists " + std::to_string(r.truth.features_c.size()) +
+              " markers; this build calibrates M = " + std::to_string(kMarkers);
+      return false;
+    }
+    truth.p_b_c = r.truth.p_b_c;
+    truth.q_b_c = r.truth.q_b_c;
+    for (int i = 0; i < kMarkers; ++i)
+      truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
+    if constexpr (NK > 0) {
+      const Pinhole<double>& k = r.truth.intrinsics;
+      const double v[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
+      for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[j];
+    }
+  }
+  run = run_loop<NK>(recording_config(r), x0, p0, recording_loop_data(r),
+                     r.has_truth ? &truth : nullptr, progress);
   return true;
 }
 

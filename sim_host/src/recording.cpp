@@ -224,6 +224,11 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
   if (!read_file(priors_yaml, text, error) ||
       !parse_priors_yaml(text, priors_yaml, out.sensors.intrinsics, out.priors, out.notes, error))
     return false;
+  const std::string truth_yaml = dir + "/truth.yaml";
+  out.has_truth = std::filesystem::exists(truth_yaml);
+  if (out.has_truth && (!read_file(truth_yaml, text, error) ||
+                        !parse_truth_yaml(text, truth_yaml, out.truth, error)))
+    return false;
   if (!read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
     return false;
   if (!read_file(frames_csv, text, error) || !parse_frames_csv(text, frames_csv, out.frames, error))

@@ -397,4 +397,25 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   return write_text(dir + "/mirrorcal.yaml", t, error);
 }
 
+bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::string& error) {
+  std::string y =
+      "# The truth of a simulated recording (SI units, px): calibrate reports its error.\n";
+  y += "p_b_c: " + list(t.p_b_c) + "\nq_b_c_wxyz: " + wxyz(t.q_b_c) + "\nfeatures_c:\n";
+  for (const auto& f : t.features_c) y += "  - " + list(f) + "\n";
+  const auto k = as_array(t.intrinsics);
+  y += "intrinsics: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew\n";
+  return write_text(dir + "/truth.yaml", y, error);
+}
+
+bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingTruth& out,
+                      std::string& error) {
+  YamlMap y(file, error);
+  double k[5];
+  if (!y.load(text) || !y.vec3("p_b_c", out.p_b_c) || !y.quaternion("q_b_c_wxyz", out.q_b_c) ||
+      !y.vec3_list("features_c", out.features_c, false) || !y.numbers("intrinsics", 5, k))
+    return false;
+  out.intrinsics = {k[0], k[1], k[2], k[3], k[4]};
+  return true;
+}
+
 }  // namespace mirrorcal::sim

@@ -1,5 +1,5 @@
-// libFuzzer target: the YAML beside a recording (mirrorcal.yaml, imu.yaml, camchain.yaml), each
-// parser on the same input. Any input gives values or a message, never a crash.
+// libFuzzer target: the YAML beside a recording (mirrorcal.yaml, imu.yaml, camchain.yaml,
+// truth.yaml), each parser on the same input. Any input gives values or a message, never a crash.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -33,5 +33,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   ok = sim::parse_camchain_yaml(text, "camchain.yaml", sensors, notes, error);
   if (ok != error.empty()) std::abort();
   if (ok && (sensors.width < 1 || sensors.height < 1)) std::abort();
+  sim::RecordingTruth truth;
+  error.clear();
+  ok = sim::parse_truth_yaml(text, "truth.yaml", truth, error);
+  if (ok != error.empty()) std::abort();
   return 0;
 }

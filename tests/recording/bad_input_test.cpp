@@ -351,3 +351,8 @@ TEST_F(BadInput, LensDistortionIsRefused) {
   write_lines(dir() + "/camchain.yaml", l);
   expect_error({dir() + "/camchain.yaml:", "distortion_coeffs: must all be 0"});
 }
+
+TEST_F(BadInput, TruthFileThatIsDamaged) {
+  spit(dir() + "/truth.yaml", "p_b_c: [0.01, 0.02]\n");
+  expect_error({dir() + "/truth.yaml:1:", "p_b_c: expected a list of 3 numbers"});
+}

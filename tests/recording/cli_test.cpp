@@ -50,6 +50,15 @@ TEST(Cli, RecordThenCalibrateIsBitIdenticalToSim) {
     EXPECT_FALSE(a.empty()) << f;
     EXPECT_TRUE(a == b) << f << " differs between sim and record -> calibrate";
   }
+  // The truth written beside the recording gives the NEES sim prints.
+  const auto nees_line = [](const std::string& out) {
+    const auto a = out.find("NEES of the 15 calibration states");
+    const auto colon = out.find(": ", a), end = out.find(" (", a);
+    return a == std::string::npos ? std::string("none") : out.substr(colon + 2, end - colon - 2);
+  };
+  const Result sim_out = run_mirrorcal("sim --seed 5 --no-plots --out " + d + "/sim", d);
+  EXPECT_EQ(nees_line(sim_out.output), nees_line(r.output)) << r.output;
+  EXPECT_NE(nees_line(r.output), "none");
   // A different seed is a different run: the comparison above can fail.
   r = run_mirrorcal("sim --seed 6 --no-plots --out " + d + "/sim6", d);
   ASSERT_EQ(r.code, 0) << r.output;

@@ -52,6 +52,15 @@ struct RecordingPriors {
   std::array<double, 5> sigma_intrinsics{};  // fu fv cu cv skew (px)
 };
 
+// What is true, known only for simulated recordings (truth.yaml, optional): lets calibrate report
+// the error of its estimate.
+struct RecordingTruth {
+  Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
+  std::vector<Eigen::Vector3d> features_c;
+  Pinhole<double> intrinsics{};
+};
+
 // A recording read back: the streams in timestamp order and the descriptions beside them.
 struct Recording {
   std::vector<ImuSample> imu;
@@ -60,6 +69,8 @@ struct Recording {
   RecordingPriors priors;
   std::uint64_t frames_outside_imu = 0;  // skipped: before the first or after the last IMU sample
   std::vector<std::string> notes;        // defaults used, frames skipped: tell the user
+  bool has_truth = false;                // truth.yaml was there
+  RecordingTruth truth;
 };
 
 // Reads DIR for a calibration with M = markers. On bad input returns false with a message that
@@ -89,6 +100,10 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
 bool write_sensor_yaml(const std::string& dir, const SensorInfo& sensors, std::string& error);
 // mirrorcal.yaml into dir.
 bool write_priors_yaml(const std::string& dir, const RecordingPriors& priors, std::string& error);
+// truth.yaml into dir, and its parser.
+bool write_truth_yaml(const std::string& dir, const RecordingTruth& truth, std::string& error);
+bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingTruth& out,
+                      std::string& error);
 
 // The filter's prior from a recording's (false, with a message, if the file lists a number of
 // markers other than M), and back.
