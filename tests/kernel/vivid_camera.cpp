@@ -357,11 +357,16 @@ int calibrate(mc::hal::PixelFormat format) {
   for (int i = 0; i < mc::app::kMarkers; ++i)
     truth.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
 
-  mc::app::LoopData input = mc::app::loop_data(s, data);
-  input.camera = &camera;
-  input.identifier = &camera;
+  // One pass: the frames stream through the kernel once.
+  const auto hooks = [&camera](int) {
+    mc::app::LoopHooks h;
+    h.source = &camera;
+    h.relabeler = &camera;
+    return h;
+  };
   const auto t0 = std::chrono::steady_clock::now();
-  const Run run = mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0, input, &truth);
+  const Run run = mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0,
+                                       mc::app::loop_data(s, data), &truth, {}, hooks, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   // The prior's error against the final estimate's, over the calibration block.
