@@ -145,6 +145,8 @@ bool BlobDetector::measure(const hal::FrameView& f, int x0, int y0, int x1, int 
   }
   b.u = cu;
   b.v = cv;
+  const double r = config_.centroid_radius;
+  b.truncated = cu - r < -0.5 || cv - r < -0.5 || cu + r > f.width - 0.5 || cv + r > f.height - 0.5;
   b.flux = s;
   const double half_trace = 0.5 * (cuu + cvv);
   b.spread = half_trace + std::sqrt(std::max(0.0, 0.25 * (cuu - cvv) * (cuu - cvv) + cuv * cuv));

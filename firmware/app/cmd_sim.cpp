@@ -87,12 +87,12 @@ int cmd_sim(int argc, char** argv) {
       std::printf(
           "detection (%s frames): %llu frames, %llu of %llu reflections labelled, %llu wrong "
           "labels, "
-          "%llu withheld in doubt, %llu spurious blobs; centroid error %.3f px RMS (max %.3f) "
+          "%llu withheld in doubt, %llu blobs unlabelled; centroid error %.3f px RMS (max %.3f) "
           "against the true projections; %.2f ms per frame\n",
           hal::to_string(frames.format), (unsigned long long)d.frames,
           (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
           (unsigned long long)d.wrong_labels, (unsigned long long)d.dropped_in_doubt,
-          (unsigned long long)d.spurious_blobs, d.centroid_rms_px, d.centroid_max_px,
+          (unsigned long long)d.unlabelled_blobs, d.centroid_rms_px, d.centroid_max_px,
           d.ms_per_frame);
     }
 

@@ -57,8 +57,8 @@ DetectionReport RenderedMarkers::report() const {
   r.ms_per_frame =
       r.frames > 0 ? 1e3 * detect_.counters().detect_seconds / static_cast<double>(r.frames) : 0.0;
   const drivers::IdentifierCounters& id = detect_.identifier_counters();
-  r.dropped_in_doubt = id.ambiguous + id.crossing + id.merged;
-  r.spurious_blobs = id.unassigned;
+  r.dropped_in_doubt = id.ambiguous + id.crossing + id.refused;
+  r.unlabelled_blobs = id.unassigned;
   return r;
 }
 

@@ -32,7 +32,7 @@ struct DetectionReport {
   std::uint64_t markers_labelled = 0;  // reflections the detection reported
   std::uint64_t wrong_labels = 0;      // reported under one marker's label at another's spot
   std::uint64_t dropped_in_doubt = 0;  // labels withheld: ambiguous, crossing or merged
-  std::uint64_t spurious_blobs = 0;    // blobs no marker took
+  std::uint64_t unlabelled_blobs = 0;  // blobs no marker took (spurious, merged, crowded)
   double centroid_rms_px = 0.0;        // correctly labelled, against the true projection
   double centroid_max_px = 0.0;
   double ms_per_frame = 0.0;  // detection and identification, wall time

@@ -1,5 +1,6 @@
 // No heap per frame on the camera path: detection, identification and the filter's prediction
-// for it, as the loop runs them, must not allocate (allocations counted by tests/support/alloc_counter).
+// for it, as the loop runs them, must not allocate (allocations counted by
+// tests/support/alloc_counter).
 #include <gtest/gtest.h>
 
 #include <vector>

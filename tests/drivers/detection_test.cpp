@@ -293,3 +293,30 @@ TEST(MarkerIdentifier, BrightnessNamesMarkersWithoutAPrediction) {
   blind.identify(b, n, nullptr, f);
   EXPECT_FALSE(f.seen[0] || f.seen[1] || f.seen[2]);
 }
+
+TEST(MarkerIdentifier, SpotsCutByTheImageEdgeAreWithheld) {
+  // A spot whose core the edge cuts has its centroid pulled inwards (by up to a pixel): found as a
+  // blob, flagged, and not used as a marker.
+  const mc::sim::RenderConfig rc;
+  const std::array<Eigen::Vector2d, M> truth = {
+      Eigen::Vector2d(0.7, 200.3), Eigen::Vector2d(320.4, 478.9), Eigen::Vector2d(300.2, 200.6)};
+  Canvas c;
+  for (int i = 0; i < M; ++i) c.renderer.add_spot(truth[i].x(), truth[i].y(), rc.brightness[i]);
+  const mc::hal::FrameView v = c.finish();
+  BlobDetector det({}, 640, 480);
+  Blob b[8];
+  const int n = det.detect(v, b, 8);
+  ASSERT_EQ(n, 3);
+  int truncated = 0;
+  for (int j = 0; j < n; ++j) truncated += b[j].truncated ? 1 : 0;
+  EXPECT_EQ(truncated, 2);
+  mc::drivers::MarkerIdentifier<M> id(identifier_config());
+  const auto pred = prediction_at(truth, 1.0);
+  mc::MarkerFrame<M> f;
+  const auto counts = id.identify(b, n, &pred, f);
+  EXPECT_FALSE(f.seen[0]);
+  EXPECT_FALSE(f.seen[1]);
+  ASSERT_TRUE(f.seen[2]);
+  EXPECT_LT((f.uv[2] - truth[2]).norm(), 0.1);
+  EXPECT_EQ(counts.refused, 2u);
+}

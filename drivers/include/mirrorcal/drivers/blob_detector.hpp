@@ -32,6 +32,8 @@ struct Blob {
   int peak = 0;             // brightest luma
   // Another blob lies within twice the centroid radius: its tail may pull this centroid.
   bool crowded = false;
+  // The centroid's disc reaches past the image's edge: the spot is cut, the centroid biased.
+  bool truncated = false;
 };
 
 struct BlobCounters {

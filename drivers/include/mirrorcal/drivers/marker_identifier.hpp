@@ -55,7 +55,7 @@ struct IdentifierCounters {
   std::uint64_t identified = 0;  // markers labelled
   std::uint64_t ambiguous = 0;   // markers dropped because the label was in doubt
   std::uint64_t crossing = 0;    // markers dropped because their predictions met
-  std::uint64_t merged = 0;      // blobs refused as two spots in one
+  std::uint64_t refused = 0;     // blobs refused: two spots in one, crowded, or cut by the edge
   std::uint64_t unassigned = 0;  // blobs left over (spurious, or markers out of the gates)
 
   IdentifierCounters& operator+=(const IdentifierCounters& o) {
@@ -63,7 +63,7 @@ struct IdentifierCounters {
     identified += o.identified;
     ambiguous += o.ambiguous;
     crossing += o.crossing;
-    merged += o.merged;
+    refused += o.refused;
     unassigned += o.unassigned;
     return *this;
   }
@@ -117,7 +117,7 @@ class MarkerIdentifier {
       }
     }
     for (int j = 0; j < n; ++j)
-      if (!single_spot(blobs[j])) ++counters.merged;
+      if (!single_spot(blobs[j])) ++counters.refused;
     if (prediction != nullptr) mark_crossing(*prediction, crossing);
 
     // The best assignment; then, per marker, the cheapest assignment that labels it otherwise.
@@ -153,9 +153,12 @@ class MarkerIdentifier {
   const IdentifierConfig<M>& config() const { return config_; }
 
  private:
-  // A blob that may hold two spots, or whose centroid a neighbour's tail can pull, is no
-  // marker's: a frame without it costs less than a biased or swapped position.
-  bool single_spot(const Blob& b) const { return !b.crowded && b.spread <= config_.max_spread_px2; }
+  // A blob that may hold two spots, whose centroid a neighbour's tail can pull, or whose spot
+  // the image's edge cuts (its centroid pulled inwards by up to a pixel) is no marker's: a frame
+  // without it costs less than a biased or swapped position.
+  bool single_spot(const Blob& b) const {
+    return !b.crowded && !b.truncated && b.spread <= config_.max_spread_px2;
+  }
 
   void insert_candidate(int i, int j, double d2) {
     int k = count_[i] < kCandidates ? count_[i]++ : kCandidates;
