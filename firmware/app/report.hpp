@@ -11,8 +11,8 @@ namespace mirrorcal::app {
 // calibration_params(): p and markers in cm, the rotation as the scenario's three angles in deg.
 std::vector<double> truth_display(const sim::Scenario& s, int intrinsics = 0);
 
-// The paper's Tables I, II and III, final value and sigma, in our row order (rotation columns read as
-// about x, y, z: see paper_scenario()).
+// The paper's Tables I, II and III, final value and sigma, in our row order (rotation columns read
+// as about x, y, z: see paper_scenario()).
 struct PaperRow {
   double final_value, sigma;
 };

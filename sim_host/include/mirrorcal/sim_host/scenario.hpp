@@ -18,7 +18,8 @@ struct Rig {
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> markers;  // pi_i^c (m)
   Pinhole<double> intrinsics{};
-  // The image: u in [0, width), v in [0, height), origin at the top-left pixel's centre (DESIGN.md).
+  // The image: u in [0, width), v in [0, height), origin at the top-left pixel's centre
+  // (DESIGN.md).
   int width = 640, height = 480;
 };
 
