@@ -19,6 +19,7 @@ const std::vector<Command>& commands() {
        "  sim         calibrate a simulated rig in front of a mirror\n"
        "              [--scenario paper] [--seed N] [--out DIR] [--no-plots] [--intrinsics]\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
+       "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},
