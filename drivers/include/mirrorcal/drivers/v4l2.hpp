@@ -20,6 +20,9 @@ struct V4l2Config {
   hal::PixelFormat format = hal::PixelFormat::kGrey;
   int width = 640, height = 480;
   int buffers = 4;  // requested; the driver may grant more (at most kMaxBuffers are used)
+  // Take the device's current pixel format when it is GREY or YUYV (else `format`): a camera
+  // given without a format keeps what it was set up with.
+  bool format_from_device = false;
 };
 
 // One V4L2 node streaming memory-mapped buffers in one direction; the shared part of capture and
@@ -40,6 +43,8 @@ class V4l2Stream {
   std::size_t size_image() const { return size_image_; }
   int buffer_count() const { return count_; }
   hal::PixelFormat format() const { return format_; }
+  // The frame period the driver reports (VIDIOC_G_PARM's timeperframe), 0 if it reports none.
+  std::int64_t frame_period_ns() const { return frame_period_ns_; }
   // Stops streaming, unmaps and closes; safe to call twice.
   void close();
 
@@ -65,6 +70,7 @@ class V4l2Stream {
   int width_ = 0, height_ = 0, bytes_per_line_ = 0;
   std::size_t size_image_ = 0;
   hal::PixelFormat format_ = hal::PixelFormat::kGrey;
+  std::int64_t frame_period_ns_ = 0;
   std::array<Buffer, kMaxBuffers> buffers_{};
   int count_ = 0;
 };
