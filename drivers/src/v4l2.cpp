@@ -344,6 +344,7 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
 
 bool V4l2Output::open(const std::string& path, const V4l2Config& config) {
   written_ = 0;
+  last_ = nullptr;
   if (!open_stream(path, config)) return false;
   free_.fill(false);
   for (int i = 0; i < count_; ++i) free_[static_cast<std::size_t>(i)] = true;
@@ -406,6 +407,7 @@ bool V4l2Output::write(const std::uint8_t* image, int src_bytes_per_line, int ti
   if (xioctl(fd_, VIDIOC_QBUF, &b) < 0)
     return fail("%s: VIDIOC_QBUF failed: %s", path_.c_str(), std::strerror(errno));
   free_[static_cast<std::size_t>(index)] = false;
+  last_ = dst;
   ++written_;
   return true;
 }

@@ -126,11 +126,18 @@ class V4l2Output final : public V4l2Stream {
 
   std::uint64_t frames_written() const { return written_; }
 
+  // The mapped memory of the buffer queued last (nullptr before any write). Changing it while the
+  // device holds it is outside V4L2's contract, but a loop-back device that copies the output at
+  // capture time (vivid) shows the change: a test can keep one frame queued and move what it
+  // shows with the clock.
+  std::uint8_t* last_written_data() const { return last_; }
+
  private:
   bool reclaim();  // takes back every buffer the device has finished with
 
   std::array<bool, kMaxBuffers> free_{};
   std::uint64_t written_ = 0;
+  std::uint8_t* last_ = nullptr;
 };
 
 }  // namespace mirrorcal::drivers
