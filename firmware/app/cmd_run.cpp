@@ -2,11 +2,14 @@
 // (spidev, i2c-dev or SocketCAN, optionally paced by a GPIO data-ready line); the marker stream
 // from a V4L2 camera whose frames go through the board's marker detection, identified with the
 // filter's prediction at each frame's time (without --camera a run is IMU-only: the filter
-// propagates and the result is the prior, carried through the motion).
+// propagates and the result is the prior, carried through the motion). The live pass keeps what
+// it consumed; the result is then calibrated from it as `mirrorcal calibrate` calibrates a
+// recording (kDefaultPasses passes from the prior: one pass alone is over-confident).
 #include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "cli.hpp"
 #include "devices.hpp"
@@ -29,6 +32,78 @@ class NoMarkers final : public hal::MarkerSource<kMarkers> {
     return hal::SourceStatus::kEndOfStream;
   }
 };
+
+// What the live loop consumed, kept for the calibration after it. The memory is reserved before
+// the loop starts (the loop does not allocate); what does not fit is counted and left out.
+struct SessionLog {
+  SessionLog(std::size_t imu_capacity, std::size_t frame_capacity) {
+    imu.reserve(imu_capacity);
+    frames.reserve(frame_capacity);
+  }
+  std::vector<ImuSample> imu;
+  std::vector<MarkerFrame<kMarkers>> frames;  // as labelled with the filter's prediction
+  std::uint64_t left_out = 0;
+
+  template <class T>
+  void keep(std::vector<T>& v, const T& item) {
+    if (v.size() < v.capacity())
+      v.push_back(item);
+    else
+      ++left_out;
+  }
+  // The log as a recording with the run's sensor description and priors.
+  void to_recording(sim::Recording& r) const {
+    r.imu = imu;
+    r.frames.clear();
+    for (const MarkerFrame<kMarkers>& f : frames) {
+      sim::ObservedFrame o;
+      o.t_ns = f.t_ns;
+      for (int i = 0; i < kMarkers; ++i) {
+        const auto k = static_cast<std::size_t>(i);
+        if (f.seen[k]) o.markers.push_back({i, f.uv[k].x(), f.uv[k].y()});
+      }
+      r.frames.push_back(o);
+    }
+  }
+};
+
+class LoggedImu final : public hal::ImuSource {
+ public:
+  LoggedImu(hal::ImuSource& inner, SessionLog& log) : inner_(inner), log_(log) {}
+  hal::SourceStatus next(ImuSample& s) override {
+    const hal::SourceStatus st = inner_.next(s);
+    if (st == hal::SourceStatus::kOk) log_.keep(log_.imu, s);
+    return st;
+  }
+  const char* error() const override { return inner_.error(); }
+
+ private:
+  hal::ImuSource& inner_;
+  SessionLog& log_;
+};
+
+// The camera's markers; each frame is kept once the loop has labelled it with its prediction.
+class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
+                            public hal::MarkerRelabeler<kMarkers> {
+ public:
+  LoggedMarkers(drivers::DetectingMarkerSource<kMarkers>& inner, SessionLog& log)
+      : inner_(inner), log_(log) {}
+  hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override { return inner_.poll(frame); }
+  void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
+               MarkerFrame<kMarkers>& frame) override {
+    inner_.relabel(prediction, frame);
+    log_.keep(log_.frames, frame);
+  }
+  const char* error() const override { return inner_.error(); }
+  std::int64_t detection_ns() const override { return inner_.detection_ns(); }
+
+ private:
+  drivers::DetectingMarkerSource<kMarkers>& inner_;
+  SessionLog& log_;
+};
+
+// Seconds of data a run without --duration keeps for its calibration (about 2 MB at 200 Hz).
+constexpr double kLoggedSecondsWithoutDuration = 600.0;
 
 }  // namespace
 
@@ -59,23 +134,30 @@ int cmd_run(int argc, char** argv) {
   Filter::Covariance p0;
   initialise(prior, x0, p0);
   filter.reset(x0, p0);
-  StoppingImu imu(*devices.imu, static_cast<std::int64_t>(s.duration_s * 1e9));
-  NoMarkers no_markers;
-  hal::MarkerSource<kMarkers>& markers =
-      camera ? static_cast<hal::MarkerSource<kMarkers>&>(*camera->markers) : no_markers;
-  drivers::MonotonicClock clock;
+  StoppingImu stopping(*devices.imu, static_cast<std::int64_t>(s.duration_s * 1e9));
   const std::int64_t imu_period = imu_period_ns(sensors.sensors.imu_rate_hz);
   // The frame path's budget: the camera's frame interval where the driver reports one, else 20 Hz.
   const std::int64_t frame_period = camera && camera->capture.frame_period_ns() > 0
                                         ? camera->capture.frame_period_ns()
                                         : 50'000'000;
+  const double kept_s = (s.duration_s > 0 ? s.duration_s : kLoggedSecondsWithoutDuration) + 1.0;
+  SessionLog log(
+      static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(imu_period)),
+      camera ? static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(frame_period)) : 0);
+  LoggedImu imu(stopping, log);
+  NoMarkers no_markers;
+  std::unique_ptr<LoggedMarkers> logged_markers;
+  if (camera) logged_markers = std::make_unique<LoggedMarkers>(*camera->markers, log);
+  hal::MarkerSource<kMarkers>& markers =
+      camera ? static_cast<hal::MarkerSource<kMarkers>&>(*logged_markers) : no_markers;
+  drivers::MonotonicClock clock;
   const auto profiler = make_profiler(o, clock, imu_period, frame_period);
   apply_realtime_options(o);
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
   firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc);
-  if (camera) loop.set_identifier(camera->markers.get());
+  if (camera) loop.set_identifier(logged_markers.get());
   std::printf("mirrorcal run: IMU %s%s%s, %s; %s\n", s.imu.c_str(),
               s.drdy.empty() ? "" : ", data-ready ", s.drdy.c_str(),
               describe_camera(s, devices).c_str(),
@@ -91,14 +173,24 @@ int cmd_run(int argc, char** argv) {
 
   const firmware::LoopCounters& lcount = loop.counters();
   std::printf("loop: %llu IMU samples over %.3f s, %llu gaps, %llu out of order, %llu frames\n",
-              static_cast<unsigned long long>(lcount.imu_samples), imu.seconds(),
+              static_cast<unsigned long long>(lcount.imu_samples), stopping.seconds(),
               static_cast<unsigned long long>(lcount.imu_gaps),
               static_cast<unsigned long long>(lcount.imu_out_of_order),
               static_cast<unsigned long long>(lcount.frames));
   print_device_counters(devices);
   if (profiler) report_profile(*profiler, "timing", s.out);
-  const CalibrationResult result =
-      make_result(filter, sensors.sensors.width, sensors.sensors.height);
+  CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
+  if (!log.frames.empty()) {
+    std::printf(
+        "calibrating from the run's %zu IMU samples and %zu labelled frames%s, %d passes as "
+        "`mirrorcal calibrate` does\n",
+        log.imu.size(), log.frames.size(),
+        log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
+    log.to_recording(sensors);
+    SimRun<0> refined;
+    if (!calibrate_recording<0>(sensors, refined, error)) fail(error, 1);
+    result = refined.result;
+  }
   if (!write_camchain_imucam(s.out + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(s.out + "/mirrorcal-result.yaml", result, error))
     fail(error, 1);

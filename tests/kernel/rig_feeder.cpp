@@ -16,7 +16,7 @@
 // A frame's timestamp is vivid's: the time its capture thread copies the output's current frame,
 // plus 0.9 of a frame period (vivid stamps the end of the frame). Rather than queue frames, whose
 // capture time nobody outside vivid knows to better than a frame period, the feeder keeps one
-// output frame queued, which vivid shows for good, and redraws its spots in place every
+// output frame queued, which vivid shows for good, and redraws its spots in place every half
 // millisecond for the time a capture taken then will be stamped with (see
 // V4l2Output::last_written_data). The IMU thread and the redraws run as real-time tasks: they
 // stand for hardware, which does not wait for the program under test.
@@ -130,11 +130,11 @@ int play(const sim::Scenario& s, std::uint64_t seed, double seconds) {
     imu_late = play_imu(data.imu, t0, end, can, can_failed);
   });
 
-  // The shown frame follows the clock: redrawn every millisecond with the rig as it will be at
+  // The shown frame follows the clock: redrawn every 0.5 ms with the rig as it will be at
   // the timestamp vivid gives a capture taken now (0.9 of a period later: vivid stamps the end of
-  // the frame), half a millisecond on for the wait until the next redraw.
+  // the frame), half the wait until the next redraw on.
   realtime(50);
-  constexpr std::int64_t kRedraw = 1'000'000;
+  constexpr std::int64_t kRedraw = 500'000;
   const std::int64_t stamp_offset = 9 * period / 10 + kRedraw / 2;
   std::uint64_t redraws = 0;
   double draw_s = 0.0;

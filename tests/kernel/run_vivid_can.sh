@@ -25,7 +25,7 @@ done
   --duration "$seconds" "$@" >/tmp/run.log 2>&1 &
 run=$!
 # mirrorcal prints its first line once its devices are open; then the rig starts moving.
-while ! grep -q "^mirrorcal run:" /tmp/run.log; do
+while ! grep -qs "^mirrorcal run:" /tmp/run.log; do
   kill -0 $run 2>/dev/null || break
   sleep 0.1
 done
