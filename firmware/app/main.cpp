@@ -30,7 +30,9 @@ const std::vector<Command>& commands() {
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
-       "              --out DIR [--scenario paper] [--seed N] [--intrinsics]\n",
+       "              --out DIR [--scenario paper] [--seed N] [--intrinsics]\n"
+       "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"
+       "              [--duration S] [--drdy CHIP:LINE] [--config FILE]\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
