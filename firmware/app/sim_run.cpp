@@ -109,13 +109,22 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
     run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
                        hooks ? hooks(pass) : LoopHooks{});
     // The next pass starts the calibration parameters at this pass's estimate, with the prior's
-    // covariance: the data are linearised about a far better guess (see sim_run.hpp).
+    // covariance: the data are linearised about a far better guess (see sim_run.hpp). Only where
+    // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result
+    // in stage 2) keeps its own mean, or the data would count twice.
     if (run.history.empty()) break;
     const State& est = run.history.back().state;
-    start.p_b_c = est.p_b_c;
-    start.q_b_c = est.q_b_c;
-    start.markers = est.markers;
-    start.intrinsics = est.intrinsics;
+    const auto prior_negligible = [&](int begin, int dim) {
+      for (int i = begin; i < begin + dim; ++i)
+        if (!(run.covariance(i, i) < kNegligiblePriorWeight * p0(i, i))) return false;
+      return true;
+    };
+    if (prior_negligible(State::kPbc, 3)) start.p_b_c = est.p_b_c;
+    if (prior_negligible(State::kPhi, 3)) start.q_b_c = est.q_b_c;
+    for (int m = 0; m < kMarkers; ++m)
+      if (prior_negligible(State::kPi + 3 * m, 3))
+        start.markers.template segment<3>(3 * m) = est.markers.template segment<3>(3 * m);
+    if (NK > 0 && prior_negligible(State::kK, NK)) start.intrinsics = est.intrinsics;
   }
   return run;
 }
