@@ -13,11 +13,14 @@
 #
 #   mirrorcal_kernel_test(NAME (PROGRAM guest | SCRIPT file [ARCH amd64|arm64]) [ARGS arg...]
 #                         [MODULES "name [param=value ...]"...] [SETUP "shell command"...]
-#                         [HOST_TOOLS /usr/bin/cansend ...] [FILES file...] [MONITOR] [TIMEOUT s])
+#                         [HOST_TOOLS /usr/bin/cansend ...] [FILES file...] [MONITOR] [TIMEOUT s]
+#                         [ICOUNT shift])
 #     A CTest test labelled `kernel` running PROGRAM ARGS in the guest after loading MODULES (their
 #     dependencies first) and running SETUP; its exit status is the test's. See run-in-qemu.
 #     SCRIPT runs a busybox shell script instead (e.g. to start a peer beside a host tool such as
 #     the mirrorcal program, which HOST_TOOLS copies in with its shared libraries; amd64 only).
+#     ICOUNT gives the guest a clock of its own instructions (run-in-qemu --icount), for tests
+#     that play sensors in real time: the host's load then cannot stall the guest's time.
 #
 # Not available in the sanitizer build (static linking and ASan do not mix): there the functions
 # do nothing and MIRRORCAL_KERNEL_TESTS is OFF.
@@ -106,7 +109,7 @@ function(mirrorcal_kernel_test)
   if(NOT MIRRORCAL_KERNEL_TESTS)
     return()
   endif()
-  cmake_parse_arguments(PARSE_ARGV 0 K "MONITOR" "NAME;PROGRAM;SCRIPT;ARCH;TIMEOUT"
+  cmake_parse_arguments(PARSE_ARGV 0 K "MONITOR" "NAME;PROGRAM;SCRIPT;ARCH;TIMEOUT;ICOUNT"
                         "ARGS;MODULES;SETUP;HOST_TOOLS;FILES")
   if(NOT K_NAME OR (NOT K_PROGRAM AND NOT K_SCRIPT))
     message(FATAL_ERROR "mirrorcal_kernel_test: NAME and PROGRAM or SCRIPT are required")
@@ -143,6 +146,9 @@ function(mirrorcal_kernel_test)
   endforeach()
   if(K_MONITOR)
     list(APPEND cmd --monitor)
+  endif()
+  if(DEFINED K_ICOUNT)
+    list(APPEND cmd --icount ${K_ICOUNT})
   endif()
   add_test(NAME ${K_NAME} COMMAND ${cmd} -- ${file} ${K_ARGS})
   _mirrorcal_kernel_fixture(${arch})

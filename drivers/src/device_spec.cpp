@@ -84,4 +84,25 @@ LineSpec parse_line_spec(const std::string& spec) {
   return out;
 }
 
+CameraSpec parse_camera_spec(const std::string& spec) {
+  CameraSpec out;
+  out.text = spec;
+  out.device = spec;
+  const std::size_t colon = spec.rfind(':');
+  if (colon != std::string::npos) {
+    const std::string format = spec.substr(colon + 1);
+    if (format == "grey")
+      out.format = hal::PixelFormat::kGrey;
+    else if (format == "yuyv")
+      out.format = hal::PixelFormat::kYuyv;
+    else
+      bad(spec, "unknown pixel format '" + format + "' (grey or yuyv)");
+    out.format_given = true;
+    out.device = spec.substr(0, colon);
+  }
+  if (out.device.empty() || out.device[0] != '/')
+    bad(spec, "expected a device path, e.g. /dev/video0 or /dev/video0:yuyv");
+  return out;
+}
+
 }  // namespace mirrorcal::drivers

@@ -119,11 +119,18 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
                 reinterpret_cast<const char*>(cap.card));
   }
 
+  hal::PixelFormat format = config.format;
   v4l2_format fmt{};
+  fmt.type = buf_type;
+  if (config.format_from_device && xioctl(fd_, VIDIOC_G_FMT, &fmt) == 0) {
+    if (fmt.fmt.pix.pixelformat == V4L2_PIX_FMT_GREY) format = hal::PixelFormat::kGrey;
+    if (fmt.fmt.pix.pixelformat == V4L2_PIX_FMT_YUYV) format = hal::PixelFormat::kYuyv;
+  }
+  fmt = v4l2_format{};
   fmt.type = buf_type;
   fmt.fmt.pix.width = static_cast<std::uint32_t>(config.width);
   fmt.fmt.pix.height = static_cast<std::uint32_t>(config.height);
-  fmt.fmt.pix.pixelformat = fourcc_of(config.format);
+  fmt.fmt.pix.pixelformat = fourcc_of(format);
   fmt.fmt.pix.field = V4L2_FIELD_NONE;
   if (xioctl(fd_, VIDIOC_S_FMT, &fmt) < 0) {
     const int e = errno;
@@ -132,10 +139,9 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     return fail("%s: VIDIOC_S_FMT failed: %s", p, std::strerror(e));
   }
   const v4l2_pix_format& got = fmt.fmt.pix;
-  if (got.pixelformat != fourcc_of(config.format) || static_cast<int>(got.width) != config.width ||
+  if (got.pixelformat != fourcc_of(format) || static_cast<int>(got.width) != config.width ||
       static_cast<int>(got.height) != config.height) {
-    const FourccText want_t = fourcc_text(fourcc_of(config.format)),
-                     got_t = fourcc_text(got.pixelformat);
+    const FourccText want_t = fourcc_text(fourcc_of(format)), got_t = fourcc_text(got.pixelformat);
     close();
     return fail("%s does not support %s %dx%d (the driver offers %s %ux%u)", p, want_t.s,
                 config.width, config.height, got_t.s, got.width, got.height);
@@ -145,7 +151,7 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     return fail("%s delivers interlaced frames (field %u); only progressive is supported", p,
                 got.field);
   }
-  format_ = config.format;
+  format_ = format;
   width_ = config.width;
   height_ = config.height;
   // Honour the driver's stride and image size: rows may be padded.
@@ -159,6 +165,18 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     close();
     return fail("%s reports an image size of %u bytes, less than %zu for %dx%d", p, got.sizeimage,
                 need, width_, height_);
+  }
+
+  // The frame interval, where the driver tells it (capture: timeperframe; output: timeperframe).
+  frame_period_ns_ = 0;
+  v4l2_streamparm parm{};
+  parm.type = buf_type;
+  if (xioctl(fd_, VIDIOC_G_PARM, &parm) == 0) {
+    const v4l2_fract& tpf =
+        output_ ? parm.parm.output.timeperframe : parm.parm.capture.timeperframe;
+    if (tpf.numerator > 0 && tpf.denominator > 0)
+      frame_period_ns_ =
+          static_cast<std::int64_t>(1'000'000'000LL * tpf.numerator / tpf.denominator);
   }
 
   v4l2_requestbuffers req{};
@@ -326,6 +344,7 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
 
 bool V4l2Output::open(const std::string& path, const V4l2Config& config) {
   written_ = 0;
+  last_ = nullptr;
   if (!open_stream(path, config)) return false;
   free_.fill(false);
   for (int i = 0; i < count_; ++i) free_[static_cast<std::size_t>(i)] = true;
@@ -388,6 +407,7 @@ bool V4l2Output::write(const std::uint8_t* image, int src_bytes_per_line, int ti
   if (xioctl(fd_, VIDIOC_QBUF, &b) < 0)
     return fail("%s: VIDIOC_QBUF failed: %s", path_.c_str(), std::strerror(errno));
   free_[static_cast<std::size_t>(index)] = false;
+  last_ = dst;
   ++written_;
   return true;
 }

@@ -1,17 +1,87 @@
-// mirrorcal record: the simulated rig's streams and priors, written as a EuRoC recording that
-// `mirrorcal calibrate` replays bit-identically to `mirrorcal sim` with the same seed.
+// mirrorcal record: a EuRoC recording, either of the simulated rig's streams and priors (which
+// `mirrorcal calibrate` replays bit-identically to `mirrorcal sim` with the same seed), or, with
+// --imu, of the board's devices (the IMU's samples and the markers detected in the camera's
+// frames, labelled by their brightness) through the same writer.
 #include <cstdio>
+#include <filesystem>
 #include <string>
 
 #include "cli.hpp"
+#include "devices.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "sim_run.hpp"
 
 namespace mirrorcal::app {
 
+namespace {
+
+// The board's devices into dir until --duration or Ctrl-C. With --sensors, its imu.yaml,
+// camchain.yaml and mirrorcal.yaml are copied beside the streams (the camera's size is
+// camchain.yaml's), so `mirrorcal calibrate DIR` takes the recording as it is; else the camera
+// streams 640x480.
+int record_devices(const Options& o, const std::string& dir) {
+  const RunSettings s = device_settings(o, "record", false);
+  sim::Recording sensors;
+  if (!s.sensors.empty()) read_sensors(s.sensors, sensors);
+  const Devices devices = open_devices(s, sensors.sensors.width, sensors.sensors.height);
+
+  std::string err;
+  sim::RecordingWriter writer;
+  if (!writer.open(dir, err)) fail(err, 1);
+  std::printf("mirrorcal record: IMU %s, %s; %s into %s\n", s.imu.c_str(),
+              describe_camera(s, devices).c_str(),
+              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
+                               : "until Ctrl-C or the IMU stops",
+              dir.c_str());
+  std::fflush(stdout);
+  StoppingImu imu(*devices.imu, static_cast<std::int64_t>(s.duration_s * 1e9));
+  hal::SourceStatus imu_status, frame_status = hal::SourceStatus::kNotReady;
+  std::uint64_t frames = 0;
+  {
+    StopOnSignal stop_on_signal;
+    ImuSample sample;
+    MarkerFrame<kMarkers> frame;
+    while ((imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
+      if (!writer.add_imu(sample)) break;
+      // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
+      while (devices.camera &&
+             (frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
+        if (!writer.add_frame(frame)) break;
+        ++frames;
+      }
+      if (frame_status == hal::SourceStatus::kError) break;
+    }
+  }
+  StopOnSignal::report("closing the recording");
+  const bool written = writer.close(err);
+  std::printf("record: %llu IMU samples over %.3f s, %llu frames\n",
+              static_cast<unsigned long long>(imu.samples()), imu.seconds(),
+              static_cast<unsigned long long>(frames));
+  print_device_counters(devices);
+  if (!written) fail(err, 1);
+  if (imu_status == hal::SourceStatus::kError) fail(imu.error(), 1);
+  if (frame_status == hal::SourceStatus::kError) fail(devices.camera->markers->error(), 1);
+  if (!s.sensors.empty()) {
+    std::error_code ec;
+    for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
+      if (!std::filesystem::copy_file(s.sensors + "/" + f, dir + "/" + f,
+                                      std::filesystem::copy_options::overwrite_existing, ec))
+        fail(dir + "/" + f + ": cannot write: " + ec.message(), 1);
+  }
+  std::printf("wrote %s/mav0%s\n", dir.c_str(),
+              s.sensors.empty() ? "" : " and the sensor files of --sensors");
+  return 0;
+}
+
+}  // namespace
+
 int cmd_record(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"scenario", "seed", "out"}, {"intrinsics"});
+  std::vector<std::string> with_value = {"scenario", "seed", "out", "config"};
+  for (const char* key : kRunKeys)
+    if (std::string(key) != "out") with_value.emplace_back(key);
+  const Options o = parse(argc, argv, 2, with_value, {"intrinsics"});
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
+  if (o.flag("imu") || o.flag("config")) return record_devices(o, make_out_dir(o, ""));
   const sim::Scenario s = scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const std::string dir = make_out_dir(o, "");

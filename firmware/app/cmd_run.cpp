@@ -1,22 +1,20 @@
 // mirrorcal run: the calibration loop on the board's own devices. The IMU comes from a driver
 // (spidev, i2c-dev or SocketCAN, optionally paced by a GPIO data-ready line); the marker stream
-// from open_marker_source(), where the camera's capture and detection plug in (until then a run
-// is IMU-only: the filter propagates and the result is the prior, carried through the motion).
+// from a V4L2 camera whose frames go through the board's marker detection, identified with the
+// filter's prediction at each frame's time (without --camera a run is IMU-only: the filter
+// propagates and the result is the prior, carried through the motion). The live pass keeps what
+// it consumed; the result is then calibrated from it as `mirrorcal calibrate` calibrates a
+// recording (kDefaultPasses passes from the prior: one pass alone is over-confident).
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
-#include <sstream>
 #include <string>
+#include <vector>
 
 #include "cli.hpp"
+#include "devices.hpp"
 #include "loop_options.hpp"
-#include "mirrorcal/drivers/can_imu.hpp"
-#include "mirrorcal/drivers/device_spec.hpp"
-#include "mirrorcal/drivers/gpio_lines.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
-#include "mirrorcal/drivers/open_imu.hpp"
-#include "mirrorcal/drivers/register_imu.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "outputs.hpp"
@@ -35,103 +33,78 @@ class NoMarkers final : public hal::MarkerSource<kMarkers> {
   }
 };
 
-// The marker source of the run's camera (none: IMU only).
-std::unique_ptr<hal::MarkerSource<kMarkers>> open_marker_source(const RunSettings& s) {
-  if (s.camera.empty()) return std::make_unique<NoMarkers>();
-  fail("--camera " + s.camera +
-           ": `run` does not drive a camera yet; run without --camera for "
-           "the IMU alone",
-       2);
-}
-
-// Ends the device's stream after `duration_ns` of samples (0: never) and counts them.
-class LimitedImu final : public hal::ImuSource {
- public:
-  LimitedImu(hal::ImuSource& device, std::int64_t duration_ns)
-      : device_(device), duration_ns_(duration_ns) {}
-  hal::SourceStatus next(ImuSample& s) override {
-    const hal::SourceStatus st = device_.next(s);
-    if (st != hal::SourceStatus::kOk) return st;
-    if (samples_++ == 0) first_ns_ = s.t_ns;
-    last_ns_ = s.t_ns;
-    if (duration_ns_ > 0 && s.t_ns - first_ns_ > duration_ns_)
-      return hal::SourceStatus::kEndOfStream;
-    return st;
+// What the live loop consumed, kept for the calibration after it. The memory is reserved before
+// the loop starts (the loop does not allocate); what does not fit is counted and left out.
+struct SessionLog {
+  SessionLog(std::size_t imu_capacity, std::size_t frame_capacity) {
+    imu.reserve(imu_capacity);
+    frames.reserve(frame_capacity);
   }
-  const char* error() const override { return device_.error(); }
-  std::uint64_t samples() const { return samples_; }
-  double seconds() const { return static_cast<double>(last_ns_ - first_ns_) * 1e-9; }
+  std::vector<ImuSample> imu;
+  std::vector<MarkerFrame<kMarkers>> frames;  // as labelled with the filter's prediction
+  std::uint64_t left_out = 0;
 
- private:
-  hal::ImuSource& device_;
-  std::int64_t duration_ns_;
-  std::uint64_t samples_ = 0;
-  std::int64_t first_ns_ = 0, last_ns_ = 0;
+  template <class T>
+  void keep(std::vector<T>& v, const T& item) {
+    if (v.size() < v.capacity())
+      v.push_back(item);
+    else
+      ++left_out;
+  }
+  // The log as a recording with the run's sensor description and priors.
+  void to_recording(sim::Recording& r) const {
+    r.imu = imu;
+    r.frames.clear();
+    for (const MarkerFrame<kMarkers>& f : frames) {
+      sim::ObservedFrame o;
+      o.t_ns = f.t_ns;
+      for (int i = 0; i < kMarkers; ++i) {
+        const auto k = static_cast<std::size_t>(i);
+        if (f.seen[k]) o.markers.push_back({i, f.uv[k].x(), f.uv[k].y()});
+      }
+      r.frames.push_back(o);
+    }
+  }
 };
 
-bool read_text(const std::string& path, std::string& text, std::string& error) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    error = path + ": cannot read";
-    return false;
+class LoggedImu final : public hal::ImuSource {
+ public:
+  LoggedImu(hal::ImuSource& inner, SessionLog& log) : inner_(inner), log_(log) {}
+  hal::SourceStatus next(ImuSample& s) override {
+    const hal::SourceStatus st = inner_.next(s);
+    if (st == hal::SourceStatus::kOk) log_.keep(log_.imu, s);
+    return st;
   }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  text = ss.str();
-  return true;
-}
+  const char* error() const override { return inner_.error(); }
 
-// imu.yaml, camchain.yaml and mirrorcal.yaml of dir, as beside a recording.
-void read_sensors(const std::string& dir, sim::Recording& r) {
-  std::string text, error;
-  const std::string imu = dir + "/imu.yaml", cam = dir + "/camchain.yaml",
-                    priors = dir + "/mirrorcal.yaml";
-  if (!read_text(imu, text, error) || !sim::parse_imu_yaml(text, imu, r.sensors, error) ||
-      !read_text(cam, text, error) ||
-      !sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) ||
-      !read_text(priors, text, error) ||
-      !sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error))
-    fail(error, 2);
-}
+ private:
+  hal::ImuSource& inner_;
+  SessionLog& log_;
+};
 
-RunSettings settings(const Options& o) {
-  RunSettings s;
-  std::string error;
-  if (o.flag("config")) {
-    const std::string file = o.get("config", "");
-    std::string text;
-    if (!read_text(file, text, error) || !parse_run_config(text, file, s, error)) fail(error, 2);
+// The camera's markers; each frame is kept once the loop has labelled it with its prediction.
+class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
+                            public hal::MarkerRelabeler<kMarkers> {
+ public:
+  LoggedMarkers(drivers::DetectingMarkerSource<kMarkers>& inner, SessionLog& log)
+      : inner_(inner), log_(log) {}
+  hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override { return inner_.poll(frame); }
+  void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
+               MarkerFrame<kMarkers>& frame) override {
+    inner_.relabel(prediction, frame);
+    log_.keep(log_.frames, frame);
   }
-  for (const char* key : kRunKeys)
-    if (o.flag(key) && !set_run_setting(s, key, o.get(key, ""), error)) fail("--" + error, 2);
-  if (s.imu.empty()) fail("run: no IMU given (--imu SPEC, or `imu:` in the --config file)", 2);
-  if (s.sensors.empty())
-    fail(
-        "run: no sensor description given (--sensors DIR with imu.yaml, camchain.yaml and "
-        "mirrorcal.yaml, as `mirrorcal record` writes them)",
-        2);
-  return s;
-}
+  const char* error() const override { return inner_.error(); }
+  std::int64_t detection_ns() const override { return inner_.detection_ns(); }
 
-void print_driver_counters(const hal::ImuSource& imu) {
-  if (const auto* can = dynamic_cast<const drivers::CanImu*>(&imu)) {
-    const drivers::CanImuCounters& c = can->counters();
-    std::printf(
-        "CAN: %llu frames, %llu lost, %llu incomplete samples, %llu rejected, %llu error "
-        "frames, %llu bus-off, %llu recoveries\n",
-        static_cast<unsigned long long>(c.frames), static_cast<unsigned long long>(c.lost_frames()),
-        static_cast<unsigned long long>(c.assembly.incomplete_samples),
-        static_cast<unsigned long long>(c.rejected_frames),
-        static_cast<unsigned long long>(c.error_frames), static_cast<unsigned long long>(c.bus_off),
-        static_cast<unsigned long long>(c.recoveries));
-  } else if (const auto* reg = dynamic_cast<const drivers::RegisterImu*>(&imu)) {
-    const drivers::RegisterImuCounters& c = reg->counters();
-    std::printf("IMU: %llu samples, %llu missed (data-ready), %llu read retries\n",
-                static_cast<unsigned long long>(c.samples),
-                static_cast<unsigned long long>(c.missed_samples),
-                static_cast<unsigned long long>(c.read_retries));
-  }
-}
+ private:
+  drivers::DetectingMarkerSource<kMarkers>& inner_;
+  SessionLog& log_;
+};
+
+// Seconds of data a run without --duration keeps for its calibration: about 7 MB of IMU samples
+// at 200 Hz and 2 MB of frames at 60 Hz, reserved at the start.
+constexpr double kLoggedSecondsWithoutDuration = 600.0;
 
 }  // namespace
 
@@ -142,7 +115,7 @@ int cmd_run(int argc, char** argv) {
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   const Options o = parse(argc, argv, 2, with_value, flags);
-  const RunSettings s = settings(o);
+  const RunSettings s = device_settings(o, "run", true);
 
   sim::Recording sensors;
   read_sensors(s.sensors, sensors);
@@ -152,22 +125,8 @@ int cmd_run(int argc, char** argv) {
     fail(s.sensors + "/mirrorcal.yaml: " + error, 2);
 
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
-  std::unique_ptr<drivers::GpioDataReady> drdy;
-  std::unique_ptr<hal::ImuSource> device;
-  std::unique_ptr<hal::MarkerSource<kMarkers>> markers;
-  try {
-    const drivers::ImuSpec spec = drivers::parse_imu_spec(s.imu);
-    if (!s.drdy.empty())
-      drdy = std::make_unique<drivers::GpioDataReady>(drivers::parse_line_spec(s.drdy));
-    drivers::RegisterImuConfig imu_config;
-    imu_config.rate_hz = s.rate_hz;
-    imu_config.gyro_range_dps = s.gyro_range_dps;
-    imu_config.accel_range_g = s.accel_range_g;
-    device = drivers::open_imu(spec, imu_config, drdy.get());
-    markers = open_marker_source(s);
-  } catch (const drivers::DriverError& e) {
-    fail(e.what(), 1);
-  }
+  const Devices devices = open_devices(s, sensors.sensors.width, sensors.sensors.height);
+  const std::unique_ptr<Camera>& camera = devices.camera;
   std::filesystem::create_directories(s.out);
 
   using Filter = CalibrationFilter<double, kMarkers, 0>;
@@ -176,41 +135,70 @@ int cmd_run(int argc, char** argv) {
   Filter::Covariance p0;
   initialise(prior, x0, p0);
   filter.reset(x0, p0);
-  LimitedImu imu(*device, static_cast<std::int64_t>(s.duration_s * 1e9));
-  drivers::MonotonicClock clock;
+  StoppingImu stopping(*devices.imu, static_cast<std::int64_t>(s.duration_s * 1e9));
   const std::int64_t imu_period = imu_period_ns(sensors.sensors.imu_rate_hz);
-  const std::int64_t frame_period = 50'000'000;  // 20 Hz, until a camera says otherwise
+  // The frame path's budget: the camera's frame interval where the driver reports one, else 20 Hz.
+  const std::int64_t frame_period = camera && camera->capture.frame_period_ns() > 0
+                                        ? camera->capture.frame_period_ns()
+                                        : 50'000'000;
+  const double kept_s = (s.duration_s > 0 ? s.duration_s : kLoggedSecondsWithoutDuration) + 1.0;
+  SessionLog log(
+      static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(imu_period)),
+      camera ? static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(frame_period)) : 0);
+  LoggedImu imu(stopping, log);
+  NoMarkers no_markers;
+  std::unique_ptr<LoggedMarkers> logged_markers;
+  if (camera) logged_markers = std::make_unique<LoggedMarkers>(*camera->markers, log);
+  hal::MarkerSource<kMarkers>& markers =
+      camera ? static_cast<hal::MarkerSource<kMarkers>&>(*logged_markers) : no_markers;
+  drivers::MonotonicClock clock;
   const auto profiler = make_profiler(o, clock, imu_period, frame_period);
   apply_realtime_options(o);
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
-  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, *markers, lc);
+  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc);
+  if (camera) loop.set_identifier(logged_markers.get());
   std::printf("mirrorcal run: IMU %s%s%s, %s; %s\n", s.imu.c_str(),
               s.drdy.empty() ? "" : ", data-ready ", s.drdy.c_str(),
-              s.camera.empty() ? "no camera (IMU only)" : s.camera.c_str(),
+              describe_camera(s, devices).c_str(),
               s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
                                : "until the IMU stops");
   std::fflush(stdout);
-  const firmware::LoopEnd end = loop.run();
+  firmware::LoopEnd end;
+  {
+    StopOnSignal stop_on_signal;
+    end = loop.run();
+  }
+  StopOnSignal::report("writing the calibration so far");
 
   const firmware::LoopCounters& lcount = loop.counters();
   std::printf("loop: %llu IMU samples over %.3f s, %llu gaps, %llu out of order, %llu frames\n",
-              static_cast<unsigned long long>(lcount.imu_samples), imu.seconds(),
+              static_cast<unsigned long long>(lcount.imu_samples), stopping.seconds(),
               static_cast<unsigned long long>(lcount.imu_gaps),
               static_cast<unsigned long long>(lcount.imu_out_of_order),
               static_cast<unsigned long long>(lcount.frames));
-  print_driver_counters(*device);
+  print_device_counters(devices);
   if (profiler) report_profile(*profiler, "timing", s.out);
-  const CalibrationResult result =
-      make_result(filter, sensors.sensors.width, sensors.sensors.height);
+  CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
+  if (!log.frames.empty()) {
+    std::printf(
+        "calibrating from the run's %zu IMU samples and %zu labelled frames%s, %d passes as "
+        "`mirrorcal calibrate` does\n",
+        log.imu.size(), log.frames.size(),
+        log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
+    log.to_recording(sensors);
+    SimRun<0> refined;
+    if (!calibrate_recording<0>(sensors, refined, error)) fail(error, 1);
+    result = refined.result;
+  }
   if (!write_camchain_imucam(s.out + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(s.out + "/mirrorcal-result.yaml", result, error))
     fail(error, 1);
   std::printf("wrote %s/camchain-imucam.yaml and %s/mirrorcal-result.yaml\n", s.out.c_str(),
               s.out.c_str());
   if (end == firmware::LoopEnd::kImuError) fail(imu.error(), 1);
-  if (end == firmware::LoopEnd::kMarkerError) fail(markers->error(), 1);
+  if (end == firmware::LoopEnd::kMarkerError) fail(markers.error(), 1);
   return 0;
 }
 

@@ -20,7 +20,7 @@
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario", "seed", "out", "format"},
+  std::vector<std::string> with_value = {"scenario", "seed", "out", "format", "passes"},
                            flags = {"no-plots", "frames", "intrinsics"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
@@ -38,6 +38,8 @@ int cmd_sim(int argc, char** argv) {
     fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
   const sim::Scenario s = scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
+  const int passes = static_cast<int>(parse_count(o, "passes", kDefaultPasses, 1));
+  if (intrinsics && o.flag("passes")) fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/sim");
   firmware::MonotonicClock clock;  // the simulation's own clock is simulated time
   const auto profiler = make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
@@ -115,7 +117,7 @@ int cmd_sim(int argc, char** argv) {
   if (intrinsics)
     report(run_two_stage_simulation(s, seed, progress));
   else
-    report(run_simulation(s, seed, progress, frames, profiler.get()));
+    report(run_simulation(s, seed, progress, frames, profiler.get(), passes));
   return 0;
 }
 

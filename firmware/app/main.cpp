@@ -19,6 +19,7 @@ const std::vector<Command>& commands() {
        "  sim         calibrate a simulated rig in front of a mirror\n"
        "              [--scenario paper] [--seed N] [--out DIR] [--no-plots] [--intrinsics]\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
+       "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},
@@ -29,7 +30,9 @@ const std::vector<Command>& commands() {
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
-       "              --out DIR [--scenario paper] [--seed N] [--intrinsics]\n",
+       "              --out DIR [--scenario paper] [--seed N] [--intrinsics]\n"
+       "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"
+       "              [--duration S] [--drdy CHIP:LINE] [--config FILE]\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "

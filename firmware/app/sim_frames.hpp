@@ -23,6 +23,7 @@ class RenderedMarkers final : public hal::MarkerSource<kMarkers>,
  public:
   RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render, std::uint64_t seed);
   hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override { return detect_.poll(frame); }
+  std::int64_t detection_ns() const override { return detect_.detection_ns(); }
   void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
                MarkerFrame<kMarkers>& frame) override;
   DetectionReport report() const;

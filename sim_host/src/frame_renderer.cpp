@@ -53,14 +53,20 @@ FrameRenderer::FrameRenderer(const Scenario& scenario, const RenderConfig& confi
   for (float& v : noise_) v = n01(rng);
 }
 
+FrameRenderer::Window FrameRenderer::spot_window(double u, double v) const {
+  const int r = static_cast<int>(std::ceil(4.0 * config_.psf_sigma_px)) + 1;
+  Window w;
+  w.x0 = std::max(0, static_cast<int>(std::floor(u)) - r);
+  w.x1 = std::min(width_ - 1, static_cast<int>(std::ceil(u)) + r);
+  w.y0 = std::max(0, static_cast<int>(std::floor(v)) - r);
+  w.y1 = std::min(height_ - 1, static_cast<int>(std::ceil(v)) + r);
+  return w;
+}
+
 void FrameRenderer::add_spot(double u, double v, double peak) {
   const double s = config_.psf_sigma_px;
   const double flux = peak * 2.0 * M_PI * s * s;
-  const int r = static_cast<int>(std::ceil(4.0 * s)) + 1;
-  const int x0 = std::max(0, static_cast<int>(std::floor(u)) - r);
-  const int x1 = std::min(width_ - 1, static_cast<int>(std::ceil(u)) + r);
-  const int y0 = std::max(0, static_cast<int>(std::floor(v)) - r);
-  const int y1 = std::min(height_ - 1, static_cast<int>(std::ceil(v)) + r);
+  const auto [x0, x1, y0, y1] = spot_window(u, v);
   if (x0 > x1 || y0 > y1) return;
   // The Gaussian integrated over pixel [x - 0.5, x + 0.5] x [y - 0.5, y + 0.5]: separable.
   const double k = 1.0 / (s * std::sqrt(2.0));
@@ -111,6 +117,46 @@ void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::ui
     add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);
   }
   finish(frame_index, image);
+}
+
+void FrameRenderer::update_spots(std::int64_t t_ns, const std::uint8_t* still, std::uint8_t* image,
+                                 RenderedTruth& truth) {
+  const int step = hal::bytes_per_pixel(config_.format);
+  const auto stride = static_cast<std::size_t>(bytes_per_line());
+  for (const Window& w : drawn_)
+    for (int y = w.y0; y <= w.y1; ++y) {
+      const std::size_t at =
+          static_cast<std::size_t>(y) * stride + static_cast<std::size_t>(w.x0 * step);
+      std::copy(still + at, still + at + static_cast<std::size_t>((w.x1 - w.x0 + 1) * step),
+                image + at);
+    }
+  drawn_.clear();
+  const Kinematics kin = kinematics(scenario_.motion, static_cast<double>(t_ns) * 1e-9);
+  const auto m = scenario_.truth.markers.size();
+  truth.t_ns = t_ns;
+  truth.visible.assign(m, false);
+  truth.uv.assign(m, Eigen::Vector2d::Zero());
+  for (std::size_t i = 0; i < m; ++i) {
+    Eigen::Vector2d uv;
+    if (!true_pixel(scenario_, kin.p, kin.q_n_b, static_cast<int>(i), uv)) continue;
+    truth.visible[i] = true;
+    truth.uv[i] = uv;
+    add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);
+    drawn_.push_back(spot_window(uv.x(), uv.y()));
+  }
+  // Spots that overlap are summed in the canvas: write each window once, then clear them all.
+  for (const Window& w : drawn_)
+    for (int y = w.y0; y <= w.y1; ++y)
+      for (int x = w.x0; x <= w.x1; ++x) {
+        const auto p = static_cast<std::size_t>(y * width_ + x);
+        const std::size_t at =
+            static_cast<std::size_t>(y) * stride + static_cast<std::size_t>(x * step);
+        image[at] =
+            static_cast<std::uint8_t>(std::clamp(std::lround(still[at] + canvas_[p]), 0L, 255L));
+      }
+  for (const Window& w : drawn_)
+    for (int y = w.y0; y <= w.y1; ++y)
+      std::fill(canvas_.begin() + y * width_ + w.x0, canvas_.begin() + y * width_ + w.x1 + 1, 0.0f);
 }
 
 RenderedFrameSource::RenderedFrameSource(const Scenario& scenario, const RenderConfig& config,

@@ -166,6 +166,47 @@ TEST(BlobDetector, GreyAndYuyvGiveTheSameBlobs) {
   }
 }
 
+TEST(BlobDetector, SpotsUpdatedOverAStillFrameAreFoundWhereDrawn) {
+  // FrameRenderer::update_spots (real-time feeders): only the spots move; the previous ones are
+  // wiped back to the still frame, and detection finds the new ones as in a fully rendered frame.
+  Canvas c({}, 5);
+  const mc::hal::FrameView still_view = c.finish(0);
+  const std::vector<std::uint8_t> still(still_view.data, still_view.data + still_view.bytes);
+  std::vector<std::uint8_t> image = still;
+  BlobDetector detector({}, 640, 480);
+  mc::sim::RenderedTruth truth;
+  for (const std::int64_t t_ns : {1'000'000'000LL, 2'300'000'000LL}) {
+    c.renderer.update_spots(t_ns, still.data(), image.data(), truth);
+    const mc::hal::FrameView v = view_of(image, mc::hal::PixelFormat::kGrey, 640, 480, 640);
+    Blob blobs[8];
+    const int n = detector.detect(v, blobs, 8);
+    int visible = 0;
+    for (int i = 0; i < M; ++i) {
+      if (!truth.visible[i]) continue;
+      ++visible;
+      double best = 1e9;
+      for (int j = 0; j < n; ++j)
+        best =
+            std::min(best, std::hypot(blobs[j].u - truth.uv[i].x(), blobs[j].v - truth.uv[i].y()));
+      EXPECT_LT(best, 0.1) << "marker " << i << " at " << t_ns << " ns";
+    }
+    ASSERT_GT(visible, 0);
+    EXPECT_EQ(n, visible);
+    // Everything that differs from the still frame lies around a spot of this time.
+    for (int y = 0; y < 480; ++y)
+      for (int x = 0; x < 640; ++x) {
+        if (image[static_cast<std::size_t>(y * 640 + x)] ==
+            still[static_cast<std::size_t>(y * 640 + x)])
+          continue;
+        bool near = false;
+        for (int i = 0; i < M; ++i)
+          near = near || (truth.visible[i] && std::fabs(x - truth.uv[i].x()) < 8 &&
+                          std::fabs(y - truth.uv[i].y()) < 8);
+        ASSERT_TRUE(near) << "pixel " << x << "," << y << " changed away from the spots";
+      }
+  }
+}
+
 TEST(BlobDetector, HonoursPaddedRows) {
   // The driver's bytes_per_line may exceed the row: padding full of bright bytes must not be read.
   Canvas c;

@@ -35,6 +35,37 @@ TEST(DeviceSpec, LineForms) {
   EXPECT_EQ(b.line, 0u);
 }
 
+TEST(DeviceSpec, CameraForms) {
+  const CameraSpec plain = parse_camera_spec("/dev/video0");
+  EXPECT_EQ(plain.device, "/dev/video0");
+  EXPECT_FALSE(plain.format_given);
+  const CameraSpec grey = parse_camera_spec("/dev/video2:grey");
+  EXPECT_EQ(grey.device, "/dev/video2");
+  EXPECT_TRUE(grey.format_given);
+  EXPECT_EQ(grey.format, hal::PixelFormat::kGrey);
+  const CameraSpec yuyv = parse_camera_spec("/dev/v4l/by-id/cam:yuyv");
+  EXPECT_EQ(yuyv.device, "/dev/v4l/by-id/cam");
+  EXPECT_EQ(yuyv.format, hal::PixelFormat::kYuyv);
+  EXPECT_EQ(yuyv.text, "/dev/v4l/by-id/cam:yuyv");
+}
+
+TEST(DeviceSpec, BadCameraSpecsAreRefusedWithAReason) {
+  for (const auto& [spec, fragment] :
+       {std::pair<std::string, std::string>{"/dev/video0:rgb24", "unknown pixel format 'rgb24'"},
+        {"video0", "device path"},
+        {":grey", "device path"}}) {
+    try {
+      parse_camera_spec(spec);
+      ADD_FAILURE() << "accepted '" << spec << "'";
+    } catch (const DriverError& e) {
+      EXPECT_EQ(e.fault(), Fault::kBadSpec);
+      const std::string what = e.what();
+      EXPECT_NE(what.find("'" + spec + "'"), std::string::npos) << what;
+      EXPECT_NE(what.find(fragment), std::string::npos) << what;
+    }
+  }
+}
+
 void expect_bad(const std::string& spec, bool imu, const std::string& fragment) {
   try {
     if (imu)

@@ -19,6 +19,7 @@
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
+#include "vcan_sender.hpp"
 
 namespace {
 
@@ -29,16 +30,6 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kG = 9.80665;
 constexpr double kRateBit = 0.005 * kPi / 180;  // the layout's steps, in SI
 constexpr double kAccelBit = 0.000127465 * kG;
-
-// A plain raw socket on the interface: the sending side, a different program's view of the bus.
-int open_sender(const char* ifname) {
-  const int fd = socket(PF_CAN, SOCK_RAW, CAN_RAW);
-  sockaddr_can addr{};
-  addr.can_family = AF_CAN;
-  addr.can_ifindex = static_cast<int>(if_nametoindex(ifname));
-  if (fd < 0 || bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) return -1;
-  return fd;
-}
 
 void write_raw(int fd, canid_t id, std::uint8_t len) {
   can_frame f{};
@@ -184,7 +175,7 @@ void candump_peer(CanImuSender& sender) {
 // `guest_can send SECONDS`: the simulated rig as a live MM7.10 on vcan0, in real time (the peer
 // of `mirrorcal run` in kernel_run_can).
 int send_live(double seconds) {
-  const int tx = open_sender("vcan0");
+  const int tx = guest::open_sender("vcan0");
   if (tx < 0) return 1;
   sim::Scenario scenario = sim::paper_scenario();
   scenario.duration_s = seconds + 0.1;
@@ -205,7 +196,7 @@ int main(int argc, char** argv) {
   if (argc == 3 && std::strcmp(argv[1], "send") == 0) return send_live(std::atof(argv[2]));
   try {
     CanImu imu(open_mm710_socket("vcan0"), "vcan0", 1'000'000'000);
-    const int tx = open_sender("vcan0");
+    const int tx = guest::open_sender("vcan0");
     if (!GUEST_CHECK(tx >= 0)) return mirrorcal::guest::finish("kernel CAN");
     CanImuSender sender(tx);
     std::uint8_t counter = 0;

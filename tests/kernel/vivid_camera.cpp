@@ -10,9 +10,6 @@
 // vivid is loaded with one HDMI input (/dev/video0) and one HDMI output (/dev/video1); DESIGN.md,
 // "Real kernels for the drivers", says how it loops video on Linux 6.1.
 #include <fcntl.h>
-#include <linux/v4l2-dv-timings.h>
-#include <linux/videodev2.h>
-#include <sys/ioctl.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -30,41 +27,17 @@
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "sim_frames.hpp"
 #include "sim_run.hpp"
+#include "vivid_setup.hpp"
 
 namespace mc = mirrorcal;
 
 namespace {
 
-constexpr const char* kCapture = "/dev/video0";
-constexpr const char* kOutput = "/dev/video1";
-// vivid's own controls (drivers/media/test-drivers/vivid/vivid-ctrls.c, Linux 6.1).
-constexpr std::uint32_t kOsdTextMode = 0x00f0f001;     // 2: no text drawn into frames
-constexpr std::uint32_t kLoopVideo = 0x00f0f025;       // capture shows what the output sends
-constexpr std::uint32_t kPercentDropped = 0x00f0f040;  // buffers the capture drops
-
-bool set_control(int fd, std::uint32_t id, int value) {
-  v4l2_control c{};
-  c.id = id;
-  c.value = value;
-  return ioctl(fd, VIDIOC_S_CTRL, &c) == 0;
-}
-
-// Same DV timings on both nodes, text off, loop on (or not), drops as asked: before any stream.
-bool configure_vivid(bool loop, int percent_dropped) {
-  const int cap = open(kCapture, O_RDWR);
-  const int out = open(kOutput, O_RDWR);
-  bool ok = GUEST_CHECK(cap >= 0 && out >= 0);
-  v4l2_dv_timings timings = V4L2_DV_BT_CEA_640X480P59_94;
-  ok = ok && GUEST_CHECK(ioctl(cap, VIDIOC_S_DV_TIMINGS, &timings) == 0);
-  timings = V4L2_DV_BT_CEA_640X480P59_94;
-  ok = ok && GUEST_CHECK(ioctl(out, VIDIOC_S_DV_TIMINGS, &timings) == 0);
-  ok = ok && GUEST_CHECK(set_control(cap, kOsdTextMode, 2));
-  ok = ok && GUEST_CHECK(set_control(cap, kLoopVideo, loop ? 1 : 0));
-  ok = ok && GUEST_CHECK(set_control(cap, kPercentDropped, percent_dropped));
-  if (cap >= 0) close(cap);
-  if (out >= 0) close(out);
-  return ok;
-}
+using mc::guest::configure_vivid;
+using mc::guest::kPercentDropped;
+using mc::guest::set_control;
+constexpr const char* kCapture = mc::guest::kVividCapture;
+constexpr const char* kOutput = mc::guest::kVividOutput;
 
 // A frame's tag: eight bytes at the start, one nibble each as 0x10..0x1f (dark: never a blob).
 void put_tag(std::uint8_t* image, std::uint32_t tag) {
@@ -84,12 +57,7 @@ mc::hal::PixelFormat format_arg(const std::string& s) {
 }
 
 mc::drivers::V4l2Config config_of(mc::hal::PixelFormat f) {
-  mc::drivers::V4l2Config c;
-  c.format = f;
-  c.width = 640;
-  c.height = 480;
-  c.buffers = 4;
-  return c;
+  return mc::guest::vivid_config(f);
 }
 
 // Frames of the simulated rig through vivid: frame k is rendered, tagged with k and written to

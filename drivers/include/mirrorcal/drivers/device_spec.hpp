@@ -3,9 +3,13 @@
 //   i2c:/dev/i2c-1[:0x68]    an MPU-6050 (family) on an i2c-dev node, 7-bit address (default 0x68)
 //   can:can0                 a Bosch MM7.10 on a SocketCAN interface
 //   gpiochip0:17             line 17 of a GPIO chip (also /dev/gpiochip0:17), e.g. for --drdy
+//   /dev/video0[:grey|:yuyv] a V4L2 camera; without a format, the device's current one if it is
+//                            GREY or YUYV, else GREY
 #pragma once
 
 #include <string>
+
+#include "mirrorcal/hal/frames.hpp"
 
 namespace mirrorcal::drivers {
 
@@ -24,9 +28,17 @@ struct LineSpec {
   std::string text;
 };
 
-// Both throw DriverError (Fault::kBadSpec) naming the specification and what is wrong with it.
+struct CameraSpec {
+  std::string device;  // /dev/video0
+  bool format_given = false;
+  hal::PixelFormat format = hal::PixelFormat::kGrey;
+  std::string text;
+};
+
+// All throw DriverError (Fault::kBadSpec) naming the specification and what is wrong with it.
 ImuSpec parse_imu_spec(const std::string& spec);
 LineSpec parse_line_spec(const std::string& spec);
+CameraSpec parse_camera_spec(const std::string& spec);
 
 const char* bus_name(ImuBus bus);
 

@@ -20,6 +20,9 @@ struct V4l2Config {
   hal::PixelFormat format = hal::PixelFormat::kGrey;
   int width = 640, height = 480;
   int buffers = 4;  // requested; the driver may grant more (at most kMaxBuffers are used)
+  // Take the device's current pixel format when it is GREY or YUYV (else `format`): a camera
+  // given without a format keeps what it was set up with.
+  bool format_from_device = false;
 };
 
 // One V4L2 node streaming memory-mapped buffers in one direction; the shared part of capture and
@@ -40,6 +43,8 @@ class V4l2Stream {
   std::size_t size_image() const { return size_image_; }
   int buffer_count() const { return count_; }
   hal::PixelFormat format() const { return format_; }
+  // The frame period the driver reports (VIDIOC_G_PARM's timeperframe), 0 if it reports none.
+  std::int64_t frame_period_ns() const { return frame_period_ns_; }
   // Stops streaming, unmaps and closes; safe to call twice.
   void close();
 
@@ -65,6 +70,7 @@ class V4l2Stream {
   int width_ = 0, height_ = 0, bytes_per_line_ = 0;
   std::size_t size_image_ = 0;
   hal::PixelFormat format_ = hal::PixelFormat::kGrey;
+  std::int64_t frame_period_ns_ = 0;
   std::array<Buffer, kMaxBuffers> buffers_{};
   int count_ = 0;
 };
@@ -120,11 +126,18 @@ class V4l2Output final : public V4l2Stream {
 
   std::uint64_t frames_written() const { return written_; }
 
+  // The mapped memory of the buffer queued last (nullptr before any write). Changing it while the
+  // device holds it is outside V4L2's contract, but a loop-back device that copies the output at
+  // capture time (vivid) shows the change: a test can keep one frame queued and move what it
+  // shows with the clock.
+  std::uint8_t* last_written_data() const { return last_; }
+
  private:
   bool reclaim();  // takes back every buffer the device has finished with
 
   std::array<bool, kMaxBuffers> free_{};
   std::uint64_t written_ = 0;
+  std::uint8_t* last_ = nullptr;
 };
 
 }  // namespace mirrorcal::drivers

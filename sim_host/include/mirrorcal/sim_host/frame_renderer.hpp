@@ -51,7 +51,20 @@ class FrameRenderer {
   // Background, spots added since, noise and quantisation into image.
   void finish(std::uint64_t frame_index, std::uint8_t* image);
 
+  // For feeders that must keep up with a real clock on a slow machine: the spots of the scene at
+  // t_ns drawn into image over `still`, a frame rendered with no spots in view (the same size and
+  // format), touching only the pixels around the spots; those around the previous call's spots
+  // are restored from `still` first. The noise is the still frame's, frozen.
+  void update_spots(std::int64_t t_ns, const std::uint8_t* still, std::uint8_t* image,
+                    RenderedTruth& truth);
+
  private:
+  struct Window {
+    int x0 = 0, x1 = -1, y0 = 0, y1 = -1;  // inclusive; empty when x0 > x1
+  };
+  // The pixels a spot at (u, v) reaches (its PSF to 4 sigma), clipped to the image.
+  Window spot_window(double u, double v) const;
+
   const Scenario& scenario_;
   RenderConfig config_;
   std::uint64_t seed_;
@@ -59,6 +72,7 @@ class FrameRenderer {
   std::vector<float> background_;  // the static scene, DN
   std::vector<float> canvas_;      // spots of the frame being drawn, DN
   std::vector<float> noise_;       // a table of standard normal draws, cycled through per frame
+  std::vector<Window> drawn_;      // update_spots(): the windows of the spots drawn last
 };
 
 // The rendered frames of a scenario as a hal::FrameSource: frame j at the camera's j-th time

@@ -1,0 +1,205 @@
+#include "devices.hpp"
+
+#include <atomic>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "cli.hpp"
+#include "mirrorcal/drivers/can_imu.hpp"
+#include "mirrorcal/drivers/device_spec.hpp"
+#include "mirrorcal/drivers/driver_error.hpp"
+#include "mirrorcal/drivers/open_imu.hpp"
+#include "mirrorcal/drivers/register_imu.hpp"
+
+namespace mirrorcal::app {
+
+namespace {
+
+// Frame buffers the camera gets: a few frames of slack while the loop is busy with an update.
+constexpr int kCameraBuffers = 8;
+
+std::unique_ptr<Camera> open_camera(const RunSettings& s, int width, int height) {
+  if (s.camera.empty()) return nullptr;
+  const drivers::CameraSpec spec = drivers::parse_camera_spec(s.camera);
+  auto camera = std::make_unique<Camera>();
+  drivers::V4l2Config config;
+  config.format = spec.format;
+  config.format_from_device = !spec.format_given;
+  config.width = width;
+  config.height = height;
+  config.buffers = kCameraBuffers;
+  if (!camera->capture.open(spec.device, config) || !camera->capture.start())
+    throw drivers::DriverError(drivers::Fault::kWrongKind, camera->capture.error());
+  camera->markers = std::make_unique<drivers::DetectingMarkerSource<kMarkers>>(
+      camera->capture, drivers::DetectionConfig<kMarkers>{}, width, height);
+  return camera;
+}
+
+void print_camera_counters(const Camera& camera) {
+  const hal::FrameCounters f = camera.capture.counters();
+  const drivers::DetectionCounters& d = camera.markers->counters();
+  const drivers::IdentifierCounters id = camera.markers->identifier_counters();
+  std::printf(
+      "camera: %llu frames, %llu dropped, %llu corrupt (skipped), %llu restarts; timestamps %s, "
+      "%s\n",
+      static_cast<unsigned long long>(f.frames), static_cast<unsigned long long>(f.dropped),
+      static_cast<unsigned long long>(f.corrupt), static_cast<unsigned long long>(f.restarts),
+      camera.capture.timestamps_monotonic() ? "CLOCK_MONOTONIC" : "NOT CLOCK_MONOTONIC (unusable)",
+      camera.capture.start_of_exposure() ? "start of exposure" : "end of frame");
+  std::printf(
+      "markers: %llu labelled, %llu in doubt, %llu crossing, %llu blobs refused, %llu blobs "
+      "unassigned; detection %.2f ms per frame\n",
+      static_cast<unsigned long long>(id.identified), static_cast<unsigned long long>(id.ambiguous),
+      static_cast<unsigned long long>(id.crossing), static_cast<unsigned long long>(id.refused),
+      static_cast<unsigned long long>(id.unassigned),
+      d.frames > 0 ? 1e3 * d.detect_seconds / static_cast<double>(d.frames) : 0.0);
+}
+
+void print_imu_counters(const hal::ImuSource& imu) {
+  if (const auto* can = dynamic_cast<const drivers::CanImu*>(&imu)) {
+    const drivers::CanImuCounters& c = can->counters();
+    std::printf(
+        "CAN: %llu frames, %llu lost, %llu incomplete samples, %llu rejected, %llu error "
+        "frames, %llu bus-off, %llu recoveries\n",
+        static_cast<unsigned long long>(c.frames), static_cast<unsigned long long>(c.lost_frames()),
+        static_cast<unsigned long long>(c.assembly.incomplete_samples),
+        static_cast<unsigned long long>(c.rejected_frames),
+        static_cast<unsigned long long>(c.error_frames), static_cast<unsigned long long>(c.bus_off),
+        static_cast<unsigned long long>(c.recoveries));
+  } else if (const auto* reg = dynamic_cast<const drivers::RegisterImu*>(&imu)) {
+    const drivers::RegisterImuCounters& c = reg->counters();
+    std::printf("IMU: %llu samples, %llu missed (data-ready), %llu read retries\n",
+                static_cast<unsigned long long>(c.samples),
+                static_cast<unsigned long long>(c.missed_samples),
+                static_cast<unsigned long long>(c.read_retries));
+  }
+}
+
+bool read_text(const std::string& path, std::string& text, std::string& error) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    error = path + ": cannot read";
+    return false;
+  }
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  text = ss.str();
+  return true;
+}
+
+std::atomic<int> g_stop_signal{0};
+static_assert(std::atomic<int>::is_always_lock_free, "the signal handler needs a lock-free flag");
+
+extern "C" void request_stop(int signal) {
+  g_stop_signal.store(signal, std::memory_order_relaxed);
+}
+
+}  // namespace
+
+RunSettings device_settings(const Options& o, const char* command, bool sensors_required) {
+  RunSettings s;
+  std::string error;
+  if (o.flag("config")) {
+    const std::string file = o.get("config", "");
+    std::string text;
+    if (!read_text(file, text, error) || !parse_run_config(text, file, s, error)) fail(error, 2);
+  }
+  for (const char* key : kRunKeys)
+    if (o.flag(key) && !set_run_setting(s, key, o.get(key, ""), error)) fail("--" + error, 2);
+  if (s.imu.empty())
+    fail(std::string(command) + ": no IMU given (--imu SPEC, or `imu:` in the --config file)", 2);
+  if (sensors_required && s.sensors.empty())
+    fail(std::string(command) +
+             ": no sensor description given (--sensors DIR with imu.yaml, camchain.yaml and "
+             "mirrorcal.yaml, as `mirrorcal record` writes them)",
+         2);
+  return s;
+}
+
+void read_sensors(const std::string& dir, sim::Recording& r) {
+  std::string text, error;
+  const std::string imu = dir + "/imu.yaml", cam = dir + "/camchain.yaml",
+                    priors = dir + "/mirrorcal.yaml";
+  if (!read_text(imu, text, error) || !sim::parse_imu_yaml(text, imu, r.sensors, error) ||
+      !read_text(cam, text, error) ||
+      !sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) ||
+      !read_text(priors, text, error) ||
+      !sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error))
+    fail(error, 2);
+}
+
+Devices open_devices(const RunSettings& s, int width, int height) {
+  Devices d;
+  try {
+    d.camera = open_camera(s, width, height);
+    const drivers::ImuSpec spec = drivers::parse_imu_spec(s.imu);
+    if (!s.drdy.empty())
+      d.drdy = std::make_unique<drivers::GpioDataReady>(drivers::parse_line_spec(s.drdy));
+    drivers::RegisterImuConfig imu_config;
+    imu_config.rate_hz = s.rate_hz;
+    imu_config.gyro_range_dps = s.gyro_range_dps;
+    imu_config.accel_range_g = s.accel_range_g;
+    d.imu = drivers::open_imu(spec, imu_config, d.drdy.get());
+  } catch (const drivers::DriverError& e) {
+    fail(e.what(), 1);
+  }
+  return d;
+}
+
+std::string describe_camera(const RunSettings& s, const Devices& d) {
+  if (!d.camera) return "no camera (IMU only)";
+  const drivers::V4l2Capture& c = d.camera->capture;
+  char rate[48] = "frame interval not reported";
+  if (c.frame_period_ns() > 0)
+    std::snprintf(rate, sizeof rate, "%.3f Hz", 1e9 / static_cast<double>(c.frame_period_ns()));
+  char text[200];
+  std::snprintf(text, sizeof text, "camera %s (%s %dx%d, %s)", s.camera.c_str(),
+                hal::to_string(c.format()), c.width(), c.height(), rate);
+  return text;
+}
+
+void print_device_counters(const Devices& d) {
+  print_imu_counters(*d.imu);
+  if (d.camera) print_camera_counters(*d.camera);
+}
+
+StopOnSignal::StopOnSignal() {
+  struct sigaction sa {};
+  sa.sa_handler = request_stop;  // no SA_RESTART: a blocking wait returns early
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, &old_int_);
+  sigaction(SIGTERM, &sa, &old_term_);
+}
+
+StopOnSignal::~StopOnSignal() {
+  sigaction(SIGINT, &old_int_, nullptr);
+  sigaction(SIGTERM, &old_term_, nullptr);
+}
+
+int StopOnSignal::signal() {
+  return g_stop_signal.load(std::memory_order_relaxed);
+}
+
+void StopOnSignal::report(const char* then) {
+  const int sig = signal();
+  if (sig != 0)
+    std::printf("interrupted by %s: stopped at the next IMU sample; %s\n",
+                sig == SIGINT ? "SIGINT" : "SIGTERM", then);
+}
+
+hal::SourceStatus StoppingImu::next(ImuSample& s) {
+  if (StopOnSignal::signal() != 0) return hal::SourceStatus::kEndOfStream;
+  const hal::SourceStatus st = device_.next(s);
+  // A device that timed out while the stop was asked for has not failed: the run was ending.
+  if (StopOnSignal::signal() != 0) return hal::SourceStatus::kEndOfStream;
+  if (st != hal::SourceStatus::kOk) return st;
+  if (samples_ == 0) first_ns_ = s.t_ns;
+  if (duration_ns_ > 0 && s.t_ns - first_ns_ > duration_ns_) return hal::SourceStatus::kEndOfStream;
+  ++samples_;
+  last_ns_ = s.t_ns;
+  return st;
+}
+
+}  // namespace mirrorcal::app

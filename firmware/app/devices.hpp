@@ -1,0 +1,93 @@
+// The board's devices as `mirrorcal run` and `mirrorcal record` open them: the IMU (spidev, i2c-dev
+// or SocketCAN, optionally paced by a GPIO data-ready line) and the camera (V4L2 capture, markers
+// detected in its frames); their counters; and the end of a run by duration or Ctrl-C.
+#pragma once
+
+#include <signal.h>
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "cli.hpp"
+#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/drivers/gpio_lines.hpp"
+#include "mirrorcal/drivers/v4l2.hpp"
+#include "mirrorcal/hal/sources.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
+#include "run_config.hpp"
+#include "sim_run.hpp"
+
+namespace mirrorcal::app {
+
+// The camera: V4L2 capture and the markers detected in its frames (blobs, labelled by brightness,
+// 1 : 1.5 : 2.25 in id order, and by the filter's prediction once a loop relabels them).
+struct Camera {
+  drivers::V4l2Capture capture;
+  std::unique_ptr<drivers::DetectingMarkerSource<kMarkers>> markers;
+};
+
+// The settings of a command on the devices: --config FILE, then the command line (kRunKeys). An
+// IMU is required, and the sensor description (--sensors) when sensors_required; else the
+// command fails naming what is missing.
+RunSettings device_settings(const Options& o, const char* command, bool sensors_required);
+
+// imu.yaml, camchain.yaml and mirrorcal.yaml of dir, as beside a recording; fails the command
+// with the file, line and what is wrong.
+void read_sensors(const std::string& dir, sim::Recording& r);
+
+struct Devices {
+  std::unique_ptr<drivers::GpioDataReady> drdy;
+  std::unique_ptr<hal::ImuSource> imu;
+  std::unique_ptr<Camera> camera;  // null without one
+};
+
+// Opens the devices s names, the camera (streaming, width x height) first. A device that is
+// missing, busy or of the wrong kind, or a malformed specification, fails the command (exit 1)
+// with a message naming it.
+Devices open_devices(const RunSettings& s, int width, int height);
+
+// "camera /dev/video0 (GREY 640x480, 59.940 Hz)", or "no camera (IMU only)".
+std::string describe_camera(const RunSettings& s, const Devices& d);
+
+// The drivers' counters, one line per device: CAN frames lost or rejected, data-ready misses;
+// camera frames dropped or corrupt; markers labelled or withheld.
+void print_device_counters(const Devices& d);
+
+// SIGINT and SIGTERM ask a run to stop while this object lives (the previous handlers come back
+// after it). The handler only stores the signal in a lock-free atomic; StoppingImu reads it.
+class StopOnSignal {
+ public:
+  StopOnSignal();
+  ~StopOnSignal();
+  StopOnSignal(const StopOnSignal&) = delete;
+  StopOnSignal& operator=(const StopOnSignal&) = delete;
+  // The signal that asked to stop (SIGINT, SIGTERM), 0 while none has.
+  static int signal();
+  // If one has: prints "interrupted by SIGINT: stopped at the next IMU sample; <then>".
+  static void report(const char* then);
+
+ private:
+  struct sigaction old_int_ {};
+  struct sigaction old_term_ {};
+};
+
+// The device's IMU stream, ended after duration_ns of samples (0: never) or at the first sample
+// after a signal asked to stop (StopOnSignal); counts the samples it delivered.
+class StoppingImu final : public hal::ImuSource {
+ public:
+  StoppingImu(hal::ImuSource& device, std::int64_t duration_ns)
+      : device_(device), duration_ns_(duration_ns) {}
+  hal::SourceStatus next(ImuSample& s) override;
+  const char* error() const override { return device_.error(); }
+  std::uint64_t samples() const { return samples_; }
+  double seconds() const { return static_cast<double>(last_ns_ - first_ns_) * 1e-9; }
+
+ private:
+  hal::ImuSource& device_;
+  std::int64_t duration_ns_;
+  std::uint64_t samples_ = 0;
+  std::int64_t first_ns_ = 0, last_ns_ = 0;
+};
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,61 @@
+// vivid (Linux 6.1) set up as a loop-back camera for the guest programs: one HDMI input
+// (/dev/video0) shows what is written to one HDMI output (/dev/video1). DESIGN.md, "Real kernels
+// for the drivers", says how vivid loops video.
+#pragma once
+
+#include <fcntl.h>
+#include <linux/v4l2-dv-timings.h>
+#include <linux/videodev2.h>
+#include <sys/ioctl.h>
+#include <unistd.h>
+
+#include <cstdint>
+
+#include "guest_check.hpp"
+#include "mirrorcal/drivers/v4l2.hpp"
+
+namespace mirrorcal::guest {
+
+constexpr const char* kVividCapture = "/dev/video0";
+constexpr const char* kVividOutput = "/dev/video1";
+// vivid's own controls (drivers/media/test-drivers/vivid/vivid-ctrls.c, Linux 6.1).
+constexpr std::uint32_t kOsdTextMode = 0x00f0f001;     // 2: no text drawn into frames
+constexpr std::uint32_t kLoopVideo = 0x00f0f025;       // capture shows what the output sends
+constexpr std::uint32_t kPercentDropped = 0x00f0f040;  // buffers the capture drops
+
+inline bool set_control(int fd, std::uint32_t id, int value) {
+  v4l2_control c{};
+  c.id = id;
+  c.value = value;
+  return ioctl(fd, VIDIOC_S_CTRL, &c) == 0;
+}
+
+// Same DV timings (640x480p59.94) on both nodes, text off, loop on (or not), drops as asked:
+// before any stream starts.
+inline bool configure_vivid(bool loop, int percent_dropped) {
+  const int cap = open(kVividCapture, O_RDWR);
+  const int out = open(kVividOutput, O_RDWR);
+  bool ok = GUEST_CHECK(cap >= 0 && out >= 0);
+  v4l2_dv_timings timings = V4L2_DV_BT_CEA_640X480P59_94;
+  ok = ok && GUEST_CHECK(ioctl(cap, VIDIOC_S_DV_TIMINGS, &timings) == 0);
+  timings = V4L2_DV_BT_CEA_640X480P59_94;
+  ok = ok && GUEST_CHECK(ioctl(out, VIDIOC_S_DV_TIMINGS, &timings) == 0);
+  ok = ok && GUEST_CHECK(set_control(cap, kOsdTextMode, 2));
+  ok = ok && GUEST_CHECK(set_control(cap, kLoopVideo, loop ? 1 : 0));
+  ok = ok && GUEST_CHECK(set_control(cap, kPercentDropped, percent_dropped));
+  if (cap >= 0) close(cap);
+  if (out >= 0) close(out);
+  return ok;
+}
+
+// 640x480 in the given format, four buffers.
+inline drivers::V4l2Config vivid_config(hal::PixelFormat f) {
+  drivers::V4l2Config c;
+  c.format = f;
+  c.width = 640;
+  c.height = 480;
+  c.buffers = 4;
+  return c;
+}
+
+}  // namespace mirrorcal::guest
