@@ -6,8 +6,12 @@
 //                                            operation, alone, to subtract)
 //   mirrorcal_opcount recording <N>          N runs of the whole loop over the 60 s recording
 //   mirrorcal_opcount sizes                  sizeof the filter of every configuration built
+//   mirrorcal_opcount stack                  peak stack depth of predict and update, measured, of
+//                                            every configuration built
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 
 #include "filter_ops.hpp"
@@ -21,9 +25,38 @@ int usage() {
   std::fputs(
       "usage: mirrorcal_opcount predict|update|restore <M> <float|double> <N>\n"
       "       mirrorcal_opcount recording <N>\n"
-      "       mirrorcal_opcount sizes\n",
+      "       mirrorcal_opcount sizes|stack\n",
       stderr);
   return 2;
+}
+
+// Peak stack depth of a call, measured: the stack below the caller's frame is painted, the call
+// runs from that same frame, and the deepest byte it changed shows how far it went (to within
+// the few bytes of a frame that it happens not to write). Both helpers are called from the
+// same frame, so their regions lie where the measured call's frames will.
+constexpr std::size_t kProbeBytes = 4 * 1024 * 1024;  // of the usual 8 MiB main thread stack
+constexpr unsigned char kPaint = 0xA5;
+
+[[gnu::noinline]] std::uintptr_t paint_stack() {
+  unsigned char region[kProbeBytes];
+  std::memset(region, kPaint, sizeof region);
+  asm volatile("" : : "r"(region) : "memory");  // the painting must happen
+  return reinterpret_cast<std::uintptr_t>(region);
+}
+
+[[gnu::noinline]] std::size_t stack_used_since(std::uintptr_t painted) {
+  const volatile unsigned char* p = reinterpret_cast<const volatile unsigned char*>(painted);
+  std::size_t untouched = 0;
+  while (untouched < kProbeBytes && p[untouched] == kPaint) ++untouched;
+  return kProbeBytes - untouched;
+}
+
+template <class Op>
+std::size_t peak_stack(Op op) {
+  op();  // once first: lazy symbol binding and first-touch paths are not the operation's
+  const std::uintptr_t painted = paint_stack();
+  op();
+  return stack_used_since(painted);
 }
 
 }  // namespace
@@ -39,9 +72,27 @@ int main(int argc, char** argv) {
       }
     return 0;
   }
+  if (what == "stack" && argc == 2) {
+    for (const bool single : {false, true})
+      for (const int m : mb::built_marker_counts()) {
+        const auto ops = mb::make_filter_ops(m, single);
+        const std::size_t predict = peak_stack([&] {
+          ops->restore();
+          ops->predict();
+        });
+        const std::size_t update = peak_stack([&] {
+          ops->restore();
+          ops->update();
+        });
+        std::printf("%s %d %zu %zu\n", single ? "float" : "double", m, predict, update);
+      }
+    return 0;
+  }
   if (what == "recording" && argc == 3) {
     const long n = std::atol(argv[2]);
     const mb::Recording rec = mb::paper_recording();
+    std::printf("imu samples %zu, frames %zu, %.0f s\n", rec.data.imu.size(),
+                rec.data.frames.size(), rec.scenario.duration_s);
     std::uint64_t used = 0;
     for (long i = 0; i < n; ++i) used += mb::calibrate(rec);
     std::printf("markers used %llu\n", static_cast<unsigned long long>(used));

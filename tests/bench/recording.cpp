@@ -8,6 +8,7 @@ namespace mirrorcal::bench {
 Recording paper_recording() {
   Recording r;
   r.scenario = sim::paper_scenario();
+  r.scenario.camera_rate_hz = 20.0;  // the paper scenario's camera runs at 60 Hz
   r.data = sim::simulate(r.scenario, 1);
   return r;
 }

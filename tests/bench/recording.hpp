@@ -1,6 +1,6 @@
-// The whole loop over one simulated recording (the paper scenario: 60 s, M = 3, IMU 200 Hz,
-// camera 20 Hz), from the filter's construction to the final estimate; the data are simulated
-// beforehand and the estimate is published to a sink that drops it.
+// The whole loop over one simulated recording (the paper scenario's 60 s and M = 3, IMU 200 Hz,
+// camera at 20 Hz as issue 6 asks), from the filter's construction to the final estimate; the data
+// are simulated beforehand and the estimate is published to a sink that drops it.
 #pragma once
 
 #include "mirrorcal/sim_host/scenario.hpp"

@@ -148,35 +148,46 @@ class SigmaPointFilter {
     using BlockMat = Eigen::Matrix<Scalar, L, L>;
     using BlockVec = Eigen::Matrix<Scalar, L, 1>;
 
-    Eigen::LLT<BlockMat> llt(cov_.template block<L, L>(B, B));
+    // Each L x L temporary takes L^2 scalars of stack (1.8 KB at L = 15, double), and Eigen
+    // evaluates every product in an expression into a temporary of its own: so the Cholesky
+    // factor is computed in place, a and b are formed directly, the products accumulate into
+    // p_bb, and the regression matrix overwrites a. The results are those of the textbook
+    // expressions bit for bit.
+    BlockMat chol = cov_.template block<L, L>(B, B);
+    Eigen::LLT<Eigen::Ref<BlockMat>> llt(chol);
     if (llt.info() != Eigen::Success) return FilterStatus::kCovarianceNotPositiveDefinite;
-    const BlockMat chol = llt.matrixL();
+    chol.template triangularView<Eigen::StrictlyUpper>().setZero();
     const auto w = SigmaWeights<Scalar, L>::make(params_.unscented);
 
     State centre = mean_;
     f(centre);
-    // Deviations of the propagated sigma points from the propagated centre: + columns, then -.
-    Eigen::Matrix<Scalar, L, 2 * L> dev;
+    // With dev+-_j the deviations of the propagated sigma points +-j from the propagated centre
+    // (the centre's own deviation is zero by construction), the transform's
+    // a_j = (dev+_j - dev-_j) / 2 and b_j = (dev+_j + dev-_j) / 2.
+    BlockMat a, b;
     for (int j = 0; j < L; ++j) {
+      BlockVec dev[2];
       for (int sign = 0; sign < 2; ++sign) {
         State sp = mean_;
         const BlockVec d = (sign == 0 ? w.gamma : -w.gamma) * chol.col(j);
         sp.template boxplus_block<B, L>(d);
         f(sp);
-        dev.col(j + sign * L) = sp.template boxminus_block<B, L>(centre);
+        dev[sign] = sp.template boxminus_block<B, L>(centre);
       }
+      a.col(j) = Scalar(0.5) * (dev[0] - dev[1]);
+      b.col(j) = Scalar(0.5) * (dev[0] + dev[1]);
     }
-    // a_j, b_j of the transform (the centre's deviation is zero by construction).
-    const BlockMat a = Scalar(0.5) * (dev.template leftCols<L>() - dev.template rightCols<L>());
-    const BlockMat b = Scalar(0.5) * (dev.template leftCols<L>() + dev.template rightCols<L>());
     const BlockVec shift = w.inv_gamma2 * b.rowwise().sum();
-    BlockMat p_bb = w.inv_gamma2 * (a * a.transpose() + b * b.transpose()) +
-                    w.mean_correction * (shift * shift.transpose()) + q;
+    BlockMat p_bb = BlockMat::Zero();
+    add_product(p_bb, a, a.transpose());
+    add_product(p_bb, b, b.transpose());
+    p_bb = w.inv_gamma2 * p_bb + w.mean_correction * shift.lazyProduct(shift.transpose()) + q;
     // Regression matrix F = (a / gamma) chol^-1 carries the cross-covariance with the constants.
-    const BlockMat f_reg = chol.transpose()
-                               .template triangularView<Eigen::Upper>()
-                               .solve(a.transpose() / w.gamma)
-                               .transpose();
+    BlockMat& f_reg = a;
+    f_reg.transposeInPlace();
+    f_reg /= w.gamma;
+    chol.transpose().template triangularView<Eigen::Upper>().solveInPlace(f_reg);
+    f_reg.transposeInPlace();
 
     if (!p_bb.allFinite() || !f_reg.allFinite() || !shift.allFinite())
       return FilterStatus::kNonFinite;
@@ -184,13 +195,15 @@ class SigmaPointFilter {
     centre.template boxplus_block<B, L>(shift);
     mean_ = centre;
     if constexpr (B > 0) {
-      const Eigen::Matrix<Scalar, L, B> c = f_reg * cov_.template block<L, B>(B, 0);
+      Eigen::Matrix<Scalar, L, B> c = Eigen::Matrix<Scalar, L, B>::Zero();
+      add_product(c, f_reg, cov_.template block<L, B>(B, 0));
       cov_.template block<L, B>(B, 0) = c;
       cov_.template block<B, L>(0, B) = c.transpose();
     }
     constexpr int kAfter = N - B - L;
     if constexpr (kAfter > 0) {
-      const Eigen::Matrix<Scalar, L, kAfter> c = f_reg * cov_.template block<L, kAfter>(B, B + L);
+      Eigen::Matrix<Scalar, L, kAfter> c = Eigen::Matrix<Scalar, L, kAfter>::Zero();
+      add_product(c, f_reg, cov_.template block<L, kAfter>(B, B + L));
       cov_.template block<L, kAfter>(B, B + L) = c;
       cov_.template block<kAfter, L>(B + L, B) = c.transpose();
     }
@@ -311,6 +324,14 @@ class SigmaPointFilter {
   }
 
  private:
+  // dst += lhs * rhs by Eigen's product (from dst = 0, bit for bit what dst = lhs * rhs gives),
+  // out of line: the packing buffers of a blocked product, 2 L^2 scalars, then take stack space
+  // during the call only, instead of once for each product in the caller's frame.
+  template <class Dst, class Lhs, class Rhs>
+  EIGEN_DONT_INLINE static void add_product(Dst& dst, const Lhs& lhs, const Rhs& rhs) {
+    dst.noalias() += lhs * rhs;
+  }
+
   // The unscented transform of the measurement: its mean, its covariance (without noise), the
   // cross-covariance with the sampled block, and that block's Cholesky factorisation.
   template <int L, int Z>
