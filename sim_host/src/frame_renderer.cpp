@@ -104,32 +104,11 @@ void FrameRenderer::finish(std::uint64_t frame_index, std::uint8_t* image) {
 
 void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::uint8_t* image,
                            RenderedTruth& truth) {
-  const Kinematics kin = kinematics(scenario_.motion, static_cast<double>(t_ns) * 1e-9);
-  const auto m = scenario_.truth.markers.size();
-  truth.t_ns = t_ns;
-  truth.visible.assign(m, false);
-  truth.uv.assign(m, Eigen::Vector2d::Zero());
-  for (std::size_t i = 0; i < m; ++i) {
-    Eigen::Vector2d uv;
-    if (!true_pixel(scenario_, kin.p, kin.q_n_b, static_cast<int>(i), uv)) continue;
-    truth.visible[i] = true;
-    truth.uv[i] = uv;
-    add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);
-  }
+  draw_scene_spots(t_ns, truth);
   finish(frame_index, image);
 }
 
-void FrameRenderer::update_spots(std::int64_t t_ns, const std::uint8_t* still, std::uint8_t* image,
-                                 RenderedTruth& truth) {
-  const int step = hal::bytes_per_pixel(config_.format);
-  const auto stride = static_cast<std::size_t>(bytes_per_line());
-  for (const Window& w : drawn_)
-    for (int y = w.y0; y <= w.y1; ++y) {
-      const std::size_t at =
-          static_cast<std::size_t>(y) * stride + static_cast<std::size_t>(w.x0 * step);
-      std::copy(still + at, still + at + static_cast<std::size_t>((w.x1 - w.x0 + 1) * step),
-                image + at);
-    }
+void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
   drawn_.clear();
   const Kinematics kin = kinematics(scenario_.motion, static_cast<double>(t_ns) * 1e-9);
   const auto m = scenario_.truth.markers.size();
@@ -144,6 +123,20 @@ void FrameRenderer::update_spots(std::int64_t t_ns, const std::uint8_t* still, s
     add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);
     drawn_.push_back(spot_window(uv.x(), uv.y()));
   }
+}
+
+void FrameRenderer::update_spots(std::int64_t t_ns, const std::uint8_t* still, std::uint8_t* image,
+                                 RenderedTruth& truth) {
+  const int step = hal::bytes_per_pixel(config_.format);
+  const auto stride = static_cast<std::size_t>(bytes_per_line());
+  for (const Window& w : drawn_)
+    for (int y = w.y0; y <= w.y1; ++y) {
+      const std::size_t at =
+          static_cast<std::size_t>(y) * stride + static_cast<std::size_t>(w.x0 * step);
+      std::copy(still + at, still + at + static_cast<std::size_t>((w.x1 - w.x0 + 1) * step),
+                image + at);
+    }
+  draw_scene_spots(t_ns, truth);
   // Spots that overlap are summed in the canvas: write each window once, then clear them all.
   for (const Window& w : drawn_)
     for (int y = w.y0; y <= w.y1; ++y)

@@ -64,6 +64,9 @@ class FrameRenderer {
   };
   // The pixels a spot at (u, v) reaches (its PSF to 4 sigma), clipped to the image.
   Window spot_window(double u, double v) const;
+  // Adds the spots of the scene at t_ns to the canvas, says where they are in truth, and keeps
+  // their windows in drawn_.
+  void draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth);
 
   const Scenario& scenario_;
   RenderConfig config_;
@@ -72,7 +75,7 @@ class FrameRenderer {
   std::vector<float> background_;  // the static scene, DN
   std::vector<float> canvas_;      // spots of the frame being drawn, DN
   std::vector<float> noise_;       // a table of standard normal draws, cycled through per frame
-  std::vector<Window> drawn_;      // update_spots(): the windows of the spots drawn last
+  std::vector<Window> drawn_;      // the windows of the spots drawn last
 };
 
 // The rendered frames of a scenario as a hal::FrameSource: frame j at the camera's j-th time
