@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <memory>
 
+#include "expect_driver_error.hpp"
 #include "guest_check.hpp"
 #include "mirrorcal/drivers/device_spec.hpp"
 #include "mirrorcal/drivers/gpio_lines.hpp"
@@ -18,18 +19,6 @@ namespace {
 
 using namespace mirrorcal;
 using namespace mirrorcal::drivers;
-
-template <class Fn>
-void expect_error(const char* what, Fault fault, Fn fn) {
-  try {
-    fn();
-    std::printf("FAILED: %s: opened\n", what);
-    GUEST_CHECK(false);
-  } catch (const DriverError& e) {
-    std::printf("%s: %s\n", what, e.what());
-    GUEST_CHECK(e.fault() == fault);
-  }
-}
 
 }  // namespace
 
@@ -57,9 +46,10 @@ int main() {
     GUEST_CHECK(drdy.wait_rising(300'000'000, t) == hal::SourceStatus::kNotReady);
     GUEST_CHECK(drdy.edges() == static_cast<std::uint64_t>(pulses));
 
-    expect_error("busy", Fault::kBusy, [] { GpioDataReady again(parse_line_spec("gpiochip0:3")); });
-    expect_error("busy trigger", Fault::kBusy,
-                 [] { GpioTrigger trigger(parse_line_spec("gpiochip0:3")); });
+    guest::expect_driver_error("busy", Fault::kBusy,
+                               [] { GpioDataReady again(parse_line_spec("gpiochip0:3")); });
+    guest::expect_driver_error("busy trigger", Fault::kBusy,
+                               [] { GpioTrigger trigger(parse_line_spec("gpiochip0:3")); });
 
     GpioTrigger trigger(parse_line_spec("/dev/gpiochip0:0"));
     for (const bool level : {true, false, true, false}) {
@@ -70,9 +60,9 @@ int main() {
     std::printf("FAILED: %s\n", e.what());
     GUEST_CHECK(false);
   }
-  expect_error("no such line", Fault::kMissing,
-               [] { GpioDataReady l(parse_line_spec("gpiochip0:8")); });
-  expect_error("no such chip", Fault::kMissing,
-               [] { GpioDataReady l(parse_line_spec("gpiochip7:0")); });
+  guest::expect_driver_error("no such line", Fault::kMissing,
+                             [] { GpioDataReady l(parse_line_spec("gpiochip0:8")); });
+  guest::expect_driver_error("no such chip", Fault::kMissing,
+                             [] { GpioDataReady l(parse_line_spec("gpiochip7:0")); });
   return mirrorcal::guest::finish("kernel GPIO");
 }

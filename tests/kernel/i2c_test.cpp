@@ -13,6 +13,7 @@
 #include <memory>
 #include <string>
 
+#include "expect_driver_error.hpp"
 #include "guest_check.hpp"
 #include "mirrorcal/drivers/register_imu.hpp"
 
@@ -58,18 +59,6 @@ int i2cget(int bus, int reg) {
   return got ? static_cast<int>(std::strtol(out, nullptr, 16)) : -1;
 }
 
-template <class Fn>
-void expect_error(const char* what, Fault fault, Fn fn) {
-  try {
-    fn();
-    std::printf("FAILED: %s: opened\n", what);
-    GUEST_CHECK(false);
-  } catch (const DriverError& e) {
-    std::printf("%s: %s\n", what, e.what());
-    GUEST_CHECK(e.fault() == fault);
-  }
-}
-
 }  // namespace
 
 int main() {
@@ -99,8 +88,8 @@ int main() {
   char path[96];
   std::snprintf(path, sizeof(path), "/sys/bus/i2c/devices/i2c-%d/new_device", bus);
   GUEST_CHECK(static_cast<bool>(std::ofstream(path) << "dummy 0x68\n"));
-  expect_error("busy", Fault::kBusy,
-               [&] { Mpu6050 imu(std::make_unique<I2cBus>(node, 0x68), config); });
+  guest::expect_driver_error("busy", Fault::kBusy,
+                             [&] { Mpu6050 imu(std::make_unique<I2cBus>(node, 0x68), config); });
   std::snprintf(path, sizeof(path), "/sys/bus/i2c/devices/i2c-%d/delete_device", bus);
   GUEST_CHECK(static_cast<bool>(std::ofstream(path) << "0x68\n"));
 
@@ -132,11 +121,13 @@ int main() {
     GUEST_CHECK(false);
   }
 
-  expect_error("missing", Fault::kMissing,
-               [&] { Mpu6050 imu(std::make_unique<I2cBus>("/dev/i2c-9", 0x68), config); });
-  expect_error("wrong kind", Fault::kWrongKind,
-               [&] { Mpu6050 imu(std::make_unique<I2cBus>("/dev/null", 0x68), config); });
-  expect_error("no answer", Fault::kNotAnswering,
-               [&] { Mpu6050 imu(std::make_unique<I2cBus>(node, 0x69), config); });
+  guest::expect_driver_error("missing", Fault::kMissing, [&] {
+    Mpu6050 imu(std::make_unique<I2cBus>("/dev/i2c-9", 0x68), config);
+  });
+  guest::expect_driver_error("wrong kind", Fault::kWrongKind, [&] {
+    Mpu6050 imu(std::make_unique<I2cBus>("/dev/null", 0x68), config);
+  });
+  guest::expect_driver_error("no answer", Fault::kNotAnswering,
+                             [&] { Mpu6050 imu(std::make_unique<I2cBus>(node, 0x69), config); });
   return mirrorcal::guest::finish("kernel I2C");
 }
