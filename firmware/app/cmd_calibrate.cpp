@@ -17,7 +17,9 @@ template <int NK>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out) {
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
               rec.imu.size(), rec.sensors.imu_rate_hz, rec.frames.size(),
-              NK > 0 ? "camera intrinsics estimated too" : "camera intrinsics from camchain.yaml");
+              NK == 5   ? "camera intrinsics estimated too"
+              : NK == 4 ? "camera intrinsics estimated too, skew held at camchain.yaml's"
+                        : "camera intrinsics from camchain.yaml");
   const std::uint64_t burn_in = recording_config(rec).gate_after_frames;
   if (rec.frames.size() < burn_in)
     std::fprintf(stderr,
@@ -85,7 +87,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
 }  // namespace
 
 int cmd_calibrate(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"out"}, {"intrinsics"}, 1);
+  const Options o = parse(argc, argv, 2, {"out"}, {"intrinsics", "hold-skew"}, 1);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
   sim::Recording rec;
@@ -93,7 +95,20 @@ int cmd_calibrate(int argc, char** argv) {
   if (!sim::read_recording(in, kMarkers, rec, err)) fail(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
   const std::string out = make_out_dir(o, "out/calibrate");
-  if (o.flag("intrinsics") || rec.priors.estimate_intrinsics) return calibrate<5>(rec, in, out);
+  const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
+  const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
+  if (o.flag("hold-skew") && !intrinsics)
+    fail(
+        "--hold-skew applies when the intrinsics are estimated (--intrinsics, or "
+        "estimate_intrinsics: true in " +
+        in + "/mirrorcal.yaml)");
+  if (rec.priors.hold_skew && !intrinsics)
+    std::fprintf(stderr,
+                 "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
+                 "not estimated\n",
+                 in.c_str());
+  if (intrinsics && hold_skew) return calibrate<4>(rec, in, out);
+  if (intrinsics) return calibrate<5>(rec, in, out);
   return calibrate<0>(rec, in, out);
 }
 

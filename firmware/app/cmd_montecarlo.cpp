@@ -18,18 +18,23 @@
 namespace mirrorcal::app {
 
 int cmd_montecarlo(int argc, char** argv) {
-  const Options o =
-      parse(argc, argv, 2, {"runs", "jobs", "seed", "out", "scenario"}, {"no-plots", "intrinsics"});
-  const bool intrinsics = o.flag("intrinsics");
+  const Options o = parse(argc, argv, 2, {"runs", "jobs", "seed", "out", "scenario"},
+                          {"no-plots", "intrinsics", "hold-skew"});
+  const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew");
+  if (hold_skew && !intrinsics) fail("--hold-skew applies with --intrinsics");
   if (!o.flag("runs")) fail(std::string("montecarlo needs --runs N\n") + usage());
-  const sim::Scenario s = scenario_option(o);
+  // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
+  const sim::Scenario s = hold_skew ? without_skew(scenario_option(o)) : scenario_option(o);
   const std::uint64_t runs = parse_count(o, "runs", 0, 1);
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const std::string dir = make_out_dir(o, "out/montecarlo");
   std::printf("mirrorcal montecarlo: scenario '%s'%s, %llu runs on %llu jobs, seed %llu\n",
-              s.name.c_str(), intrinsics ? " with stage 2 (intrinsics)" : "",
+              s.name.c_str(),
+              !intrinsics ? ""
+              : hold_skew ? " with stage 2 (intrinsics, skew held at 0)"
+                          : " with stage 2 (intrinsics)",
               (unsigned long long)runs, (unsigned long long)jobs, (unsigned long long)seed);
 
   struct Outcome {
@@ -65,8 +70,10 @@ int cmd_montecarlo(int argc, char** argv) {
         std::lock_guard<std::mutex> lock(mu);
         if (params.empty()) params = r.result.params;
       };
-      if (intrinsics)
-        record(run_two_stage_simulation(s, run_seed));
+      if (intrinsics && hold_skew)
+        record(run_two_stage_simulation<4>(s, run_seed));
+      else if (intrinsics)
+        record(run_two_stage_simulation<5>(s, run_seed));
       else
         record(run_simulation(s, run_seed));
       std::lock_guard<std::mutex> lock(mu);
@@ -80,7 +87,7 @@ int cmd_montecarlo(int argc, char** argv) {
   std::fprintf(stderr, "\n");
 
   const std::size_t np = params.size();
-  const auto truth = truth_display(s, intrinsics ? 5 : 0);
+  const auto truth = truth_display(s, !intrinsics ? 0 : hold_skew ? 4 : 5);
   const double n = double(runs);
   std::vector<double> mean(np, 0), std_(np, 0), rms(np, 0), sig(np, 0);
   for (const auto& oc : out)

@@ -79,10 +79,13 @@ int cmd_record(int argc, char** argv) {
   std::vector<std::string> with_value = {"scenario", "seed", "out", "config"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
-  const Options o = parse(argc, argv, 2, with_value, {"intrinsics"});
+  const Options o = parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew"});
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
   if (o.flag("imu") || o.flag("config")) return record_devices(o, make_out_dir(o, ""));
-  const sim::Scenario s = scenario_option(o);
+  if (o.flag("hold-skew") && !o.flag("intrinsics")) fail("--hold-skew applies with --intrinsics");
+  // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
+  const sim::Scenario s =
+      o.flag("hold-skew") ? without_skew(scenario_option(o)) : scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const std::string dir = make_out_dir(o, "");
 
@@ -108,7 +111,7 @@ int cmd_record(int argc, char** argv) {
   // --intrinsics: calibrate estimates the intrinsics too, from the prior's guess (the paper's
   // Table III errors) rather than camchain.yaml's calibrated camera.
   const sim::RecordingPriors priors =
-      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, o.flag("intrinsics"));
+      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, o.flag("intrinsics"), o.flag("hold-skew"));
   sim::RecordingTruth truth;
   truth.p_b_c = s.truth.p_b_c;
   truth.q_b_c = s.truth.q_b_c;

@@ -21,7 +21,7 @@ namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
   std::vector<std::string> with_value = {"scenario", "seed", "out", "format", "passes"},
-                           flags = {"no-plots", "frames", "intrinsics"};
+                           flags = {"no-plots", "frames", "intrinsics", "hold-skew"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   const Options o = parse(argc, argv, 2, with_value, flags);
@@ -36,10 +36,14 @@ int cmd_sim(int argc, char** argv) {
   const bool intrinsics = o.flag("intrinsics");
   if (intrinsics && (frames.enabled || o.flag("profile")))
     fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
-  const sim::Scenario s = scenario_option(o);
+  if (o.flag("hold-skew") && !intrinsics) fail("--hold-skew applies with --intrinsics");
+  // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
+  const sim::Scenario s =
+      o.flag("hold-skew") ? without_skew(scenario_option(o)) : scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const int passes = static_cast<int>(parse_count(o, "passes", kDefaultPasses, 1));
-  if (intrinsics && o.flag("passes")) fail("--passes applies to stage 1 only (without --intrinsics)");
+  if (intrinsics && o.flag("passes"))
+    fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/sim");
   firmware::MonotonicClock clock;  // the simulation's own clock is simulated time
   const auto profiler = make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
@@ -114,8 +118,10 @@ int cmd_sim(int argc, char** argv) {
       for (const auto& p : pngs) std::printf("plot: %s\n", p.c_str());
     }
   };
-  if (intrinsics)
-    report(run_two_stage_simulation(s, seed, progress));
+  if (intrinsics && o.flag("hold-skew"))
+    report(run_two_stage_simulation<4>(s, seed, progress));
+  else if (intrinsics)
+    report(run_two_stage_simulation<5>(s, seed, progress));
   else
     report(run_simulation(s, seed, progress, frames, profiler.get(), passes));
   return 0;

@@ -17,7 +17,8 @@ const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
-       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots] [--intrinsics]\n"
+       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--intrinsics [--hold-skew]]  (stage 2: Table III; --hold-skew: skew 0)\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
        "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
@@ -26,21 +27,22 @@ const std::vector<Command>& commands() {
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n"
-       "              [--intrinsics]  (stage 2: Table III)\n",
+       "              [--intrinsics [--hold-skew]]  (stage 2: Table III; --hold-skew: skew 0)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
-       "              --out DIR [--scenario paper] [--seed N] [--intrinsics]\n"
+       "              --out DIR [--scenario paper] [--seed N] [--intrinsics [--hold-skew]]\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"
        "              [--duration S] [--drdy CHIP:LINE] [--config FILE]\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
        "mirrorcal.yaml)\n"
-       "              DIR [--intrinsics] [--out OUT]\n",
+       "              DIR [--intrinsics [--hold-skew]] [--out OUT]\n"
+       "              (--hold-skew: skew stays at camchain.yaml's intrinsics_skew, 0 if absent)\n",
        cmd_calibrate},
       {"run",
-       "  run         calibrate on the board's devices (IMU only until the camera is wired in)\n"
+       "  run         calibrate on the board's devices\n"
        "              --imu spi:/dev/spidevB.C | i2c:/dev/i2c-N[:ADDR] | can:IFACE\n"
        "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml) [--drdy CHIP:LINE]\n"
        "              [--camera /dev/videoN] [--out DIR] [--duration S] [--rate HZ]\n"

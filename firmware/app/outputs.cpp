@@ -91,8 +91,9 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   for (const auto& m : r.markers) std::fprintf(o, "  - [%.9f, %.9f, %.9f]\n", m.x(), m.y(), m.z());
   std::fprintf(o, "intrinsics: [%.6f, %.6f, %.6f, %.6f]\nskew: %.6f\n", r.intrinsics.fu,
                r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv, r.intrinsics.skew);
-  std::fprintf(o, "intrinsics_estimated: %s\nresolution: [%d, %d]\n",
-               r.intrinsics_estimated ? "true" : "false", r.width, r.height);
+  std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
+               r.estimated_intrinsics > 0 ? "true" : "false",
+               r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
@@ -133,6 +134,9 @@ bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<F
 
 template bool write_estimates_csv(const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
+                                  std::string&);
+template bool write_estimates_csv(const std::string&,
+                                  const std::vector<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
                                   std::string&);
 template bool write_estimates_csv(const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 5>>>&,

@@ -19,7 +19,7 @@ struct CalibrationResult {
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> markers;
   Pinhole<double> intrinsics{};
-  bool intrinsics_estimated = false;
+  int estimated_intrinsics = 0;  // 0, 4 (fu fv cu cv; skew held) or 5 (with skew)
   int width = 0, height = 0;
   std::vector<double> sigma;  // calibration block, in calibration_params() order (SI)
   std::vector<ParamInfo> params;
@@ -36,7 +36,7 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
     r.markers.push_back(x.marker(i).template cast<double>());
   const auto k = f.intrinsics();
   r.intrinsics = {double(k.fu), double(k.fv), double(k.cu), double(k.cv), double(k.skew)};
-  r.intrinsics_estimated = State::kIntrinsics > 0;
+  r.estimated_intrinsics = State::kIntrinsics;
   r.width = width;
   r.height = height;
   for (int j = State::kPbc; j < State::kDim; ++j)

@@ -54,6 +54,8 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
 
 template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
                                      const std::function<void(double)>&);
+template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::string&,
+                                     const std::function<void(double)>&);
 template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
                                      const std::function<void(double)>&);
 

@@ -15,13 +15,16 @@ CalibrationConfig recording_config(const sim::Recording& r);
 // The data of a recording as the loop consumes it.
 LoopData recording_loop_data(const sim::Recording& r);
 
-// Runs the NK filter (0: stage 1; 5: intrinsics too) on a recording from its priors. False, with
-// a message, if the priors do not fit this build (e.g. another number of markers).
+// Runs the NK filter (0: stage 1; 5: intrinsics too; 4: intrinsics, skew held at camchain.yaml's)
+// on a recording from its priors. False, with a message, if the priors do not fit this build (e.g.
+// another number of markers).
 template <int NK>
 bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& error,
                          const std::function<void(double)>& progress = {});
 
 extern template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
+                                            const std::function<void(double)>&);
+extern template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::string&,
                                             const std::function<void(double)>&);
 extern template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
                                             const std::function<void(double)>&);

@@ -129,14 +129,9 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   return run;
 }
 
-template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
-                               const SimRun<0>::Filter::Covariance&, const LoopData&,
-                               const SimRun<0>::State*, const std::function<void(double)>&,
-                               const std::function<LoopHooks(int)>&, int);
-template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
-                               const SimRun<5>::Filter::Covariance&, const LoopData&,
-                               const SimRun<5>::State*, const std::function<void(double)>&,
-                               const std::function<LoopHooks(int)>&, int);
+template MIRRORCAL_RUN_LOOP(0);
+template MIRRORCAL_RUN_LOOP(4);
+template MIRRORCAL_RUN_LOOP(5);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const std::function<void(double)>& progress, const FrameMode& frames,
@@ -169,8 +164,9 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   return run;
 }
 
-SimRun<5> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                   const std::function<void(double)>& progress) {
+template <int NK>
+SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress) {
   const auto half = [&](double offset) {
     return [&progress, offset](double f) {
       if (progress) progress(offset + 0.5 * f);
@@ -178,13 +174,13 @@ SimRun<5> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
   };
   const SimRun<0> stage1 = run_simulation(s, seed, half(0.0));
 
-  using Run = SimRun<5>;
-  using State = Run::State;
+  using Run = SimRun<NK>;
+  using State = typename Run::State;
   const std::uint64_t seed2 = sim::derive_seed(seed, 300);
   const sim::SimData data = sim::simulate(s, seed2);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed2);
   State x0;
-  Run::Filter::Covariance p0;
+  typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
   const auto& est = stage1.history.back().state;
@@ -192,11 +188,21 @@ SimRun<5> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
   x0.q_b_c = est.q_b_c;
   x0.markers = est.markers;
   constexpr int B = State::kPbc, L = SimRun<0>::State::kDim - B;
-  p0.block<L, L>(B, B) = stage1.covariance.block<L, L>(B, B);
+  p0.template block<L, L>(B, B) = stage1.covariance.template block<L, L>(B, B);
   const State truth = truth_state<State>(s);
-  Run run = run_loop<5>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
   run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
+}
+
+template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+
+sim::Scenario without_skew(sim::Scenario s) {
+  s.truth.intrinsics.skew = 0.0;
+  return s;
 }
 
 }  // namespace mirrorcal::app

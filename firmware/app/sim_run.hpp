@@ -109,14 +109,16 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
                     const std::function<LoopHooks(int pass)>& hooks = {},
                     int passes = kDefaultPasses);
 
-extern template SimRun<0> run_loop<0>(const CalibrationConfig&, const SimRun<0>::State&,
-                                      const SimRun<0>::Filter::Covariance&, const LoopData&,
-                                      const SimRun<0>::State*, const std::function<void(double)>&,
-                                      const std::function<LoopHooks(int)>&, int);
-extern template SimRun<5> run_loop<5>(const CalibrationConfig&, const SimRun<5>::State&,
-                                      const SimRun<5>::Filter::Covariance&, const LoopData&,
-                                      const SimRun<5>::State*, const std::function<void(double)>&,
-                                      const std::function<LoopHooks(int)>&, int);
+// The filters the product instantiates: stage 1 (NK = 0), stage 2 (NK = 5), and stage 2 with the
+// skew held at the configured value (NK = 4: Kalibr and OpenVINS have no slot for skew).
+#define MIRRORCAL_RUN_LOOP(NK)                                                          \
+  SimRun<NK> run_loop<NK>(const CalibrationConfig&, const SimRun<NK>::State&,           \
+                          const SimRun<NK>::Filter::Covariance&, const LoopData&,       \
+                          const SimRun<NK>::State*, const std::function<void(double)>&, \
+                          const std::function<LoopHooks(int)>&, int)
+extern template MIRRORCAL_RUN_LOOP(0);
+extern template MIRRORCAL_RUN_LOOP(4);
+extern template MIRRORCAL_RUN_LOOP(5);
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
@@ -128,9 +130,18 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
 // then stage 2 on a second minute of data (the rig moved again, new noise) with the intrinsics
 // estimated too: the calibration parameters start from stage 1's estimate and covariance, the
 // intrinsics from guesses drawn with the scenario's intrinsics sigma (100 px), the IMU state from
-// its prior. Stage 2's state is what the run reports.
-SimRun<5> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                   const std::function<void(double)>& progress = {});
+// its prior. Stage 2's state is what the run reports. NK = 5 estimates the skew; NK = 4 holds it at
+// the scenario camera's (simulate a camera without skew to hold it at zero: without_skew()).
+template <int NK>
+SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress = {});
+extern template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                                      const std::function<void(double)>&);
+extern template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                      const std::function<void(double)>&);
+
+// The scenario with a camera that has no skew (most cameras), for --hold-skew.
+sim::Scenario without_skew(sim::Scenario s);
 
 // The prior a simulated run with this seed starts from (a user's guesses, drawn around the truth).
 Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& data,

@@ -13,6 +13,7 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
 }
 
 template class CalibrationLoop<double, 3, 0>;
+template class CalibrationLoop<double, 3, 4>;  // stage 2 holding skew
 template class CalibrationLoop<double, 3, 5>;
 
 }  // namespace mirrorcal::firmware

@@ -293,6 +293,7 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                   "features_c",
                   "sigma_features_c",
                   "estimate_intrinsics",
+                  "hold_skew",
                   "intrinsics_guess",
                   "sigma_intrinsics"});
   RecordingPriors r;
@@ -332,6 +333,8 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
   r.estimate_intrinsics = false;
   if (y.has("estimate_intrinsics") && !y.flag("estimate_intrinsics", r.estimate_intrinsics))
     return false;
+  r.hold_skew = false;
+  if (y.has("hold_skew") && !y.flag("hold_skew", r.hold_skew)) return false;
   // The intrinsics' guess and 1-sigma matter only when they are estimated; say so only then.
   if (y.has("intrinsics_guess")) {
     double k[5];
@@ -391,6 +394,8 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   t += "sigma_features_c:\n";
   for (const auto& f : r.sigma_features_c) t += "  - " + list(f) + "\n";
   t += std::string("estimate_intrinsics: ") + (r.estimate_intrinsics ? "true" : "false") + "\n";
+  t += std::string("hold_skew: ") + (r.hold_skew ? "true" : "false") +
+       "  # with estimate_intrinsics: skew stays at camchain.yaml's intrinsics_skew\n";
   const auto k = as_array(r.intrinsics_guess);
   t += "intrinsics_guess: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew (px)\n";
   t += "sigma_intrinsics: " + list(r.sigma_intrinsics.data(), 5) + "\n";

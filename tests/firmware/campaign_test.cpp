@@ -74,4 +74,9 @@ TEST(Campaign, TenRunsOfStageTwoMeetTheBar) {
   expect_campaign_meets_bar("--intrinsics", 20);
 }
 
+// Stage 2 holding skew at zero on a camera without skew: fu, fv, cu, cv only.
+TEST(Campaign, TenRunsOfStageTwoWithSkewHeldMeetTheBar) {
+  expect_campaign_meets_bar("--intrinsics --hold-skew", 19);
+}
+
 }  // namespace

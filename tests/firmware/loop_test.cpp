@@ -179,10 +179,30 @@ TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
 // of their sigmas, which end far below a pixel; the stage 1 parameters stay calibrated.
 TEST(TwoStages, IntrinsicsConvergeFromGuesses100PxOff) {
   const mc::sim::Scenario s = mc::sim::paper_scenario();
-  const auto run = mc::app::run_two_stage_simulation(s, 4);
+  const auto run = mc::app::run_two_stage_simulation<5>(s, 4);
   const auto& last = run.history.back();
   ASSERT_EQ(last.error.size(), 20);
   for (int j = 15; j < 20; ++j) {
+    EXPECT_LT(last.sigma(j), 1.0) << run.result.params[std::size_t(j)].name << " [px]";
+    EXPECT_LT(std::abs(last.error(j)), 4.0 * last.sigma(j))
+        << run.result.params[std::size_t(j)].name;
+  }
+  for (int j = 0; j < 15; ++j)
+    EXPECT_LT(std::abs(last.error(j)), 4.0 * last.sigma(j))
+        << run.result.params[std::size_t(j)].name;
+  EXPECT_EQ(run.filter_counters.failures, 0u);
+}
+
+// Stage 2 holding skew (NK = 4) on a camera without it: the skew stays exactly where it was put,
+// the other four converge as with skew estimated, and the stage 1 parameters stay calibrated.
+TEST(TwoStages, HoldingSkewKeepsItAtZeroAndCalibratesTheRest) {
+  const mc::sim::Scenario s = mc::app::without_skew(mc::sim::paper_scenario());
+  const auto run = mc::app::run_two_stage_simulation<4>(s, 4);
+  const auto& last = run.history.back();
+  ASSERT_EQ(last.error.size(), 19);
+  EXPECT_EQ(run.result.params.back().name, "cv");
+  EXPECT_EQ(run.result.intrinsics.skew, 0.0);
+  for (int j = 15; j < 19; ++j) {
     EXPECT_LT(last.sigma(j), 1.0) << run.result.params[std::size_t(j)].name << " [px]";
     EXPECT_LT(std::abs(last.error(j)), 4.0 * last.sigma(j))
         << run.result.params[std::size_t(j)].name;

@@ -291,6 +291,11 @@ TEST_F(BadInput, SigmaThatIsNotPositive) {
   expect_error({priors() + ":", "sigma_p_b_c: every 1-sigma must be > 0"});
 }
 
+TEST_F(BadInput, HoldSkewThatIsNotABoolean) {
+  set_key(priors(), "hold_skew", "hold_skew: maybe");
+  expect_error({priors() + ":", "hold_skew: expected true or false"});
+}
+
 TEST_F(BadInput, QuaternionThatIsNotUnit) {
   set_key(priors(), "q_b_c_wxyz", "q_b_c_wxyz: [1, 1, 0, 0]");
   expect_error({priors() + ":", "q_b_c_wxyz: expected a unit quaternion"});

@@ -126,6 +126,46 @@ TEST(Cli, RecordWithIntrinsicsAsksForThemInThePriors) {
   EXPECT_NE(slurp(d + "/ca/estimates.csv").find("sigma_fu [px]"), std::string::npos);
 }
 
+// Holding skew (most cameras have none; Kalibr and OpenVINS have no slot for it): the recording
+// asks for it, calibrate estimates fu fv cu cv only and writes camchain.yaml's skew back.
+TEST(Cli, HoldSkewEstimatesFourIntrinsicsAndKeepsTheCameraSkew) {
+  TempDir dir("cli-hold-skew");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal("record --seed 9 --intrinsics --hold-skew --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(YAML::LoadFile(d + "/rec/mirrorcal.yaml")["hold_skew"].as<bool>());
+  const double skew_in =
+      YAML::LoadFile(d + "/rec/camchain.yaml")["cam0"]["intrinsics_skew"].as<double>();
+  EXPECT_EQ(skew_in, 0.0);  // the simulated camera of --hold-skew has none
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const YAML::Node result = YAML::LoadFile(d + "/cal/mirrorcal-result.yaml");
+  EXPECT_TRUE(result["intrinsics_estimated"].as<bool>());
+  EXPECT_FALSE(result["skew_estimated"].as<bool>());
+  for (const char* k : {"fu", "fv", "cu", "cv"}) EXPECT_TRUE(result["sigma"][k]) << k;
+  EXPECT_FALSE(result["sigma"]["skew"]);
+  EXPECT_EQ(result["skew"].as<double>(), skew_in);
+  EXPECT_EQ(YAML::LoadFile(d + "/cal/camchain-imucam.yaml")["cam0"]["intrinsics_skew"].as<double>(),
+            skew_in);
+  const std::string csv = slurp(d + "/cal/estimates.csv");
+  EXPECT_NE(csv.find("sigma_cv [px]"), std::string::npos);
+  EXPECT_EQ(csv.find("skew"), std::string::npos);
+  // The option does the same as the key.
+  r = run_mirrorcal("record --seed 9 --intrinsics --out " + d + "/rec5", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec5 --hold-skew --out " + d + "/cal5", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(slurp(d + "/cal5/estimates.csv").find("skew"), std::string::npos);
+  // Holding skew without estimating intrinsics is a mistake, said so.
+  r = run_mirrorcal("record --seed 9 --out " + d + "/rec0", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec0 --hold-skew --out " + d + "/cal0", d);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("--hold-skew applies when the intrinsics are estimated"),
+            std::string::npos)
+      << r.output;
+}
+
 TEST(Cli, CalibrateOnAMissingRecordingNamesTheFileAndFails) {
   TempDir dir("cli-missing");
   const Result r =

@@ -72,8 +72,8 @@ TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
   const TempDir tmp("priors");
   const std::string& dir = tmp.path;
   std::string err;
-  ASSERT_TRUE(
-      mc::sim::write_priors_yaml(dir, mc::sim::from_prior(prior, s.gravity_n, 0.75, true), err))
+  ASSERT_TRUE(mc::sim::write_priors_yaml(
+      dir, mc::sim::from_prior(prior, s.gravity_n, 0.75, true, true), err))
       << err;
 
   mc::sim::RecordingPriors read;
@@ -84,6 +84,7 @@ TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
       << err;
   EXPECT_TRUE(notes.empty());
   EXPECT_TRUE(read.estimate_intrinsics);
+  EXPECT_TRUE(read.hold_skew);
   EXPECT_EQ(read.pixel_sigma, 0.75);
   expect_same(read.gravity_n, s.gravity_n, "gravity_n");
 

@@ -48,6 +48,7 @@ struct RecordingPriors {
   Eigen::Vector3d sigma_rot_b_c = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3d> features_c, sigma_features_c;
   bool estimate_intrinsics = false;
+  bool hold_skew = false;  // estimate fu fv cu cv only; skew stays at camchain.yaml's (0 if absent)
   Pinhole<double> intrinsics_guess{};        // default: camchain.yaml's
   std::array<double, 5> sigma_intrinsics{};  // fu fv cu cv skew (px)
 };
@@ -140,7 +141,7 @@ bool to_prior(const RecordingPriors& r, Prior<M>& p, std::string& error) {
 
 template <int M>
 RecordingPriors from_prior(const Prior<M>& p, const Eigen::Vector3d& gravity_n, double pixel_sigma,
-                           bool estimate_intrinsics) {
+                           bool estimate_intrinsics, bool hold_skew = false) {
   RecordingPriors r;
   r.gravity_n = gravity_n;
   r.pixel_sigma = pixel_sigma;
@@ -161,6 +162,7 @@ RecordingPriors from_prior(const Prior<M>& p, const Eigen::Vector3d& gravity_n, 
   r.features_c.assign(p.markers.begin(), p.markers.end());
   r.sigma_features_c.assign(p.sigma_markers.begin(), p.sigma_markers.end());
   r.estimate_intrinsics = estimate_intrinsics;
+  r.hold_skew = hold_skew;
   r.intrinsics_guess = p.intrinsics;
   r.sigma_intrinsics = p.sigma_intrinsics;
   return r;
