@@ -14,7 +14,8 @@ namespace mirrorcal::app {
 namespace {
 
 template <int NK>
-int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out) {
+int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
+              const sim::CalibrationStart* from) {
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
               rec.imu.size(), rec.sensors.imu_rate_hz, rec.frames.size(),
               NK == 5   ? "camera intrinsics estimated too"
@@ -29,7 +30,8 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   std::string err;
   SimRun<NK> run;
   const auto t0 = std::chrono::steady_clock::now();
-  if (!calibrate_recording<NK>(rec, run, err, [](double f) { print_progress("calibrating", f); }))
+  if (!calibrate_recording<NK>(
+          rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::fprintf(stderr, "\rcalibrating done   \n");
@@ -87,13 +89,25 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
 }  // namespace
 
 int cmd_calibrate(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"out"}, {"intrinsics", "hold-skew"}, 1);
+  const Options o = parse(argc, argv, 2, {"out", "from"}, {"intrinsics", "hold-skew"}, 1);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
   sim::Recording rec;
   std::string err;
   if (!sim::read_recording(in, kMarkers, rec, err)) fail(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
+  // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
+  // calibration (of another recording: the same data twice would count twice).
+  sim::CalibrationStart start;
+  const sim::CalibrationStart* from = nullptr;
+  if (o.flag("from")) {
+    if (!sim::read_calibration_start(o.get("from", ""), start, err)) fail(err, 1);
+    from = &start;
+    std::printf(
+        "mirrorcal calibrate: the camera pose and markers start from %s (estimate and "
+        "covariance), not from mirrorcal.yaml's guesses\n",
+        o.get("from", "").c_str());
+  }
   const std::string out = make_out_dir(o, "out/calibrate");
   const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
   const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
@@ -107,9 +121,9 @@ int cmd_calibrate(int argc, char** argv) {
                  "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
                  "not estimated\n",
                  in.c_str());
-  if (intrinsics && hold_skew) return calibrate<4>(rec, in, out);
-  if (intrinsics) return calibrate<5>(rec, in, out);
-  return calibrate<0>(rec, in, out);
+  if (intrinsics && hold_skew) return calibrate<4>(rec, in, out, from);
+  if (intrinsics) return calibrate<5>(rec, in, out, from);
+  return calibrate<0>(rec, in, out, from);
 }
 
 }  // namespace mirrorcal::app

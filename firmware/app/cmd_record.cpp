@@ -73,23 +73,10 @@ int record_devices(const Options& o, const std::string& dir) {
   return 0;
 }
 
-}  // namespace
-
-int cmd_record(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario", "seed", "out", "config"};
-  for (const char* key : kRunKeys)
-    if (std::string(key) != "out") with_value.emplace_back(key);
-  const Options o = parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew"});
-  if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
-  if (o.flag("imu") || o.flag("config")) return record_devices(o, make_out_dir(o, ""));
-  if (o.flag("hold-skew") && !o.flag("intrinsics")) fail("--hold-skew applies with --intrinsics");
-  // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
-  const sim::Scenario s =
-      o.flag("hold-skew") ? without_skew(scenario_option(o)) : scenario_option(o);
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const std::string dir = make_out_dir(o, "");
-
-  // Exactly what `sim` with this seed hands to the loop, and the prior it starts from.
+// The simulated rig's streams of one run (data and prior from seed) and its priors, as `sim` with
+// that seed hands them to the loop, and its truth, into dir.
+void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
+                               bool hold_skew, const std::string& dir) {
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
 
@@ -108,10 +95,10 @@ int cmd_record(int argc, char** argv) {
   sensors.intrinsics = s.truth.intrinsics;  // stage 1 calibrates with a calibrated camera
   sensors.width = s.truth.width;
   sensors.height = s.truth.height;
-  // --intrinsics: calibrate estimates the intrinsics too, from the prior's guess (the paper's
-  // Table III errors) rather than camchain.yaml's calibrated camera.
+  // intrinsics: calibrate estimates them too, from the prior's guess (the paper's Table III
+  // errors) rather than camchain.yaml's calibrated camera.
   const sim::RecordingPriors priors =
-      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, o.flag("intrinsics"), o.flag("hold-skew"));
+      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, intrinsics, hold_skew);
   sim::RecordingTruth truth;
   truth.p_b_c = s.truth.p_b_c;
   truth.q_b_c = s.truth.q_b_c;
@@ -126,6 +113,39 @@ int cmd_record(int argc, char** argv) {
       "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
       s.duration_s, dir.c_str());
+}
+
+}  // namespace
+
+int cmd_record(int argc, char** argv) {
+  std::vector<std::string> with_value = {"scenario", "seed", "out", "config"};
+  for (const char* key : kRunKeys)
+    if (std::string(key) != "out") with_value.emplace_back(key);
+  const Options o = parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage"});
+  if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
+  if (o.flag("imu") || o.flag("config")) return record_devices(o, make_out_dir(o, ""));
+  const bool two_stage = o.flag("two-stage"), hold_skew = o.flag("hold-skew");
+  if (hold_skew && !o.flag("intrinsics") && !two_stage)
+    fail("--hold-skew applies with --intrinsics or --two-stage");
+  if (two_stage && o.flag("intrinsics"))
+    fail("--two-stage records stage 1 without and stage 2 with the intrinsics; drop --intrinsics");
+  // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
+  const sim::Scenario s = hold_skew ? without_skew(scenario_option(o)) : scenario_option(o);
+  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
+  const std::string dir = make_out_dir(o, "");
+  if (!two_stage) {
+    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, dir);
+    return 0;
+  }
+  // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds).
+  const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
+  write_simulated_recording(s, seed, false, false, stage1);
+  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, stage2);
+  std::printf(
+      "calibrate them as `sim --intrinsics%s --seed %llu` does (the same bytes):\n"
+      "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",
+      hold_skew ? " --hold-skew" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
+      stage2.c_str());
   return 0;
 }
 

@@ -32,13 +32,17 @@ const std::vector<Command>& commands() {
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
        "              --out DIR [--scenario paper] [--seed N] [--intrinsics [--hold-skew]]\n"
+       "              [--two-stage [--hold-skew]]  (DIR/stage1 and DIR/stage2 of sim "
+       "--intrinsics)\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"
        "              [--duration S] [--drdy CHIP:LINE] [--config FILE]\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
        "mirrorcal.yaml)\n"
-       "              DIR [--intrinsics [--hold-skew]] [--out OUT]\n"
+       "              DIR [--intrinsics [--hold-skew]] [--from RESULT] [--out OUT]\n"
+       "              (--from: start the camera pose and markers from an earlier calibration's\n"
+       "              mirrorcal-result.yaml, or its folder: stage 2 after a stage 1)\n"
        "              (--hold-skew: skew stays at camchain.yaml's intrinsics_skew, 0 if absent)\n",
        cmd_calibrate},
       {"run",

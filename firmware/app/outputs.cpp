@@ -80,15 +80,16 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
                "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n");
   std::fprintf(o, "T_cam_imu:\n");
   write_matrix_rows(o, t_cam_imu(r), "  ");
-  std::fprintf(o, "p_b_c: [%.9f, %.9f, %.9f]\n", r.p_b_c.x(), r.p_b_c.y(), r.p_b_c.z());
+  std::fprintf(o, "p_b_c: [%.17g, %.17g, %.17g]\n", r.p_b_c.x(), r.p_b_c.y(), r.p_b_c.z());
   const Eigen::Matrix3d rbc = r.q_b_c.toRotationMatrix();
   std::fprintf(o, "R_b_c:\n");
   for (int i = 0; i < 3; ++i)
     std::fprintf(o, "  - [%.12f, %.12f, %.12f]\n", rbc(i, 0), rbc(i, 1), rbc(i, 2));
-  std::fprintf(o, "q_b_c_wxyz: [%.12f, %.12f, %.12f, %.12f]\n", r.q_b_c.w(), r.q_b_c.x(),
+  std::fprintf(o, "q_b_c_wxyz: [%.17g, %.17g, %.17g, %.17g]\n", r.q_b_c.w(), r.q_b_c.x(),
                r.q_b_c.y(), r.q_b_c.z());
   std::fprintf(o, "features_c:\n");
-  for (const auto& m : r.markers) std::fprintf(o, "  - [%.9f, %.9f, %.9f]\n", m.x(), m.y(), m.z());
+  for (const auto& m : r.markers)
+    std::fprintf(o, "  - [%.17g, %.17g, %.17g]\n", m.x(), m.y(), m.z());
   std::fprintf(o, "intrinsics: [%.6f, %.6f, %.6f, %.6f]\nskew: %.6f\n", r.intrinsics.fu,
                r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv, r.intrinsics.skew);
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
@@ -97,6 +98,14 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
+  std::fprintf(o, "# covariance of the calibration states, rows and columns in sigma's order\n");
+  std::fprintf(o, "covariance:\n");
+  for (long i = 0; i < r.covariance.rows(); ++i) {
+    std::fprintf(o, "  - [");
+    for (long j = 0; j < r.covariance.cols(); ++j)
+      std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
+    std::fprintf(o, "]\n");
+  }
   return finish(f, path, error);
 }
 

@@ -21,7 +21,8 @@ struct CalibrationResult {
   Pinhole<double> intrinsics{};
   int estimated_intrinsics = 0;  // 0, 4 (fu fv cu cv; skew held) or 5 (with skew)
   int width = 0, height = 0;
-  std::vector<double> sigma;  // calibration block, in calibration_params() order (SI)
+  std::vector<double> sigma;   // calibration block, in calibration_params() order (SI)
+  Eigen::MatrixXd covariance;  // of the calibration block, same order
   std::vector<ParamInfo> params;
 };
 
@@ -41,13 +42,18 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.height = height;
   for (int j = State::kPbc; j < State::kDim; ++j)
     r.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
+  constexpr int kCalibration = State::kDim - State::kPbc;
+  r.covariance = f.covariance()
+                     .template block<kCalibration, kCalibration>(State::kPbc, State::kPbc)
+                     .template cast<double>();
   r.params = calibration_params(State::kMarkers, State::kIntrinsics);
   return r;
 }
 
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's.
 bool write_camchain_imucam(const std::string& path, const CalibrationResult& r, std::string& error);
-// Everything estimated with its 1-sigma.
+// Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
+// and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
 bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error);
 
 // estimates.csv: time and every calibration state with its 1-sigma (SI units, rotation as the

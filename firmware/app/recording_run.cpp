@@ -23,12 +23,21 @@ LoopData recording_loop_data(const sim::Recording& r) {
 
 template <int NK>
 bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& error,
-                         const std::function<void(double)>& progress) {
+                         const std::function<void(double)>& progress,
+                         const sim::CalibrationStart* from) {
   Prior<kMarkers> prior;
   if (!sim::to_prior(r.priors, prior, error)) return false;
   typename SimRun<NK>::State x0;
   typename SimRun<NK>::Filter::Covariance p0;
   initialise(prior, x0, p0);
+  if (from != nullptr) {
+    if (from->features_c.size() != static_cast<std::size_t>(kMarkers)) {
+      error = "the calibration to start from has " + std::to_string(from->features_c.size()) +
+              " markers; this build calibrates M = " + std::to_string(kMarkers);
+      return false;
+    }
+    start_from(*from, x0, p0);
+  }
   // A simulated recording's truth: each history row gets the error and NEES against it.
   typename SimRun<NK>::State truth;
   if (r.has_truth) {
@@ -53,10 +62,13 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
 }
 
 template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
-                                     const std::function<void(double)>&);
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
 template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::string&,
-                                     const std::function<void(double)>&);
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
 template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
-                                     const std::function<void(double)>&);
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
 
 }  // namespace mirrorcal::app

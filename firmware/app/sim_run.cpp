@@ -164,6 +164,16 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   return run;
 }
 
+sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
+  sim::CalibrationStart s;
+  s.p_b_c = earlier.p_b_c;
+  s.q_b_c = earlier.q_b_c;
+  s.features_c = earlier.markers;
+  const long n = 6 + 3 * static_cast<long>(earlier.markers.size());
+  s.covariance = earlier.covariance.topLeftCorner(n, n);
+  return s;
+}
+
 template <int NK>
 SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
                                     const std::function<void(double)>& progress) {
@@ -176,19 +186,14 @@ SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
 
   using Run = SimRun<NK>;
   using State = typename Run::State;
-  const std::uint64_t seed2 = sim::derive_seed(seed, 300);
+  const std::uint64_t seed2 = sim::derive_seed(seed, kStage2SeedStream);
   const sim::SimData data = sim::simulate(s, seed2);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed2);
   State x0;
   typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
-  const auto& est = stage1.history.back().state;
-  x0.p_b_c = est.p_b_c;
-  x0.q_b_c = est.q_b_c;
-  x0.markers = est.markers;
-  constexpr int B = State::kPbc, L = SimRun<0>::State::kDim - B;
-  p0.template block<L, L>(B, B) = stage1.covariance.template block<L, L>(B, B);
+  start_from(calibration_start(stage1.result), x0, p0);
   const State truth = truth_state<State>(s);
   Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
   run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;

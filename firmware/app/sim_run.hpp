@@ -10,6 +10,7 @@
 #include "history.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/hal/frames.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "outputs.hpp"
@@ -120,6 +121,25 @@ extern template MIRRORCAL_RUN_LOOP(0);
 extern template MIRRORCAL_RUN_LOOP(4);
 extern template MIRRORCAL_RUN_LOOP(5);
 
+// An earlier calibration's camera pose and markers with their covariance, as a later one starts
+// from them (stage 2 from stage 1; `calibrate --from`).
+sim::CalibrationStart calibration_start(const CalibrationResult& earlier);
+
+// Starts the camera pose and markers at an earlier calibration's estimate and covariance in place
+// of the prior's guesses; the IMU state and the intrinsics keep the prior's. The markers must be
+// as many as the state's.
+template <class State, class Covariance>
+void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0) {
+  constexpr int B = State::kPbc, L = 6 + 3 * State::kMarkers;
+  x0.p_b_c = earlier.p_b_c;
+  x0.q_b_c = earlier.q_b_c;
+  for (int i = 0; i < State::kMarkers; ++i)
+    x0.markers.template segment<3>(3 * i) = earlier.features_c[static_cast<std::size_t>(i)];
+  p0.template block<L, State::kDim>(B, 0).setZero();
+  p0.template block<State::kDim, L>(0, B).setZero();
+  p0.template block<L, L>(B, B) = earlier.covariance;
+}
+
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const std::function<void(double)>& progress = {},
@@ -132,6 +152,7 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
 // intrinsics from guesses drawn with the scenario's intrinsics sigma (100 px), the IMU state from
 // its prior. Stage 2's state is what the run reports. NK = 5 estimates the skew; NK = 4 holds it at
 // the scenario camera's (simulate a camera without skew to hold it at zero: without_skew()).
+constexpr std::uint64_t kStage2SeedStream = 300;  // stage 2's seed: derive_seed(seed, this)
 template <int NK>
 SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
                                     const std::function<void(double)>& progress = {});

@@ -438,4 +438,13 @@ bool RecordingWriter::close(std::string& error) {
   return error_.empty();
 }
 
+bool read_calibration_start(const std::string& path, CalibrationStart& out, std::string& error) {
+  std::error_code ec;
+  const std::string file =
+      std::filesystem::is_directory(path, ec) ? path + "/mirrorcal-result.yaml" : path;
+  std::string text;
+  if (!read_file(file, text, error)) return false;
+  return parse_calibration_start(text, file, out, error);
+}
+
 }  // namespace mirrorcal::sim

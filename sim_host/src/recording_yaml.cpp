@@ -3,6 +3,8 @@
 // round-trip form, so written-then-read values are the same doubles.
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -420,6 +422,39 @@ bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingT
       !y.vec3_list("features_c", out.features_c, false) || !y.numbers("intrinsics", 5, k))
     return false;
   out.intrinsics = {k[0], k[1], k[2], k[3], k[4]};
+  return true;
+}
+
+bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,
+                             std::string& error) {
+  YamlMap y(file, error);
+  if (!y.load(text) || !y.vec3("p_b_c", out.p_b_c) || !y.quaternion("q_b_c_wxyz", out.q_b_c) ||
+      !y.vec3_list("features_c", out.features_c, false))
+    return false;
+  // Results written before the covariance was added to the file lack it.
+  if (!y.has("covariance")) return y.missing("covariance");
+  // The calibration block: p_b_c, rotation, markers, then the intrinsics it estimated (if any).
+  const std::size_t n = 6 + 3 * out.features_c.size();
+  const YAML::Node rows = y.node("covariance");
+  const std::size_t dim = rows.IsSequence() ? rows.size() : 0;
+  if (dim != n && dim != n + 4 && dim != n + 5)
+    return y.fail(rows, "covariance",
+                  "expected " + std::to_string(n) + " rows (p_b_c, rotation, " +
+                      std::to_string(out.features_c.size()) +
+                      (out.features_c.size() == 1 ? " marker), " : " markers), ") +
+                      std::to_string(n + 4) + " or " + std::to_string(n + 5) + " (and intrinsics)");
+  Eigen::MatrixXd full(dim, dim);
+  std::vector<double> row(dim);
+  for (std::size_t i = 0; i < dim; ++i) {
+    if (!y.numbers(rows[i], "covariance", dim, row.data())) return false;
+    for (std::size_t j = 0; j < dim; ++j) full(long(i), long(j)) = row[j];
+  }
+  out.covariance = full.topLeftCorner(long(n), long(n));
+  const double scale = out.covariance.diagonal().cwiseAbs().maxCoeff();
+  if ((out.covariance - out.covariance.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale)
+    return y.fail(rows, "covariance", "is not symmetric");
+  if (out.covariance.llt().info() != Eigen::Success)
+    return y.fail(rows, "covariance", "is not positive definite");
   return true;
 }
 

@@ -1,5 +1,5 @@
 // libFuzzer target: the YAML beside a recording (mirrorcal.yaml, imu.yaml, camchain.yaml,
-// truth.yaml), each parser on the same input. Any input gives values or a message, never a crash.
+// truth.yaml) and a result to start from (calibrate --from), each parser on the same input. Any input gives values or a message, never a crash.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -37,5 +37,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   error.clear();
   ok = sim::parse_truth_yaml(text, "truth.yaml", truth, error);
   if (ok != error.empty()) std::abort();
+  // A start accepted for calibrate --from is a square block of the markers' size.
+  sim::CalibrationStart start;
+  error.clear();
+  ok = sim::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
+  if (ok != error.empty()) std::abort();
+  const long n = 6 + 3 * static_cast<long>(start.features_c.size());
+  if (ok && (start.covariance.rows() != n || start.covariance.cols() != n)) std::abort();
   return 0;
 }

@@ -166,6 +166,44 @@ TEST(Cli, HoldSkewEstimatesFourIntrinsicsAndKeepsTheCameraSkew) {
       << r.output;
 }
 
+// The paper's two stages on recordings: `record --two-stage` writes the two minutes `sim
+// --intrinsics` calibrates, and calibrating the second --from the first gives sim's bytes.
+TEST(Cli, TwoStagesOnRecordingsGiveTheBytesOfSimWithIntrinsics) {
+  TempDir dir("cli-two-stage");
+  const std::string& d = dir.path;
+  for (const std::string hold : {"", " --hold-skew"}) {
+    SCOPED_TRACE(hold);
+    Result r =
+        run_mirrorcal("sim --intrinsics" + hold + " --seed 5 --no-plots --out " + d + "/sim", d);
+    ASSERT_EQ(r.code, 0) << r.output;
+    r = run_mirrorcal("record --two-stage" + hold + " --seed 5 --out " + d + "/rec", d);
+    ASSERT_EQ(r.code, 0) << r.output;
+    r = run_mirrorcal("calibrate " + d + "/rec/stage1 --out " + d + "/c1", d);
+    ASSERT_EQ(r.code, 0) << r.output;
+    r = run_mirrorcal("calibrate " + d + "/rec/stage2 --from " + d +
+                          "/c1/mirrorcal-result.yaml --out " + d + "/c2",
+                      d);
+    ASSERT_EQ(r.code, 0) << r.output;
+    for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
+      const std::string a = slurp(d + "/sim/" + f), b = slurp(d + "/c2/" + f);
+      EXPECT_FALSE(a.empty()) << f;
+      EXPECT_TRUE(a == b) << f << " differs between sim --intrinsics and the two calibrates";
+    }
+    // Without --from, stage 2 starts from mirrorcal.yaml's guesses: another calibration.
+    r = run_mirrorcal("calibrate " + d + "/rec/stage2 --out " + d + "/c2b", d);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(slurp(d + "/c2b/estimates.csv"), slurp(d + "/c2/estimates.csv"));
+  }
+  // A start that is not a result is refused, naming the file.
+  const Result bad = run_mirrorcal("calibrate " + d + "/rec/stage2 --from " + d +
+                                       "/rec/stage2/mirrorcal.yaml --out " + d + "/c3",
+                                   d);
+  EXPECT_EQ(bad.code, 1) << bad.output;
+  EXPECT_NE(bad.output.find(d + "/rec/stage2/mirrorcal.yaml: missing required key 'covariance'"),
+            std::string::npos)
+      << bad.output;
+}
+
 TEST(Cli, CalibrateOnAMissingRecordingNamesTheFileAndFails) {
   TempDir dir("cli-missing");
   const Result r =

@@ -4,6 +4,7 @@
 
 #include <cstring>
 
+#include "outputs.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -183,4 +184,72 @@ TEST(Recording, LoopFramesAreWrittenAsTheirObservedFrames) {
   EXPECT_EQ(
       slurp(a.path + "/mav0/cam0/features.csv"),
       "#timestamp [ns],feature_id,u [px],v [px]\n5000001,0,1.25,479.5\n5000001,2,0.1,0.001\n");
+}
+
+// A calibration written to mirrorcal-result.yaml starts the next one exactly where it ended: the
+// estimate and the calibration block's covariance read back as the same doubles.
+TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
+  mc::app::CalibrationResult r;
+  r.p_b_c = Eigen::Vector3d(0.01 / 3.0, -0.05, 0.1 + 1e-17);
+  r.q_b_c = Eigen::Quaterniond(Eigen::AngleAxisd(1.0 / 7.0, Eigen::Vector3d(1, 2, 3).normalized()));
+  r.markers = {Eigen::Vector3d(0.02, -1.0 / 30.0, -0.03), Eigen::Vector3d(0.05, 0.04, -0.03),
+               Eigen::Vector3d(-0.08, 0.06, std::nextafter(0.01, 1.0))};
+  r.params = mc::app::calibration_params(3, 5);
+  const int n = static_cast<int>(r.params.size());
+  Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n);
+  r.covariance = 1e-6 * (a * a.transpose() + Eigen::MatrixXd::Identity(n, n));
+  for (int j = 0; j < n; ++j) r.sigma.push_back(std::sqrt(r.covariance(j, j)));
+  const TempDir tmp("start");
+  std::string err;
+  ASSERT_TRUE(mc::app::write_result_yaml(tmp.path + "/mirrorcal-result.yaml", r, err)) << err;
+
+  mc::sim::CalibrationStart start;
+  ASSERT_TRUE(mc::sim::read_calibration_start(tmp.path, start, err)) << err;  // the folder
+  expect_same(start.p_b_c, r.p_b_c, "p_b_c");
+  EXPECT_TRUE(start.q_b_c.coeffs() == r.q_b_c.coeffs());
+  ASSERT_EQ(start.features_c.size(), 3u);
+  for (int i = 0; i < 3; ++i) expect_same(start.features_c[i], r.markers[i], "marker");
+  // The block of the camera pose and markers; the intrinsics' rows are not part of a start.
+  ASSERT_EQ(start.covariance.rows(), 15);
+  EXPECT_TRUE(start.covariance == r.covariance.topLeftCorner(15, 15));
+}
+
+TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {
+  const std::string head =
+      "p_b_c: [0.01, -0.05, 0.1]\nq_b_c_wxyz: [1, 0, 0, 0]\nfeatures_c:\n  - [0, 0, 1]\n";
+  const auto rows = [](const Eigen::MatrixXd& c) {
+    std::string t = "covariance:\n";
+    for (long i = 0; i < c.rows(); ++i) {
+      t += "  - [";
+      for (long j = 0; j < c.cols(); ++j) t += (j ? ", " : "") + std::to_string(c(i, j));
+      t += "]\n";
+    }
+    return t;
+  };
+  const auto refused = [](const std::string& text, const std::string& want) {
+    mc::sim::CalibrationStart s;
+    std::string err;
+    EXPECT_FALSE(mc::sim::parse_calibration_start(text, "r.yaml", s, err)) << text;
+    EXPECT_NE(err.find(want), std::string::npos) << err << "\nlacks: " << want;
+  };
+  const Eigen::MatrixXd good = 1e-4 * Eigen::MatrixXd::Identity(9, 9);  // 6 + 3 x 1 marker
+  mc::sim::CalibrationStart s;
+  std::string err;
+  EXPECT_TRUE(mc::sim::parse_calibration_start(head + rows(good), "r.yaml", s, err)) << err;
+  refused(head, "r.yaml: missing required key 'covariance'");  // a result of an older mirrorcal
+  refused(head + rows(Eigen::MatrixXd::Identity(8, 8)),
+          "r.yaml:6: covariance: expected 9 rows (p_b_c, rotation, 1 marker), 13 or 14");
+  Eigen::MatrixXd asym = good;
+  asym(0, 1) = 1e-5;
+  refused(head + rows(asym), "covariance: is not symmetric");
+  Eigen::MatrixXd indefinite = good;
+  indefinite(2, 2) = -1e-4;
+  refused(head + rows(indefinite), "covariance: is not positive definite");
+  std::string short_row = head + rows(good);
+  short_row.replace(short_row.find("0.000100, 0.000000"), 18, "0.000100");
+  refused(short_row, "covariance: expected a list of 9 numbers");
+  refused(head + "covariance: [[nan]]", "r.yaml:5: covariance");
+  const std::string missing = "/nonexistent/mirrorcal-result.yaml";
+  EXPECT_FALSE(mc::sim::read_calibration_start(missing, s, err));
+  EXPECT_NE(err.find(missing + ": cannot open"), std::string::npos) << err;
 }

@@ -106,6 +106,22 @@ bool write_truth_yaml(const std::string& dir, const RecordingTruth& truth, std::
 bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingTruth& out,
                       std::string& error);
 
+// Where a calibration's camera pose and markers start instead of mirrorcal.yaml's guesses
+// (`calibrate --from`): an earlier calibration's estimate, with the covariance of that block, as
+// its mirrorcal-result.yaml holds them (SI units; rows p_b_c, rotation error, markers).
+struct CalibrationStart {
+  Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
+  std::vector<Eigen::Vector3d> features_c;
+  Eigen::MatrixXd covariance;  // (6 + 3M) square, symmetric positive definite
+};
+
+// Reads a mirrorcal-result.yaml (path, or a folder holding one) as a start; on bad input false
+// with a message naming the file, the line and what is wrong.
+bool read_calibration_start(const std::string& path, CalibrationStart& out, std::string& error);
+bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,
+                             std::string& error);
+
 // The filter's prior from a recording's (false, with a message, if the file lists a number of
 // markers other than M), and back.
 template <int M>
