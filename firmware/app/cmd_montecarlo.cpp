@@ -19,9 +19,11 @@ namespace mirrorcal::app {
 
 int cmd_montecarlo(int argc, char** argv) {
   const Options o = parse(argc, argv, 2, {"runs", "jobs", "seed", "out", "scenario"},
-                          {"no-plots", "intrinsics", "hold-skew"});
-  const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew");
-  if (hold_skew && !intrinsics) fail("--hold-skew applies with --intrinsics");
+                          {"no-plots", "intrinsics", "hold-skew", "one-stage"});
+  const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew"),
+             one_stage = o.flag("one-stage");
+  if ((hold_skew || one_stage) && !intrinsics)
+    fail("--hold-skew and --one-stage apply with --intrinsics");
   if (!o.flag("runs")) fail(std::string("montecarlo needs --runs N\n") + usage());
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
   const sim::Scenario s = hold_skew ? without_skew(scenario_option(o)) : scenario_option(o);
@@ -42,6 +44,7 @@ int cmd_montecarlo(int argc, char** argv) {
     std::vector<double> error, sigma;  // display units
     double nees = 0, wall_s = 0;
     std::uint64_t gated = 0, failures = 0;
+    bool suspect = false;  // convergence_warning() would warn a user of this run
     ErrorSeries series;
   };
   std::vector<Outcome> out(runs);
@@ -65,15 +68,18 @@ int cmd_montecarlo(int argc, char** argv) {
         }
         oc.nees = last.nees;
         oc.gated = r.filter_counters.markers_gated;
+        oc.suspect = !convergence_warning(r.result).empty();
         oc.failures = r.filter_counters.failures;
         oc.series = error_series(r.history, r.result.params);
         std::lock_guard<std::mutex> lock(mu);
         if (params.empty()) params = r.result.params;
       };
       if (intrinsics && hold_skew)
-        record(run_two_stage_simulation<4>(s, run_seed));
+        record(one_stage ? run_one_stage_simulation<4>(s, run_seed)
+                         : run_two_stage_simulation<4>(s, run_seed));
       else if (intrinsics)
-        record(run_two_stage_simulation<5>(s, run_seed));
+        record(one_stage ? run_one_stage_simulation<5>(s, run_seed)
+                         : run_two_stage_simulation<5>(s, run_seed));
       else
         record(run_simulation(s, run_seed));
       std::lock_guard<std::mutex> lock(mu);
@@ -105,7 +111,10 @@ int cmd_montecarlo(int argc, char** argv) {
   const double nees_hi = chi2_quantile(0.975, n * double(np)) / n;
 
   std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
-              intrinsics ? ", II and III (after stage 2)" : " and II", (unsigned long long)runs);
+              !intrinsics ? " and II"
+              : one_stage ? ", II and III (one stage)"
+                          : ", II and III (after stage 2)",
+              (unsigned long long)runs);
   std::printf("%-7s %-4s %9s | %9s %7s | %9s %8s %8s %8s | %s\n", "param", "unit", "truth", "paper",
               "sigma", "mean", "std", "rms err", "filter s", "rms < paper sigma");
   int beaten = 0;
@@ -122,6 +131,14 @@ int cmd_montecarlo(int argc, char** argv) {
   std::printf("average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f): %s\n",
               np, nees, nees_lo, nees_hi,
               nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
+  std::string suspects;
+  for (std::size_t i = 0; i < out.size(); ++i)
+    if (out[i].suspect) suspects += (suspects.empty() ? "" : ", ") + std::to_string(i);
+  if (!suspects.empty())
+    std::printf(
+        "runs a user would have been warned of (more than 1 %% of the markers gated; included "
+        "above): %s\n",
+        suspects.c_str());
   std::printf("wall time %.1f s (%.2f s per run on %llu jobs)\n", wall, wall / n * double(jobs),
               (unsigned long long)jobs);
 

@@ -192,6 +192,8 @@ int cmd_run(int argc, char** argv) {
     if (!calibrate_recording<0>(sensors, refined, error)) fail(error, 1);
     result = refined.result;
   }
+  if (const std::string w = convergence_warning(result); !w.empty())
+    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_camchain_imucam(s.out + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(s.out + "/mirrorcal-result.yaml", result, error))
     fail(error, 1);

@@ -21,7 +21,7 @@ namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
   std::vector<std::string> with_value = {"scenario", "seed", "out", "format", "passes"},
-                           flags = {"no-plots", "frames", "intrinsics", "hold-skew"};
+                           flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   const Options o = parse(argc, argv, 2, with_value, flags);
@@ -36,7 +36,9 @@ int cmd_sim(int argc, char** argv) {
   const bool intrinsics = o.flag("intrinsics");
   if (intrinsics && (frames.enabled || o.flag("profile")))
     fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
-  if (o.flag("hold-skew") && !intrinsics) fail("--hold-skew applies with --intrinsics");
+  if ((o.flag("hold-skew") || o.flag("one-stage")) && !intrinsics)
+    fail("--hold-skew and --one-stage apply with --intrinsics");
+  const bool one_stage = o.flag("one-stage");
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
   const sim::Scenario s =
       o.flag("hold-skew") ? without_skew(scenario_option(o)) : scenario_option(o);
@@ -103,6 +105,8 @@ int cmd_sim(int argc, char** argv) {
     }
 
     std::string err;
+    if (const std::string w = convergence_warning(run.result); !w.empty())
+      std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
     if (!write_run_outputs(dir, run, err)) fail(err, 1);
     std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n",
                 dir.c_str());
@@ -119,9 +123,11 @@ int cmd_sim(int argc, char** argv) {
     }
   };
   if (intrinsics && o.flag("hold-skew"))
-    report(run_two_stage_simulation<4>(s, seed, progress));
+    report(one_stage ? run_one_stage_simulation<4>(s, seed, progress)
+                     : run_two_stage_simulation<4>(s, seed, progress));
   else if (intrinsics)
-    report(run_two_stage_simulation<5>(s, seed, progress));
+    report(one_stage ? run_one_stage_simulation<5>(s, seed, progress)
+                     : run_two_stage_simulation<5>(s, seed, progress));
   else
     report(run_simulation(s, seed, progress, frames, profiler.get(), passes));
   return 0;

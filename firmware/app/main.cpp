@@ -18,7 +18,8 @@ const std::vector<Command>& commands() {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
        "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
-       "              [--intrinsics [--hold-skew]]  (stage 2: Table III; --hold-skew: skew 0)\n"
+       "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III;\n"
+       "              --hold-skew: skew 0; --one-stage: everything at once from one minute)\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
        "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
@@ -27,7 +28,7 @@ const std::vector<Command>& commands() {
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n"
-       "              [--intrinsics [--hold-skew]]  (stage 2: Table III; --hold-skew: skew 0)\n",
+       "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"

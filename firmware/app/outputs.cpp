@@ -71,6 +71,21 @@ bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
   return finish(f, path, error);
 }
 
+std::string convergence_warning(const CalibrationResult& r) {
+  const double seen = double(r.markers_used + r.markers_gated);
+  if (seen == 0.0) return "no marker was used: nothing was calibrated beyond the priors";
+  const double gated = double(r.markers_gated) / seen;
+  if (gated <= kSuspectGatedFraction) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "%.1f %% of the markers were rejected by the 99.9 %% gate (a consistent "
+                "calibration rejects about 0.1 %%): it has most likely locked onto a wrong "
+                "solution. Start from better guesses (or estimate the intrinsics in a second "
+                "stage, calibrate --from), and check the recording.",
+                100.0 * gated);
+  return text;
+}
+
 bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error) {
   File f = open_for_writing(path, error);
   if (!f) return false;
@@ -95,6 +110,11 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
+  std::fprintf(o, "markers_used: %llu\nmarkers_gated: %llu\n",
+               static_cast<unsigned long long>(r.markers_used),
+               static_cast<unsigned long long>(r.markers_gated));
+  std::fprintf(o, "consistent: %s  # false: more than 1 %% of the markers gated, do not trust it\n",
+               convergence_warning(r).empty() ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);

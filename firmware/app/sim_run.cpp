@@ -205,6 +205,25 @@ template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64
 template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
                                                const std::function<void(double)>&);
 
+template <int NK>
+SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress) {
+  using Run = SimRun<NK>;
+  const sim::SimData data = sim::simulate(s, seed);
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
+  initialise(simulation_prior(s, data, seed), x0, p0);
+  const typename Run::State truth = truth_state<typename Run::State>(s);
+  Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
+  run.markers_out_of_image = data.markers_out_of_image;
+  return run;
+}
+
+template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+
 sim::Scenario without_skew(sim::Scenario s) {
   s.truth.intrinsics.skew = 0.0;
   return s;

@@ -161,6 +161,16 @@ extern template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std:
 extern template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
                                                       const std::function<void(double)>&);
 
+// The paper's "everything at once" mode: one minute of data, the intrinsics estimated with the
+// rest from the prior's guesses (100 px off), the same as `record --intrinsics` then `calibrate`.
+template <int NK>
+SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress = {});
+extern template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                                      const std::function<void(double)>&);
+extern template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                      const std::function<void(double)>&);
+
 // The scenario with a camera that has no skew (most cameras), for --hold-skew.
 sim::Scenario without_skew(sim::Scenario s);
 

@@ -204,6 +204,49 @@ TEST(Cli, TwoStagesOnRecordingsGiveTheBytesOfSimWithIntrinsics) {
       << bad.output;
 }
 
+// The paper's everything-at-once mode: `sim --intrinsics --one-stage` is `record --intrinsics`
+// then `calibrate`, byte for byte.
+TEST(Cli, OneStageSimIsARecordingWithIntrinsicsCalibrated) {
+  TempDir dir("cli-one-stage");
+  const std::string& d = dir.path;
+  Result r =
+      run_mirrorcal("sim --intrinsics --one-stage --seed 6 --no-plots --out " + d + "/sim", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_EQ(run_mirrorcal("record --intrinsics --seed 6 --out " + d + "/rec", d).code, 0);
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
+    const std::string a = slurp(d + "/sim/" + f), b = slurp(d + "/cal/" + f);
+    EXPECT_FALSE(a.empty()) << f;
+    EXPECT_TRUE(a == b) << f << " differs between sim --one-stage and record -> calibrate";
+  }
+  EXPECT_NE(slurp(d + "/sim/estimates.csv").find("sigma_skew [px]"), std::string::npos);
+  r = run_mirrorcal("sim --one-stage --no-plots --out " + d + "/x", d);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("apply with --intrinsics"), std::string::npos) << r.output;
+}
+
+// A run that locked onto a wrong solution is flagged, not passed off as a calibration: run 20 of
+// `montecarlo --intrinsics --one-stage --seed 1` (intrinsics guesses 100 px off, one stage) gates
+// most of its markers; a good run gates about 0.1 %.
+TEST(Cli, ARunThatDivergedIsFlaggedInTheOutputAndTheResult) {
+  TempDir dir("cli-diverged");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal(
+      "sim --intrinsics --one-stage --seed 879718831788819081 --no-plots --out " + d + "/bad", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("WARNING: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("locked onto a wrong solution"), std::string::npos) << r.output;
+  const YAML::Node bad = YAML::LoadFile(d + "/bad/mirrorcal-result.yaml");
+  EXPECT_FALSE(bad["consistent"].as<bool>());
+  EXPECT_GT(bad["markers_gated"].as<double>(),
+            0.01 * (bad["markers_used"].as<double>() + bad["markers_gated"].as<double>()));
+  r = run_mirrorcal("sim --intrinsics --one-stage --seed 6 --no-plots --out " + d + "/good", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("WARNING"), std::string::npos) << r.output;
+  EXPECT_TRUE(YAML::LoadFile(d + "/good/mirrorcal-result.yaml")["consistent"].as<bool>());
+}
+
 TEST(Cli, CalibrateOnAMissingRecordingNamesTheFileAndFails) {
   TempDir dir("cli-missing");
   const Result r =
