@@ -109,7 +109,7 @@ constexpr double kLoggedSecondsWithoutDuration = 600.0;
 }  // namespace
 
 int cmd_run(int argc, char** argv) {
-  std::vector<std::string> with_value = {"config"};
+  std::vector<std::string> with_value = {"config", "from"};
   for (const char* key : kRunKeys) with_value.emplace_back(key);
   std::vector<std::string> flags;
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
@@ -123,6 +123,18 @@ int cmd_run(int argc, char** argv) {
   std::string error;
   if (!sim::to_prior(sensors.priors, prior, error))
     fail(s.sensors + "/mirrorcal.yaml: " + error, 2);
+  // --from: the calibration after the live pass starts the camera pose and markers from an earlier
+  // one (stage 2 after stage 1, as calibrate --from).
+  sim::CalibrationStart start;
+  const sim::CalibrationStart* from = nullptr;
+  if (o.flag("from")) {
+    if (!sim::read_calibration_start(o.get("from", ""), start, error)) fail(error, 1);
+    if (start.features_c.size() != static_cast<std::size_t>(kMarkers))
+      fail(o.get("from", "") + ": has " + std::to_string(start.features_c.size()) +
+               " markers; this build calibrates M = " + std::to_string(kMarkers),
+           1);
+    from = &start;
+  }
 
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
   const Devices devices = open_devices(s, sensors.sensors.width, sensors.sensors.height);
@@ -188,9 +200,18 @@ int cmd_run(int argc, char** argv) {
         log.imu.size(), log.frames.size(),
         log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
     log.to_recording(sensors);
-    SimRun<0> refined;
-    if (!calibrate_recording<0>(sensors, refined, error)) fail(error, 1);
-    result = refined.result;
+    // The live pass predicted with camchain.yaml's intrinsics; the calibration estimates them too
+    // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew).
+    const auto refine = [&](auto run) {
+      if (!calibrate_recording(sensors, run, error, {}, from)) fail(error, 1);
+      result = run.result;
+    };
+    if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
+      refine(SimRun<4>{});
+    else if (sensors.priors.estimate_intrinsics)
+      refine(SimRun<5>{});
+    else
+      refine(SimRun<0>{});
   }
   if (const std::string w = convergence_warning(result); !w.empty())
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());

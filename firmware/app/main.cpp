@@ -52,6 +52,7 @@ const std::vector<Command>& commands() {
        "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml) [--drdy CHIP:LINE]\n"
        "              [--camera /dev/videoN] [--out DIR] [--duration S] [--rate HZ]\n"
        "              [--gyro-range DPS] [--accel-range G] [--config FILE] [--profile]\n"
+       "              [--from RESULT]  (start from an earlier calibration, as calibrate --from)\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_run},
   };
