@@ -253,8 +253,10 @@ void CanImu::on_error_frame(std::uint32_t can_id, const std::uint8_t* data) {
 
 hal::SourceStatus CanImu::next(ImuSample& sample) {
   const std::int64_t deadline = monotonic_ns() + timeout_ns_;
+  wait_ns_ = 0;
   for (;;) {
-    const std::int64_t left = deadline - monotonic_ns();
+    const std::int64_t poll_start = monotonic_ns();
+    const std::int64_t left = deadline - poll_start;
     if (left <= 0) {
       if (bus_off_)
         error_.set(
@@ -268,6 +270,7 @@ hal::SourceStatus CanImu::next(ImuSample& sample) {
     }
     pollfd p{fd_, POLLIN, 0};
     const int ready = ::poll(&p, 1, static_cast<int>((left + 999'999) / 1'000'000));
+    wait_ns_ += monotonic_ns() - poll_start;
     if (ready < 0 && errno != EINTR) {
       error_.set("%s: poll failed: %s", device_.c_str(), std::strerror(errno));
       return hal::SourceStatus::kError;

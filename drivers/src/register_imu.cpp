@@ -92,9 +92,12 @@ bool RegisterImu::read_with_retry(std::uint8_t first, std::uint8_t* out, std::si
 
 hal::SourceStatus RegisterImu::next(ImuSample& sample) {
   std::int64_t t_ns = 0;
+  wait_ns_ = 0;
   if (drdy_ != nullptr) {
     const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
+    const std::int64_t wait_start = monotonic_ns();
     const hal::SourceStatus s = drdy_->wait_rising(timeout_ns, t_ns);
+    wait_ns_ = monotonic_ns() - wait_start;
     if (s == hal::SourceStatus::kNotReady) {
       error_.set("%s: stops answering: no data-ready edge for %lld ms", bus_->device().c_str(),
                  static_cast<long long>(timeout_ns / 1'000'000));
@@ -117,8 +120,11 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
       next_due_ns_ = next_due_ns_ == 0 ? now : next_due_ns_ + period_ns_;
       if (next_due_ns_ < now - period_ns_) next_due_ns_ = now;  // fell behind: start again
       sleep_until_ns(next_due_ns_);
+      t_ns = monotonic_ns();
+      wait_ns_ = t_ns - now;
+    } else {
+      t_ns = monotonic_ns();
     }
-    t_ns = monotonic_ns();
   }
 
   std::uint8_t raw[32];

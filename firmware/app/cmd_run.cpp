@@ -76,6 +76,7 @@ class LoggedImu final : public hal::ImuSource {
     return st;
   }
   const char* error() const override { return inner_.error(); }
+  std::int64_t wait_ns() const override { return inner_.wait_ns(); }
 
  private:
   hal::ImuSource& inner_;

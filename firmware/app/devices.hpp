@@ -80,6 +80,7 @@ class StoppingImu final : public hal::ImuSource {
       : device_(device), duration_ns_(duration_ns) {}
   hal::SourceStatus next(ImuSample& s) override;
   const char* error() const override { return device_.error(); }
+  std::int64_t wait_ns() const override { return device_.wait_ns(); }
   std::uint64_t samples() const { return samples_; }
   double seconds() const { return static_cast<double>(last_ns_ - first_ns_) * 1e-9; }
 

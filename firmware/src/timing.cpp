@@ -10,6 +10,8 @@ namespace mirrorcal::firmware {
 
 const char* stage_name(Stage s) {
   switch (s) {
+    case Stage::kImuWait:
+      return "imu_wait";
     case Stage::kImuRead:
       return "imu_read";
     case Stage::kPropagation:
@@ -68,6 +70,12 @@ LoopProfiler::LoopProfiler(hal::Clock& clock, std::int64_t imu_budget_ns,
 void LoopProfiler::record(Stage s, std::int64_t ns) {
   hist_[index(s)].add(ns);
   (in_frame_ ? frame_total_ns_ : imu_total_ns_) += ns;
+}
+
+void LoopProfiler::imu_read(std::int64_t ns, std::int64_t wait_ns) {
+  wait_ns = std::clamp<std::int64_t>(wait_ns, 0, ns);
+  hist_[index(Stage::kImuWait)].add(wait_ns);
+  record(Stage::kImuRead, ns - wait_ns);
 }
 
 void LoopProfiler::marker_polled(std::int64_t ns, std::int64_t detection_ns) {

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <random>
+#include <thread>
 
 #include "mirrorcal/drivers/can_imu.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
@@ -202,6 +203,30 @@ TEST(CanImu, DeliversSamplesAndSurvivesGarbageAndBusOff) {
   EXPECT_EQ(imu.next(out), hal::SourceStatus::kError);
   EXPECT_NE(std::string(imu.error()).find("bus-off"), std::string::npos) << imu.error();
   EXPECT_NE(std::string(imu.error()).find("restart-ms"), std::string::npos) << imu.error();
+}
+
+TEST(CanImu, TheWaitForFramesIsReportedApartFromTheRead) {
+  Pair pair;
+  ASSERT_GE(pair.rx, 0);
+  CanImu imu(pair.rx, "pair", 2'000'000'000);
+  CanImuSender sender(pair.tx);
+  const ImuSample in = sample_of(0.5, -0.25, 1.0, 0.1, -9.8, 0.3);
+  ImuSample out;
+  // The sample's frames come 100 ms after the read starts: that time is the wait, not the read.
+  constexpr std::int64_t kDelay = 100'000'000;
+  const std::int64_t t0 = monotonic_ns();
+  std::thread late([&] {
+    sleep_until_ns(t0 + kDelay);
+    sender.send(in);
+  });
+  const hal::SourceStatus st = imu.next(out);
+  const std::int64_t elapsed = monotonic_ns() - t0;
+  late.join();
+  ASSERT_EQ(st, hal::SourceStatus::kOk);
+  EXPECT_LE(imu.wait_ns(), elapsed);
+  // Decoding three frames takes microseconds; half the delay leaves room for a loaded machine.
+  EXPECT_GE(imu.wait_ns(), kDelay / 2);
+  EXPECT_LT(elapsed - imu.wait_ns(), kDelay / 2);
 }
 
 TEST(CanImu, ASilentBusIsReportedAsNotAnswering) {

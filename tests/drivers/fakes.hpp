@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/register_bus.hpp"
 #include "mirrorcal/hal/lines.hpp"
 
@@ -150,12 +151,15 @@ class FakeIcm42688 final : public SpiTransport {
 };
 
 // A data-ready line whose rising edges are scripted: times popped in order; none left -> timeout.
+// Each wait sleeps for delay_ns first, as a part whose next sample is that far away.
 class FakeDataReady final : public hal::DataReadyLine {
  public:
   std::deque<std::int64_t> edges;
   std::int64_t last_timeout_ns = 0;
+  std::int64_t delay_ns = 0;
   hal::SourceStatus wait_rising(std::int64_t timeout_ns, std::int64_t& t_ns) override {
     last_timeout_ns = timeout_ns;
+    if (delay_ns > 0) sleep_until_ns(monotonic_ns() + delay_ns);
     if (edges.empty()) return hal::SourceStatus::kNotReady;
     t_ns = edges.front();
     edges.pop_front();

@@ -113,6 +113,21 @@ TEST(Mpu6050, DataReadyEdgesTimeTheSamplesAndRevealMissedOnes) {
   EXPECT_NE(std::string(imu.error()).find("no data-ready edge"), std::string::npos) << imu.error();
 }
 
+TEST(Mpu6050, TheWaitForTheDataReadyEdgeIsReportedApartFromTheRead) {
+  FakeDataReady drdy;
+  Mpu6050 imu(std::make_unique<FakeMpu6050>(), unpaced(), &drdy);
+  drdy.edges = {1'000'000'000, 1'005'000'000};
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  EXPECT_LT(imu.wait_ns(), 50'000'000) << "the edge was there at once";
+  drdy.delay_ns = 50'000'000;  // the next edge is 50 ms away
+  const std::int64_t t0 = monotonic_ns();
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  const std::int64_t elapsed = monotonic_ns() - t0;
+  EXPECT_GE(imu.wait_ns(), drdy.delay_ns);
+  EXPECT_LE(imu.wait_ns(), elapsed);
+}
+
 TEST(Icm42688, ConfiguresOverSpiAndConvertsWithTheDataSheetScales) {
   auto transport = std::make_unique<FakeIcm42688>();
   FakeIcm42688& part = *transport;
@@ -195,6 +210,11 @@ TEST(Icm42688, PacedByTheClockWithoutDataReady) {
   for (int i = 0; i < 20; ++i) ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   // 20 periods of 1 ms: never faster than the part's rate.
   EXPECT_GE(s.t_ns - start, 20 * 1'000'000);
+  // The sleep to the next period is the wait, and a read lasts no longer than its wait and more.
+  const std::int64_t t0 = monotonic_ns();
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  EXPECT_GT(imu.wait_ns(), 0);
+  EXPECT_LE(imu.wait_ns(), monotonic_ns() - t0);
 }
 
 }  // namespace

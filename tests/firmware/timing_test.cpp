@@ -30,6 +30,7 @@ class SteppingClock final : public mc::hal::Clock {
  public:
   explicit SteppingClock(std::int64_t step_ns) : step_ns_(step_ns) {}
   std::int64_t now_ns() override { return t_ += step_ns_; }
+  void advance(std::int64_t ns) { t_ += ns; }
 
  private:
   std::int64_t step_ns_;
@@ -47,6 +48,24 @@ class DetectingSource final : public mc::hal::MarkerSource<3> {
  private:
   mc::sim::VectorMarkerSource<3> inner_;
   std::int64_t detection_ns_;
+};
+
+// An IMU that waits a fixed time for each sample (the clock moves on by it) and says so.
+class WaitingImuSource final : public mc::hal::ImuSource {
+ public:
+  WaitingImuSource(const std::vector<mc::ImuSample>& samples, SteppingClock& clock,
+                   std::int64_t wait_ns)
+      : inner_(samples), clock_(clock), wait_ns_(wait_ns) {}
+  mc::hal::SourceStatus next(mc::ImuSample& s) override {
+    clock_.advance(wait_ns_);
+    return inner_.next(s);
+  }
+  std::int64_t wait_ns() const override { return wait_ns_; }
+
+ private:
+  mc::sim::VectorImuSource inner_;
+  SteppingClock& clock_;
+  std::int64_t wait_ns_;
 };
 
 }  // namespace
@@ -95,11 +114,12 @@ TEST(Timing, EveryStageOfTheLoopIsTimedAndPathsAddUp) {
   mc::initialise(prior, x0, p0);
   filter.reset(x0, p0);
 
-  constexpr std::int64_t kTick = 1000, kDetect = 400;  // ns
+  // Each IMU read waits 7 ticks for its sample, then costs one tick like every other stage.
+  constexpr std::int64_t kTick = 1000, kDetect = 400, kWait = 7 * kTick;  // ns
   SteppingClock clock(kTick);
   // Budgets: the IMU path of an ordinary sample (read and propagation), and the frame path.
   const auto profiler = std::make_unique<LoopProfiler>(clock, 2 * kTick, 4 * kTick);
-  mc::sim::VectorImuSource imu(data.imu);
+  WaitingImuSource imu(data.imu, clock, kWait);
   DetectingSource markers(data.frames, kDetect);
   struct NullSink final : mc::firmware::EstimateSink<mc::CalibrationFilter<double, 3, 0>> {
     void publish(std::int64_t, const mc::CalibrationFilter<double, 3, 0>&) override {}
@@ -113,6 +133,7 @@ TEST(Timing, EveryStageOfTheLoopIsTimedAndPathsAddUp) {
 
   const auto count = [&](Stage st) { return profiler->histogram(st).count(); };
   EXPECT_EQ(count(Stage::kImuRead), c.imu_samples + 1);  // and the read that met the end
+  EXPECT_EQ(count(Stage::kImuWait), c.imu_samples + 1);
   EXPECT_EQ(count(Stage::kUpdate), c.frames);
   EXPECT_EQ(count(Stage::kOutput), c.frames);
   EXPECT_EQ(count(Stage::kMarkerDetection), data.frames.size());
@@ -128,9 +149,14 @@ TEST(Timing, EveryStageOfTheLoopIsTimedAndPathsAddUp) {
   EXPECT_EQ(profiler->histogram(Stage::kFramePath).min_ns(), 4 * kTick);
   EXPECT_EQ(profiler->histogram(Stage::kFramePath).max_ns(), 4 * kTick);
   EXPECT_EQ(profiler->histogram(Stage::kFramePath).misses(), 0u);
-  // A sample: read and propagation, two ticks (a poll that delivers a frame belongs to the frame's
-  // path). The first sample only reads; the one sample whose poll meets the end of the marker
-  // stream has that poll as a third tick: the only miss of the 2-tick budget.
+  // The wait for a sample is timed on its own; the read costs its one tick.
+  EXPECT_EQ(profiler->histogram(Stage::kImuWait).min_ns(), kWait);
+  EXPECT_EQ(profiler->histogram(Stage::kImuWait).max_ns(), kWait);
+  EXPECT_EQ(profiler->histogram(Stage::kImuRead).min_ns(), kTick);
+  EXPECT_EQ(profiler->histogram(Stage::kImuRead).max_ns(), kTick);
+  // A sample: read and propagation, two ticks, its wait not included (a poll that delivers a frame
+  // belongs to the frame's path). The first sample only reads; the one sample whose poll meets the
+  // end of the marker stream has that poll as a third tick: the only miss of the 2-tick budget.
   const DurationHistogram& path = profiler->histogram(Stage::kImuPath);
   EXPECT_EQ(path.min_ns(), kTick);
   EXPECT_EQ(path.max_ns(), 3 * kTick);
@@ -141,8 +167,8 @@ TEST(Timing, EveryStageOfTheLoopIsTimedAndPathsAddUp) {
 TEST(Timing, HistogramFileHasCyclictestLayout) {
   SteppingClock clock(1000);
   LoopProfiler p(clock, 5'000'000, 50'000'000);
-  p.record(Stage::kImuRead, 2'500);
-  p.record(Stage::kImuRead, 2'700);
+  p.imu_read(42'500, 40'000);  // 40 us waiting, 2.5 us reading
+  p.imu_read(2'700, 0);
   p.record(Stage::kPropagation, 7'100);
   p.end_imu_sample();
   const std::string path = ::testing::TempDir() + "/timing-histogram.txt";
@@ -169,13 +195,14 @@ TEST(Timing, HistogramFileHasCyclictestLayout) {
     ++bins;
   }
   EXPECT_EQ(bins, DurationHistogram::kBins);
+  EXPECT_EQ(column_sums[static_cast<std::size_t>(Stage::kImuWait)], 2);
   EXPECT_EQ(column_sums[static_cast<std::size_t>(Stage::kImuRead)], 2);
   EXPECT_EQ(column_sums[static_cast<std::size_t>(Stage::kPropagation)], 1);
   EXPECT_EQ(column_sums[static_cast<std::size_t>(Stage::kImuPath)], 1);
   EXPECT_EQ(total_line,
-            "# Total: 000000002 000000001 000000000 000000000 000000000 000000000 "
+            "# Total: 000000002 000000002 000000001 000000000 000000000 000000000 000000000 "
             "000000001 000000000");
-  EXPECT_EQ(max_line, "# Max Latencies: 00002 00007 00000 00000 00000 00000 00012 00000");
+  EXPECT_EQ(max_line, "# Max Latencies: 00040 00002 00007 00000 00000 00000 00000 00012 00000");
 }
 
 TEST(Timing, UnwritableHistogramPathIsAnErrorNamingIt) {

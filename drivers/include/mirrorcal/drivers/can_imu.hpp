@@ -117,6 +117,8 @@ class CanImu final : public hal::ImuSource {
 
   hal::SourceStatus next(ImuSample& sample) override;
   const char* error() const override { return error_.c_str(); }
+  // The time next() spent in poll, waiting for the sample's three frames.
+  std::int64_t wait_ns() const override { return wait_ns_; }
   const CanImuCounters& counters() const;
   bool bus_off() const { return bus_off_; }
   // The last error frame's classes in words (e.g. "bus-off"), for logs; empty if none came.
@@ -128,6 +130,7 @@ class CanImu final : public hal::ImuSource {
   int fd_;
   std::string device_;
   std::int64_t timeout_ns_;
+  std::int64_t wait_ns_ = 0;
   mm710::Assembler assembler_;
   mutable CanImuCounters counters_{};
   bool bus_off_ = false;

@@ -2,8 +2,8 @@
 // ICM-42688-P over SPI. Opening checks WHO_AM_I, configures rate and full scale and throws
 // DriverError when the part is missing, of another kind or does not take its configuration.
 // next() waits for the sample (the data-ready line's rising edge if there is one, else the next
-// period on CLOCK_MONOTONIC), reads the data registers in one burst and converts with the data
-// sheet's scales. Nothing is allocated after opening.
+// period on CLOCK_MONOTONIC; wait_ns() says how long), reads the data registers in one burst and
+// converts with the data sheet's scales. Nothing is allocated after opening.
 #pragma once
 
 #include <cstdint>
@@ -35,6 +35,8 @@ class RegisterImu : public hal::ImuSource {
  public:
   hal::SourceStatus next(ImuSample& sample) override;
   const char* error() const override { return error_.c_str(); }
+  // The wait on the data-ready edge, or the sleep to the next period.
+  std::int64_t wait_ns() const override { return wait_ns_; }
 
   const RegisterImuCounters& counters() const { return counters_; }
   std::int64_t period_ns() const { return period_ns_; }
@@ -70,6 +72,7 @@ class RegisterImu : public hal::ImuSource {
   bool pace_;
   std::int64_t next_due_ns_ = 0;
   std::int64_t last_edge_ns_ = -1;
+  std::int64_t wait_ns_ = 0;
   RegisterImuCounters counters_{};
   ErrorText error_;
 };

@@ -72,6 +72,7 @@ class CalibrationLoop {
   void propagate_to(const ImuSample& next);
   void apply_frame(const MarkerFrame<M>& frame);
   hal::SourceStatus poll_markers();
+  hal::SourceStatus read_imu(ImuSample& sample);
 
   Filter& filter_;
   hal::ImuSource& imu_;

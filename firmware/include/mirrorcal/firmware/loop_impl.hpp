@@ -60,13 +60,19 @@ hal::SourceStatus CalibrationLoop<S, M, NK>::poll_markers() {
 }
 
 template <typename S, int M, int NK>
+hal::SourceStatus CalibrationLoop<S, M, NK>::read_imu(ImuSample& sample) {
+  LoopProfiler* const p = config_.profiler;
+  if (p == nullptr) return imu_.next(sample);
+  const std::int64_t t0 = p->now_ns();
+  const hal::SourceStatus st = imu_.next(sample);
+  p->imu_read(p->now_ns() - t0, imu_.wait_ns());
+  return st;
+}
+
+template <typename S, int M, int NK>
 bool CalibrationLoop<S, M, NK>::step() {
   ImuSample sample;
-  hal::SourceStatus st;
-  {
-    const StageTimer timer(config_.profiler, Stage::kImuRead);
-    st = imu_.next(sample);
-  }
+  const hal::SourceStatus st = read_imu(sample);
   if (st != hal::SourceStatus::kOk) {
     end_ = st == hal::SourceStatus::kEndOfStream ? LoopEnd::kEndOfStream : LoopEnd::kImuError;
     return false;

@@ -29,6 +29,10 @@ class ImuSource {
   virtual ~ImuSource() = default;
   virtual SourceStatus next(ImuSample& sample) = 0;
   virtual const char* error() const { return ""; }
+  // How much of the last next() went into waiting for the sample (ns): blocked in poll, on the
+  // data-ready line or asleep until the next period. The loop's timing budget counts it apart
+  // from the cost of reading and decoding; 0 where the samples come ready-made.
+  virtual std::int64_t wait_ns() const { return 0; }
 };
 
 // Marker observations of each frame, in timestamp order. poll() does not block: it returns the
