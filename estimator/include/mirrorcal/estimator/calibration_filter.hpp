@@ -139,6 +139,7 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
 
 // The configurations the product uses are compiled once, in estimator/src/filter_*.cpp.
 extern template class CalibrationFilter<double, 3, 0>;
+extern template class CalibrationFilter<double, 3, 4>;
 extern template class CalibrationFilter<double, 3, 5>;
 extern template class CalibrationFilter<float, 3, 0>;
 
