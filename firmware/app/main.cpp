@@ -19,6 +19,8 @@ const std::vector<Command>& commands() {
        "  sim         calibrate a simulated rig in front of a mirror\n"
        "              [--scenario paper] [--seed N] [--out DIR] [--no-plots] [--intrinsics]\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
+       "              [--spot-noise PX] [--pixel-sigma PX]  (with --frames: the pixel noise drawn\n"
+       "              into the frames and the one the filter assumes; default the scenario's)\n"
        "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
@@ -26,7 +28,9 @@ const std::vector<Command>& commands() {
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n"
-       "              [--intrinsics]  (stage 2: Table III)\n",
+       "              [--intrinsics]  (stage 2: Table III)\n"
+       "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
+       "              [--pixel-sigma PX]  (as sim)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
