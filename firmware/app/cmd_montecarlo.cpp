@@ -126,9 +126,12 @@ int cmd_montecarlo(int argc, char** argv) {
                 truth[j] + mean[j], std::sqrt(std_[j]), r, std::sqrt(sig[j]), ok ? "yes" : "NO");
   }
   std::printf("\n%d of %zu parameters below the paper's sigma\n", beaten, np);
-  std::printf("average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f): %s\n",
-              np, nees, nees_lo, nees_hi,
-              nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
+  std::printf(
+      "average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f, 99 %% "
+      "%.2f..%.2f): %s\n",
+      np, nees, nees_lo, nees_hi, chi2_quantile(0.005, n * double(np)) / n,
+      chi2_quantile(0.995, n * double(np)) / n,
+      nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
   DetectionReport detection;
   if (frames.enabled) {
     std::vector<DetectionReport> each;

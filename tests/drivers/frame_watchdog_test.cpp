@@ -103,7 +103,7 @@ TEST(FrameWatchdog, TheDevicesOwnErrorPassesThroughUnchanged) {
 }
 
 // What the loop sees: the detecting marker source over the watched camera fails with the
-// watchdog's message (CalibrationLoop ends with kMarkerError, `run` writes what it has and exits 1).
+// watchdog's message (the loop ends with kMarkerError; `run` writes what it has, exits 1).
 TEST(FrameWatchdog, TheMarkerSourceOverItFailsWithTheMessage) {
   ScriptedFrames frames;
   ManualClock clock;
