@@ -254,11 +254,18 @@ void CanImu::on_error_frame(std::uint32_t can_id, const std::uint8_t* data) {
 hal::SourceStatus CanImu::next(ImuSample& sample) {
   const std::int64_t deadline = monotonic_ns() + timeout_ns_;
   wait_ns_ = 0;
+  std::uint64_t frames_meanwhile = 0;  // of any kind but error frames, none completing a sample
   for (;;) {
     const std::int64_t poll_start = monotonic_ns();
     const std::int64_t left = deadline - poll_start;
     if (left <= 0) {
-      if (bus_off_)
+      if (frames_meanwhile > 0 && !bus_off_)
+        error_.set(
+            "%s: stops answering: %llu frames in %lld ms but no complete MM7.10 sample (wrong "
+            "length, out of order or missing messages)",
+            device_.c_str(), static_cast<unsigned long long>(frames_meanwhile),
+            static_cast<long long>(timeout_ns_ / 1'000'000));
+      else if (bus_off_)
         error_.set(
             "%s: stops answering: bus-off and no frame since for %lld ms (automatic "
             "recovery: ip link set %s type can restart-ms 100)",
@@ -314,6 +321,7 @@ hal::SourceStatus CanImu::next(ImuSample& sample) {
       on_error_frame(frame.can_id, frame.data);
       continue;
     }
+    ++frames_meanwhile;
     mm710::Frame f;
     f.id = frame.can_id & CAN_SFF_MASK;
     f.len = frame.len;

@@ -90,6 +90,22 @@ bool RegisterImu::read_with_retry(std::uint8_t first, std::uint8_t* out, std::si
   return true;
 }
 
+const char* RegisterImu::no_data(const std::uint8_t* raw) const {
+  const std::size_t fields[2] = {accel_offset_, gyro_offset_};
+  bool zeros = true, ones = true, no_data_value = no_data_value_valid_;
+  for (const std::size_t f : fields)
+    for (std::size_t i = 0; i < 6; ++i) {
+      zeros = zeros && raw[f + i] == 0x00;
+      ones = ones && raw[f + i] == 0xff;
+      if (i % 2 == 0) no_data_value = no_data_value && big_endian(raw + f + i) == no_data_value_;
+    }
+  if (ones) return "0xff throughout (nothing drives the bus: part unplugged or unpowered?)";
+  if (zeros) return "0x00 throughout (nothing answers, or the part reset and sleeps)";
+  if (no_data_value)
+    return "the part's no-data value on every axis (its sensors are off: did it reset?)";
+  return nullptr;
+}
+
 hal::SourceStatus RegisterImu::next(ImuSample& sample) {
   std::int64_t t_ns = 0;
   wait_ns_ = 0;
@@ -133,8 +149,16 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
                bus_->device().c_str(), data_length_, data_register_, std::strerror(errno));
     return hal::SourceStatus::kError;
   }
-  // Once a second, make sure the part is still the one we configured (a bus reads 0xff or 0x00
-  // when the part is gone, which would otherwise pass as a plausible sample).
+  // A bus with nobody answering reads one byte value throughout (0xff where the data line floats
+  // high or is pulled up, 0x00 where it is held low), and a part that reset itself reads its
+  // no-data value: neither may reach the filter as a sample. A working part never reads all six
+  // axes exactly zero (gravity and noise see to that).
+  if (const char* why = no_data(raw)) {
+    error_.set("%s: stops answering: the data registers read %s", bus_->device().c_str(), why);
+    return hal::SourceStatus::kError;
+  }
+  // Once a second, make sure the part is still the one we configured (a part replaced or reset
+  // to another configuration would otherwise pass unnoticed).
   const std::uint64_t per_second =
       static_cast<std::uint64_t>(1'000'000'000 / (period_ns_ > 0 ? period_ns_ : 1));
   if (per_second > 0 && counters_.samples % per_second == per_second - 1) {
@@ -236,6 +260,8 @@ Icm42688::Icm42688(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& co
 
   data_register_ = kAccelDataX1;
   data_length_ = 12;
+  no_data_value_valid_ = true;  // its data registers read -32768 while a sensor is off
+  no_data_value_ = -32768;
   accel_offset_ = 0;
   gyro_offset_ = 6;
   period_ns_ = std::llround(1e9 / odr->hz);

@@ -10,20 +10,27 @@
 #include <vector>
 
 #include "cli.hpp"
+#include "loop_options.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "plots.hpp"
 #include "report.hpp"
+#include "sim_frames.hpp"
 #include "sim_run.hpp"
 
 namespace mirrorcal::app {
 
 int cmd_montecarlo(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"runs", "jobs", "seed", "out", "scenario"},
-                          {"no-plots", "intrinsics", "hold-skew", "one-stage"});
+  const Options o = parse(
+      argc, argv, 2,
+      {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise", "passes"},
+      {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames"});
   const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew"),
              one_stage = o.flag("one-stage");
   if ((hold_skew || one_stage) && !intrinsics)
     fail("--hold-skew and --one-stage apply with --intrinsics");
+  const FrameMode frames = frame_mode_option(o);
+  if (intrinsics && frames.enabled)
+    fail("--intrinsics runs on listed markers (not yet with --frames)");
   if (!o.flag("runs")) fail(std::string("montecarlo needs --runs N\n") + usage());
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
   const sim::Scenario s = hold_skew ? without_skew(scenario_option(o)) : scenario_option(o);
@@ -31,13 +38,20 @@ int cmd_montecarlo(int argc, char** argv) {
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
+  const int passes = static_cast<int>(parse_count(o, "passes", kDefaultPasses, 1));
+  if (intrinsics && o.flag("passes"))
+    fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/montecarlo");
-  std::printf("mirrorcal montecarlo: scenario '%s'%s, %llu runs on %llu jobs, seed %llu\n",
+  std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s, %llu runs on %llu jobs, seed %llu\n",
               s.name.c_str(),
               !intrinsics ? ""
+              : one_stage ? (hold_skew ? " in one stage with the intrinsics (skew held at 0)"
+                                       : " in one stage with the intrinsics")
               : hold_skew ? " with stage 2 (intrinsics, skew held at 0)"
                           : " with stage 2 (intrinsics)",
-              (unsigned long long)runs, (unsigned long long)jobs, (unsigned long long)seed);
+              frames.enabled ? ", markers detected in rendered frames, " : "",
+              frames.enabled ? hal::to_string(frames.format) : "", (unsigned long long)runs,
+              (unsigned long long)jobs, (unsigned long long)seed);
 
   struct Outcome {
     std::uint64_t seed = 0;
@@ -46,6 +60,7 @@ int cmd_montecarlo(int argc, char** argv) {
     std::uint64_t gated = 0, failures = 0;
     bool suspect = false;  // convergence_warning() would warn a user of this run
     ErrorSeries series;
+    DetectionReport detection;  // --frames only
   };
   std::vector<Outcome> out(runs);
   std::vector<ParamInfo> params;
@@ -71,6 +86,7 @@ int cmd_montecarlo(int argc, char** argv) {
         oc.suspect = !convergence_warning(r.result).empty();
         oc.failures = r.filter_counters.failures;
         oc.series = error_series(r.history, r.result.params);
+        oc.detection = r.detection;
         std::lock_guard<std::mutex> lock(mu);
         if (params.empty()) params = r.result.params;
       };
@@ -81,7 +97,7 @@ int cmd_montecarlo(int argc, char** argv) {
         record(one_stage ? run_one_stage_simulation<5>(s, run_seed)
                          : run_two_stage_simulation<5>(s, run_seed));
       else
-        record(run_simulation(s, run_seed));
+        record(run_simulation(s, run_seed, {}, frames, nullptr, passes));
       std::lock_guard<std::mutex> lock(mu);
       print_progress("runs done:", double(++done) / double(runs));
     }
@@ -128,9 +144,12 @@ int cmd_montecarlo(int argc, char** argv) {
                 truth[j] + mean[j], std::sqrt(std_[j]), r, std::sqrt(sig[j]), ok ? "yes" : "NO");
   }
   std::printf("\n%d of %zu parameters below the paper's sigma\n", beaten, np);
-  std::printf("average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f): %s\n",
-              np, nees, nees_lo, nees_hi,
-              nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
+  std::printf(
+      "average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f, 99 %% "
+      "%.2f..%.2f): %s\n",
+      np, nees, nees_lo, nees_hi, chi2_quantile(0.005, n * double(np)) / n,
+      chi2_quantile(0.995, n * double(np)) / n,
+      nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
   std::string suspects;
   for (std::size_t i = 0; i < out.size(); ++i)
     if (out[i].suspect) suspects += (suspects.empty() ? "" : ", ") + std::to_string(i);
@@ -139,6 +158,13 @@ int cmd_montecarlo(int argc, char** argv) {
         "runs a user would have been warned of (more than 1 %% of the markers gated; included "
         "above): %s\n",
         suspects.c_str());
+  DetectionReport detection;
+  if (frames.enabled) {
+    std::vector<DetectionReport> each;
+    for (const auto& oc : out) each.push_back(oc.detection);
+    detection = combine(each);
+    print_detection(detection, frames.format);
+  }
   std::printf("wall time %.1f s (%.2f s per run on %llu jobs)\n", wall, wall / n * double(jobs),
               (unsigned long long)jobs);
 
@@ -152,19 +178,37 @@ int cmd_montecarlo(int argc, char** argv) {
   std::fprintf(f,
                "# nees_mean=%.4f nees_95_lo=%.4f nees_95_hi=%.4f runs=%llu wall_s=%.2f jobs=%llu\n",
                nees, nees_lo, nees_hi, (unsigned long long)runs, wall, (unsigned long long)jobs);
+  if (frames.enabled)
+    std::fprintf(f,
+                 "# frames=%s markers_drawn=%llu markers_labelled=%llu wrong_labels=%llu "
+                 "centroid_rms_px=%.4f centroid_max_px=%.4f ms_per_frame=%.3f\n",
+                 hal::to_string(frames.format), (unsigned long long)detection.markers_drawn,
+                 (unsigned long long)detection.markers_labelled,
+                 (unsigned long long)detection.wrong_labels, detection.centroid_rms_px,
+                 detection.centroid_max_px, detection.ms_per_frame);
   std::fclose(f);
   f = std::fopen((dir + "/runs.csv").c_str(), "w");
   if (!f) fail("cannot write " + dir + "/runs.csv", 1);
   std::fprintf(f, "run,seed");
   for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
-  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s\n");
+  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s");
+  if (frames.enabled)
+    std::fprintf(f, ",markers_drawn,markers_labelled,wrong_labels,centroid_rms_px,centroid_max_px");
+  std::fprintf(f, "\n");
   for (std::size_t i = 0; i < out.size(); ++i) {
     std::fprintf(f, "%zu,%llu", i, (unsigned long long)out[i].seed);
     for (double e : out[i].error) std::fprintf(f, ",%.6g", e);
     for (double e : out[i].sigma) std::fprintf(f, ",%.6g", e);
-    std::fprintf(f, ",%.4f,%llu,%llu,%.3f\n", out[i].nees, (unsigned long long)out[i].gated,
+    std::fprintf(f, ",%.4f,%llu,%llu,%.3f", out[i].nees, (unsigned long long)out[i].gated,
                  (unsigned long long)out[i].failures, out[i].wall_s);
+    if (frames.enabled) {
+      const DetectionReport& d = out[i].detection;
+      std::fprintf(f, ",%llu,%llu,%llu,%.4f,%.4f", (unsigned long long)d.markers_drawn,
+                   (unsigned long long)d.markers_labelled, (unsigned long long)d.wrong_labels,
+                   d.centroid_rms_px, d.centroid_max_px);
+    }
+    std::fprintf(f, "\n");
   }
   std::fclose(f);
   std::printf("wrote %s/summary.csv, %s/runs.csv\n", dir.c_str(), dir.c_str());

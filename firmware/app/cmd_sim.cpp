@@ -15,24 +15,19 @@
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "plots.hpp"
 #include "report.hpp"
+#include "sim_frames.hpp"
 #include "sim_run.hpp"
 
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario", "seed", "out", "format", "passes"},
+  std::vector<std::string> with_value = {"scenario",    "seed",       "out",   "format",
+                                         "pixel-sigma", "spot-noise", "passes"},
                            flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   const Options o = parse(argc, argv, 2, with_value, flags);
-  FrameMode frames;
-  frames.enabled = o.flag("frames");
-  const std::string format = o.get("format", "grey");
-  if (format == "yuyv")
-    frames.format = hal::PixelFormat::kYuyv;
-  else if (format != "grey")
-    fail("--format: '" + format + "' is not a pixel format (grey or yuyv)");
-  if (o.flag("format") && !frames.enabled) fail("--format applies to --frames only");
+  const FrameMode frames = frame_mode_option(o);
   const bool intrinsics = o.flag("intrinsics");
   if (intrinsics && (frames.enabled || o.flag("profile")))
     fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
@@ -90,19 +85,7 @@ int cmd_sim(int argc, char** argv) {
         (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
         (unsigned long long)fc.failures, wall);
 
-    if (frames.enabled) {
-      const DetectionReport& d = run.detection;
-      std::printf(
-          "detection (%s frames): %llu frames, %llu of %llu reflections labelled, %llu wrong "
-          "labels, "
-          "%llu withheld in doubt, %llu blobs unlabelled; centroid error %.3f px RMS (max %.3f) "
-          "against the true projections; %.2f ms per frame\n",
-          hal::to_string(frames.format), (unsigned long long)d.frames,
-          (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
-          (unsigned long long)d.wrong_labels, (unsigned long long)d.dropped_in_doubt,
-          (unsigned long long)d.unlabelled_blobs, d.centroid_rms_px, d.centroid_max_px,
-          d.ms_per_frame);
-    }
+    if (frames.enabled) print_detection(run.detection, frames.format);
 
     std::string err;
     if (const std::string w = convergence_warning(run.result); !w.empty())

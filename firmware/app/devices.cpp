@@ -32,8 +32,13 @@ std::unique_ptr<Camera> open_camera(const RunSettings& s, int width, int height)
   config.buffers = kCameraBuffers;
   if (!camera->capture.open(spec.device, config) || !camera->capture.start())
     throw drivers::DriverError(drivers::Fault::kWrongKind, camera->capture.error());
+  // 20 frame periods of silence, at least 2 s (20 Hz when the driver reports no frame interval).
+  const std::int64_t period = camera->capture.frame_period_ns();
+  camera->watchdog = std::make_unique<drivers::FrameWatchdog>(
+      camera->capture, camera->clock, spec.device,
+      drivers::FrameWatchdog::timeout_for(period > 0 ? period : 50'000'000));
   camera->markers = std::make_unique<drivers::DetectingMarkerSource<kMarkers>>(
-      camera->capture, drivers::DetectionConfig<kMarkers>{}, width, height);
+      *camera->watchdog, drivers::DetectionConfig<kMarkers>{}, width, height);
   return camera;
 }
 

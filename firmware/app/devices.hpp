@@ -11,7 +11,9 @@
 
 #include "cli.hpp"
 #include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/drivers/frame_watchdog.hpp"
 #include "mirrorcal/drivers/gpio_lines.hpp"
+#include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/v4l2.hpp"
 #include "mirrorcal/hal/sources.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
@@ -20,10 +22,14 @@
 
 namespace mirrorcal::app {
 
-// The camera: V4L2 capture and the markers detected in its frames (blobs, labelled by brightness,
-// 1 : 1.5 : 2.25 in id order, and by the filter's prediction once a loop relabels them).
+// The camera: V4L2 capture, watched for silence (a camera that stops delivering frames ends the
+// run with a message, FrameWatchdog), and the markers detected in its frames (blobs, labelled by
+// brightness, 1 : 1.5 : 2.25 in id order, and by the filter's prediction once a loop relabels
+// them).
 struct Camera {
   drivers::V4l2Capture capture;
+  drivers::MonotonicClock clock;
+  std::unique_ptr<drivers::FrameWatchdog> watchdog;
   std::unique_ptr<drivers::DetectingMarkerSource<kMarkers>> markers;
 };
 

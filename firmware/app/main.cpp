@@ -21,6 +21,8 @@ const std::vector<Command>& commands() {
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III;\n"
        "              --hold-skew: skew 0; --one-stage: everything at once from one minute)\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
+       "              [--spot-noise PX] [--pixel-sigma PX]  (with --frames: the pixel noise drawn\n"
+       "              into the frames and the one the filter assumes; default the scenario's)\n"
        "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
@@ -28,7 +30,9 @@ const std::vector<Command>& commands() {
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n"
-       "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n",
+       "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n"
+       "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
+       "              [--pixel-sigma PX]  (as sim)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"

@@ -4,12 +4,20 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "mirrorcal/drivers/detecting_marker_source.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "sim_run.hpp"
 
 namespace mirrorcal::app {
+
+// The detection of several runs as one: counts summed, the centroid RMS over all labelled markers,
+// the maximum of the maxima, time per frame over all frames.
+DetectionReport combine(const std::vector<DetectionReport>& runs);
+
+// One line saying how detection did (sim and montecarlo print it).
+void print_detection(const DetectionReport& d, hal::PixelFormat format);
 
 // The detection settings for frames drawn with the given renderer settings: its brightness
 // ratios are the identification's second cue.
@@ -32,7 +40,7 @@ class RenderedMarkers final : public hal::MarkerSource<kMarkers>,
   sim::RenderedFrameSource frames_;
   drivers::DetectingMarkerSource<kMarkers> detect_;
   DetectionReport report_{};
-  double sum_sq_ = 0.0;
+  double sum_sq_ = 0.0, sum_u_ = 0.0, sum_v_ = 0.0;
 };
 
 }  // namespace mirrorcal::app

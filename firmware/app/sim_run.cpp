@@ -145,22 +145,29 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   const Run::State truth = truth_state<Run::State>(s);
   // With frames, every pass renders and detects them afresh (detection follows the prediction).
   std::optional<RenderedMarkers> rendered;
+  std::uint64_t wrong_labels_before = 0;
   const auto hooks = [&](int pass) {
     LoopHooks h;
     if (pass == passes - 1) h.profiler = profiler;  // the timing of one pass, the final one
     if (frames.enabled) {
       sim::RenderConfig render;
       render.format = frames.format;
+      render.spot_noise_px = frames.spot_noise_px >= 0.0 ? frames.spot_noise_px : s.pixel_sigma;
+      if (rendered) wrong_labels_before += rendered->report().wrong_labels;
       rendered.emplace(s, render, sim::derive_seed(seed, 200));
       h.source = &*rendered;
       h.relabeler = &*rendered;
     }
     return h;
   };
-  Run run =
-      run_loop<0>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
+  CalibrationConfig config = scenario_config(s);
+  if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
+  Run run = run_loop<0>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
-  if (rendered) run.detection = rendered->report();
+  if (rendered) {
+    run.detection = rendered->report();
+    run.detection.wrong_labels_before = wrong_labels_before;
+  }
   return run;
 }
 

@@ -20,23 +20,30 @@ namespace mirrorcal::app {
 constexpr int kMarkers = 3;  // M of the product build: the paper's three markers
 
 // mirrorcal sim --frames: find the markers in rendered frames with the board's detection code
-// (sim_frames.hpp) instead of taking the listed reflections.
+// (sim_frames.hpp) instead of taking the listed reflections. By default the frames carry the
+// scenario's pixel noise (each spot drawn displaced by it, as the listed reflections are) and the
+// filter assumes it: the paper's scenario with detection and identification in the loop.
 struct FrameMode {
   bool enabled = false;
   hal::PixelFormat format = hal::PixelFormat::kGrey;
+  double spot_noise_px = -1.0;  // the noise drawn into the frames, px; < 0: the scenario's
+  double pixel_sigma = -1.0;    // the pixel noise the filter assumes, px; < 0: the scenario's
 };
 
 // How detection did against the rendered truth (--frames only).
 struct DetectionReport {
   std::uint64_t frames = 0;
-  std::uint64_t markers_drawn = 0;     // reflections in the image
-  std::uint64_t markers_labelled = 0;  // reflections the detection reported
-  std::uint64_t wrong_labels = 0;      // reported under one marker's label at another's spot
-  std::uint64_t dropped_in_doubt = 0;  // labels withheld: ambiguous, crossing or merged
-  std::uint64_t unlabelled_blobs = 0;  // blobs no marker took (spurious, merged, crowded)
-  double centroid_rms_px = 0.0;        // correctly labelled, against the true projection
+  std::uint64_t markers_drawn = 0;        // reflections in the image
+  std::uint64_t markers_labelled = 0;     // reflections the detection reported
+  std::uint64_t wrong_labels = 0;         // reported under one marker's label at another's spot
+  std::uint64_t wrong_labels_before = 0;  // the same in the passes before the last (the rest of
+                                          // the report is the last pass's)
+  std::uint64_t dropped_in_doubt = 0;     // labels withheld: ambiguous, crossing or merged
+  std::uint64_t unlabelled_blobs = 0;     // blobs no marker took (spurious, merged, crowded)
+  double centroid_rms_px = 0.0;           // correctly labelled, against where the spot was drawn
   double centroid_max_px = 0.0;
-  double ms_per_frame = 0.0;  // detection and identification, wall time
+  double centroid_mean_px[2] = {0.0, 0.0};  // the mean error in u and v: detection's bias
+  double ms_per_frame = 0.0;                // detection and identification, wall time
 };
 
 template <int NK>

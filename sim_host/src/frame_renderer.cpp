@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "mirrorcal/sim_host/simulator.hpp"
 
@@ -11,6 +12,7 @@ namespace {
 
 constexpr std::size_t kNoiseTable = std::size_t{1} << 18;
 constexpr std::uint64_t kNoiseStream = 0x4652414d45ull;  // "FRAME": seeds apart from simulate()'s
+constexpr std::uint64_t kSpotStream = 0x53504f54ull << 32;  // "SPOT", xor the frame's time
 
 }  // namespace
 
@@ -115,9 +117,15 @@ void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
   truth.t_ns = t_ns;
   truth.visible.assign(m, false);
   truth.uv.assign(m, Eigen::Vector2d::Zero());
+  // The spots' displacements of this frame, drawn for every marker in view or not, so that the
+  // same frame gets the same ones whenever drawn.
+  std::mt19937_64 rng(derive_seed(seed_, kSpotStream ^ static_cast<std::uint64_t>(t_ns)));
+  std::normal_distribution<double> n01;
   for (std::size_t i = 0; i < m; ++i) {
+    const double du = n01(rng), dv = n01(rng);
     Eigen::Vector2d uv;
     if (!true_pixel(scenario_, kin.p, kin.q_n_b, static_cast<int>(i), uv)) continue;
+    uv += config_.spot_noise_px * Eigen::Vector2d(du, dv);
     truth.visible[i] = true;
     truth.uv[i] = uv;
     add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);

@@ -6,6 +6,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <random>
 #include <thread>
@@ -53,6 +54,30 @@ TEST(Mm710, FramesMatchTheLayoutWorkedByHand) {
   EXPECT_EQ(f[2].data[4], 0x00);
   EXPECT_EQ(f[2].data[5], 0x80);
   for (const auto& frame : f) EXPECT_EQ(frame.len, 8);
+}
+
+// The CRC byte (bits 56-63) is carried but not verified: no public source gives the MM7.10's
+// algorithm (can_imu.hpp). The sender writes 0; the decoder reads the same values whatever it
+// holds.
+TEST(Mm710, TheCrcByteIsCarriedNotVerified) {
+  const double dps = kPi / 180;
+  mm710::Frame f[3];
+  ASSERT_TRUE(mm710::encode(sample_of(3 * dps, -1 * dps, 7 * dps, 0.2 * kG, -0.1 * kG, kG), 9, f));
+  for (int m = 0; m < 3; ++m) {
+    EXPECT_EQ(f[m].data[7], 0) << "message " << m;
+    mm710::Part zero, other;
+    ASSERT_TRUE(mm710::decode(f[m], zero));
+    for (const int crc : {0x01, 0x5a, 0xff}) {
+      mm710::Frame g = f[m];
+      g.data[7] = static_cast<std::uint8_t>(crc);
+      ASSERT_TRUE(mm710::decode(g, other)) << "message " << m << " crc " << crc;
+      EXPECT_EQ(other.message, zero.message);
+      EXPECT_EQ(other.counter, zero.counter);
+      EXPECT_EQ(other.rate, zero.rate);
+      EXPECT_EQ(other.accel, zero.accel);
+      EXPECT_EQ(other.status_ok, zero.status_ok);
+    }
+  }
 }
 
 TEST(Mm710, RoundTripIsWithinHalfABit) {
@@ -237,6 +262,43 @@ TEST(CanImu, ASilentBusIsReportedAsNotAnswering) {
   EXPECT_EQ(imu.next(out), hal::SourceStatus::kError);
   EXPECT_GE(monotonic_ns() - t0, 50'000'000);
   EXPECT_NE(std::string(imu.error()).find("stops answering"), std::string::npos) << imu.error();
+}
+
+// A sensor that stops mid-stream, or keeps the bus busy with frames that never make a sample
+// (wrong length, or only TX1 over and over): both are a sensor that stopped answering.
+TEST(CanImu, FramesThatNeverMakeASampleAreASensorThatStoppedAnswering) {
+  Pair pair;
+  CanImu imu(pair.rx, "pair", 100'000'000);
+  CanImuSender sender(pair.tx);
+  ImuSample out;
+  ASSERT_TRUE(sender.send(sample_of(0.1, 0.2, 0.3, 0, 0, 9.8)));
+  ASSERT_EQ(imu.next(out), hal::SourceStatus::kOk);
+  std::atomic<bool> stop{false};
+  std::thread noise([&] {
+    for (int k = 0; !stop; ++k) {
+      can_frame f{};
+      f.can_id = k % 2 == 0 ? mm710::kTx1 : mm710::kTx2;
+      f.len = static_cast<std::uint8_t>(k % 2 == 0 ? 8 : 5);  // TX1 alone, TX2 too short
+      f.data[6] = static_cast<std::uint8_t>(k & 0x0f);
+      if (write(pair.tx, &f, sizeof(f)) != static_cast<ssize_t>(sizeof(f))) break;
+      usleep(1'000);
+    }
+  });
+  const std::int64_t t0 = monotonic_ns();
+  const hal::SourceStatus st = imu.next(out);
+  const std::int64_t waited = monotonic_ns() - t0;
+  stop = true;
+  noise.join();
+  EXPECT_EQ(st, hal::SourceStatus::kError);
+  EXPECT_GE(waited, 100'000'000);
+  EXPECT_LT(waited, 1'000'000'000);
+  const std::string message = imu.error();
+  EXPECT_EQ(message.rfind("pair: stops answering: ", 0), 0u) << message;
+  EXPECT_NE(message.find(" frames in 100 ms but no complete MM7.10 sample"), std::string::npos)
+      << message;
+  EXPECT_GT(imu.counters().rejected_frames, 10u);
+  EXPECT_GT(imu.counters().assembly.incomplete_samples, 10u);
+  EXPECT_EQ(imu.counters().samples, 1u);
 }
 
 TEST(CanImu, OpeningAMissingInterfaceSaysSo) {

@@ -37,8 +37,9 @@ class FakeMpu6050 final : public RegisterBus {
     regs_[0x6B] = 0x40; /* reset value: asleep */
   }
   double gyro_dps[3] = {0, 0, 0};
-  double accel_g[3] = {0, 0, 0};
-  bool dead = false;  // the part stops answering: every transfer fails with EREMOTEIO
+  double accel_g[3] = {0, 0, 1};  // at rest, z up
+  bool dead = false;              // the part stops answering: every transfer fails with dead_errno
+  int dead_errno = EREMOTEIO;
   std::size_t reads = 0, writes = 0, largest_read = 0;
   std::array<std::uint8_t, 256> regs_{};
 
@@ -60,7 +61,7 @@ class FakeMpu6050 final : public RegisterBus {
 
  private:
   bool fail() {
-    errno = EREMOTEIO;
+    errno = dead_errno;
     return false;
   }
   void refresh() {
@@ -83,8 +84,9 @@ class FakeIcm42688 final : public SpiTransport {
  public:
   FakeIcm42688() { reset(); }
   double gyro_dps[3] = {0, 0, 0};
-  double accel_g[3] = {0, 0, 0};
-  bool unplugged = false;  // MISO floats high: every byte reads 0xff
+  double accel_g[3] = {0, 0, 1};  // at rest, z up
+  bool unplugged = false;         // MISO floats high: every byte reads 0xff
+  bool miso_low = false;          // MISO held low: every byte reads 0x00
   std::size_t transfers = 0, resets = 0;
   std::vector<std::uint8_t> first_bytes;  // of every transfer, to check the framing
   std::array<std::uint8_t, 256> bank0{};
@@ -94,8 +96,8 @@ class FakeIcm42688 final : public SpiTransport {
     ++transfers;
     first_bytes.push_back(tx[0]);
     rx[0] = 0xff;
-    if (unplugged) {
-      for (std::size_t i = 0; i < n; ++i) rx[i] = 0xff;
+    if (unplugged || miso_low) {
+      for (std::size_t i = 0; i < n; ++i) rx[i] = unplugged ? 0xff : 0x00;
       return true;
     }
     const std::uint8_t addr = tx[0] & 0x7f;
@@ -150,15 +152,19 @@ class FakeIcm42688 final : public SpiTransport {
   std::string name_ = "fake-icm42688";
 };
 
-// A data-ready line whose rising edges are scripted: times popped in order; none left -> timeout.
-// Each wait sleeps for delay_ns first, as a part whose next sample is that far away.
+// A data-ready line whose rising edges are scripted: times popped in order; none left -> timeout;
+// broken -> the line itself fails (its chip went away). Each wait sleeps for delay_ns first, as a
+// part whose next sample is that far away.
 class FakeDataReady final : public hal::DataReadyLine {
  public:
   std::deque<std::int64_t> edges;
   std::int64_t last_timeout_ns = 0;
   std::int64_t delay_ns = 0;
+  bool broken = false;
+  const char* error() const override { return broken ? "gpiochip0:17: read failed: ENODEV" : ""; }
   hal::SourceStatus wait_rising(std::int64_t timeout_ns, std::int64_t& t_ns) override {
     last_timeout_ns = timeout_ns;
+    if (broken) return hal::SourceStatus::kError;
     if (delay_ns > 0) sleep_until_ns(monotonic_ns() + delay_ns);
     if (edges.empty()) return hal::SourceStatus::kNotReady;
     t_ns = edges.front();

@@ -2,7 +2,9 @@
 // ask, conversion with their scales, data-ready pacing and the failures a user meets.
 #include <gtest/gtest.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 
 #include "fakes.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
@@ -82,15 +84,34 @@ TEST(Mpu6050, RefusesOtherPartsAndSilentBuses) {
             Fault::kBadSpec);
 }
 
+// i2c-dev's answers when the part goes away mid-run: no acknowledge (EREMOTEIO from most
+// adapters, ENXIO from some), a stretched clock (ETIMEDOUT), a bus in error (EIO).
 TEST(Mpu6050, ReportsAPartThatStopsAnswering) {
+  for (const int err : {EREMOTEIO, ENXIO, ETIMEDOUT, EIO}) {
+    auto bus = std::make_unique<FakeMpu6050>();
+    FakeMpu6050& part = *bus;
+    Mpu6050 imu(std::move(bus), unpaced());
+    ImuSample s;
+    ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+    part.dead = true;
+    part.dead_errno = err;
+    EXPECT_EQ(imu.next(s), hal::SourceStatus::kError);
+    const std::string message = imu.error();
+    EXPECT_NE(message.find("fake-mpu6050: stops answering"), std::string::npos) << message;
+    EXPECT_NE(message.find(std::strerror(err)), std::string::npos) << message;
+  }
+}
+
+// A part that reset (a brown-out) wakes asleep with its data registers cleared: all zeros.
+TEST(Mpu6050, APartThatResetIsNotTakenForASample) {
   auto bus = std::make_unique<FakeMpu6050>();
   FakeMpu6050& part = *bus;
   Mpu6050 imu(std::move(bus), unpaced());
   ImuSample s;
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
-  part.dead = true;
+  part.regs_[0x6B] = 0x40;  // PWR_MGMT_1 back to its reset value: asleep
   EXPECT_EQ(imu.next(s), hal::SourceStatus::kError);
-  EXPECT_NE(std::string(imu.error()).find("stops answering"), std::string::npos) << imu.error();
+  EXPECT_NE(std::string(imu.error()).find("0x00 throughout"), std::string::npos) << imu.error();
 }
 
 TEST(Mpu6050, DataReadyEdgesTimeTheSamplesAndRevealMissedOnes) {
@@ -111,6 +132,21 @@ TEST(Mpu6050, DataReadyEdgesTimeTheSamplesAndRevealMissedOnes) {
   ImuSample s;
   EXPECT_EQ(imu.next(s), hal::SourceStatus::kError);  // no more edges: the part went quiet
   EXPECT_NE(std::string(imu.error()).find("no data-ready edge"), std::string::npos) << imu.error();
+  // 20 periods, at least 200 ms.
+  EXPECT_EQ(drdy.last_timeout_ns, 200'000'000);
+}
+
+TEST(Mpu6050, ADataReadyLineThatFailsIsNamedWithTheImu) {
+  auto bus = std::make_unique<FakeMpu6050>();
+  FakeDataReady drdy;
+  Mpu6050 imu(std::move(bus), unpaced(), &drdy);
+  drdy.edges.push_back(1'000'000'000);
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  drdy.broken = true;
+  EXPECT_EQ(imu.next(s), hal::SourceStatus::kError);
+  EXPECT_EQ(std::string(imu.error()),
+            "fake-mpu6050: data-ready line failed: gpiochip0:17: read failed: ENODEV");
 }
 
 TEST(Mpu6050, TheWaitForTheDataReadyEdgeIsReportedApartFromTheRead) {
@@ -183,17 +219,52 @@ TEST(Icm42688, RefusesUnsupportedRatesAndAnUnpluggedPart) {
   EXPECT_NE(std::string(gone.what()).find("0xff"), std::string::npos) << gone.what();
 }
 
-TEST(Icm42688, NoticesWithinASecondWhenThePartIsUnplugged) {
+// A part that stops answering mid-run, in each way an SPI bus shows it: no sample of it may reach
+// the filter, and the message names the device and what it read.
+TEST(Icm42688, APartThatStopsAnsweringEndsTheStreamAtOnce) {
+  struct Case {
+    const char* what;
+    void (*stop)(FakeIcm42688&);
+    const char* expected;
+  };
+  const Case cases[] = {
+      {"unplugged (MISO floats high)", [](FakeIcm42688& p) { p.unplugged = true; }, "0xff"},
+      {"MISO held low", [](FakeIcm42688& p) { p.miso_low = true; }, "0x00"},
+      {"reset by a brown-out (sensors off, WHO_AM_I still right)",
+       [](FakeIcm42688& p) {
+         const std::uint8_t soft_reset[2] = {0x11, 0x01};  // DEVICE_CONFIG, as the SPI bus writes
+         std::uint8_t rx[2];
+         p.transfer(soft_reset, rx, 2);
+       },
+       "sensors are off"},
+  };
+  for (const Case& c : cases) {
+    auto transport = std::make_unique<FakeIcm42688>();
+    FakeIcm42688& part = *transport;
+    Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), unpaced(200));
+    ImuSample s;
+    ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk) << c.what;
+    c.stop(part);
+    EXPECT_EQ(imu.next(s), hal::SourceStatus::kError) << c.what;
+    const std::string message = imu.error();
+    EXPECT_NE(message.find("fake-icm42688: stops answering"), std::string::npos) << message;
+    EXPECT_NE(message.find(c.expected), std::string::npos) << c.what << ": " << message;
+    EXPECT_EQ(imu.counters().samples, 1u) << c.what;
+  }
+}
+
+// Within a second, a part that still answers but is no longer the one configured (WHO_AM_I).
+TEST(Icm42688, NoticesWithinASecondWhenThePartIsReplaced) {
   auto transport = std::make_unique<FakeIcm42688>();
   FakeIcm42688& part = *transport;
   Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), unpaced(200));
   ImuSample s;
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
-  part.unplugged = true;  // reads now give 0xffff everywhere: plausible-looking -1 counts
+  part.bank0[0x75] = 0x6f;  // an ICM-20689 answers now
   int delivered = 0;
   while (imu.next(s) == hal::SourceStatus::kOk && delivered < 1000) ++delivered;
   EXPECT_LT(delivered, 200) << "a second of samples at 200 Hz";
-  EXPECT_NE(std::string(imu.error()).find("WHO_AM_I reads 0xff"), std::string::npos) << imu.error();
+  EXPECT_NE(std::string(imu.error()).find("WHO_AM_I reads 0x6f"), std::string::npos) << imu.error();
 }
 
 TEST(Icm42688, PacedByTheClockWithoutDataReady) {

@@ -116,6 +116,15 @@ int main() {
         std::printf("read: accel %.9f %.9f %.9f m/s^2, gyro %.9f %.9f %.9f rad/s\n", s.accel[0],
                     s.accel[1], s.accel[2], s.gyro[0], s.gyro[1], s.gyro[2]);
     }
+    // Mid-run the part resets (a brown-out): its data registers read 0x00. The next read ends the
+    // stream with a message instead of handing the filter a sample of zeros.
+    for (int i = 0; i < 14; ++i)
+      GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x3B + i, 0) == 0);
+    ImuSample s;
+    GUEST_CHECK(imu.next(s) == hal::SourceStatus::kError);
+    std::printf("after a reset: %s\n", imu.error());
+    GUEST_CHECK(std::strstr(imu.error(), "stops answering: the data registers read 0x00") !=
+                nullptr);
   } catch (const DriverError& e) {
     std::printf("FAILED: %s\n", e.what());
     GUEST_CHECK(false);

@@ -5,6 +5,9 @@
 #   run_can.sh interrupt   a run without --duration, stopped by SIGINT (Ctrl-C) after about 1 s
 #   run_can.sh record      `mirrorcal record --imu can:vcan0` for 2 s; `mirrorcal calibrate` reads
 #                          it back (and refuses it: an IMU-only recording has no frame)
+#   run_can.sh silent      a run without --duration while the sensor sends for 4 s and then falls
+#                          silent: the run ends with exit 1 and a message naming vcan0, and
+#                          writes the calibration of what it received
 mode=${1:-duration}
 /data/guest_can send 4 &
 sender=$!
@@ -23,12 +26,26 @@ elif [ "$mode" = interrupt ]; then
   kill -INT $run
   wait $run
   status=$?
+elif [ "$mode" = silent ]; then
+  mirrorcal run --imu can:vcan0 --sensors /data --out /tmp/out >/tmp/run.log 2>&1
+  status=$?
 else
   mirrorcal run --imu can:vcan0 --sensors /data --out /tmp/out --duration 2 >/tmp/run.log 2>&1
   status=$?
 fi
 cat /tmp/run.log
 wait $sender || { echo "run_can: the sender failed"; exit 1; }
+if [ "$mode" = silent ]; then
+  [ "$status" -eq 1 ] || { echo "run_can: mirrorcal exited with $status, not 1"; exit 1; }
+  grep -q "^mirrorcal: vcan0: stops answering: no frame of the MM7.10 for 500 ms" /tmp/run.log ||
+    { echo "run_can: no 'stops answering' message"; exit 1; }
+  n=$(sed -n 's/^loop: \([0-9]*\) IMU samples.*/\1/p' /tmp/run.log)
+  [ "${n:-0}" -ge 600 ] && [ "$n" -le 900 ] || { echo "run_can: $n samples, not about 800"; exit 1; }
+  [ -s /tmp/out/camchain-imucam.yaml ] && [ -s /tmp/out/mirrorcal-result.yaml ] ||
+    { echo "run_can: no results"; exit 1; }
+  echo "run_can: passed"
+  exit 0
+fi
 [ "$status" -eq 0 ] || { echo "run_can: mirrorcal ($mode) exited with $status"; exit 1; }
 n=$(sed -n 's/^\(loop\|record\): \([0-9]*\) IMU samples.*/\2/p' /tmp/run.log)
 if [ "$mode" = record ]; then

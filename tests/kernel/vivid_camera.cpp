@@ -22,6 +22,8 @@
 
 #include "guest_check.hpp"
 #include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/drivers/frame_watchdog.hpp"
+#include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/v4l2.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
@@ -290,6 +292,31 @@ int drops() {
   GUEST_CHECK(cap.counters().frames == none.frames + half.frames);
   GUEST_CHECK(half.rate() > none.rate() + 0.2);
   GUEST_CHECK(half.rate() < 0.9);
+
+  // Every buffer dropped: the camera stops answering. Polled as the loop polls it (never
+  // blocking), the watchdog ends the stream after its timeout with a message naming the device.
+  mc::drivers::MonotonicClock clock;
+  mc::drivers::FrameWatchdog watchdog(cap, clock, kCapture, 1'000'000'000);
+  const int fd2 = open(kCapture, O_RDWR);
+  GUEST_CHECK(fd2 >= 0 && set_control(fd2, kPercentDropped, 100));
+  if (fd2 >= 0) close(fd2);
+  mc::hal::FrameView f;
+  while (watchdog.poll(f) == mc::hal::SourceStatus::kOk) {
+  }  // what was queued before
+  const std::int64_t t0 = mc::drivers::monotonic_ns();
+  mc::hal::SourceStatus st = mc::hal::SourceStatus::kNotReady;
+  while (st != mc::hal::SourceStatus::kError && mc::drivers::monotonic_ns() - t0 < 10'000'000'000) {
+    st = watchdog.poll(f);
+    usleep(5'000);
+  }
+  const double waited_s = static_cast<double>(mc::drivers::monotonic_ns() - t0) * 1e-9;
+  std::printf("vivid dropping 100 %%: %s after %.2f s: %s\n",
+              st == mc::hal::SourceStatus::kError ? "error" : "no error", waited_s,
+              watchdog.error());
+  GUEST_CHECK(st == mc::hal::SourceStatus::kError);
+  GUEST_CHECK(waited_s > 0.5 && waited_s < 3.0);  // the silence began before t0
+  GUEST_CHECK(std::strstr(watchdog.error(), "/dev/video0: stops answering: no frame for") !=
+              nullptr);
   return mc::guest::finish("vivid drops");
 }
 

@@ -12,8 +12,19 @@
 // 0.000127465 g per bit, raw 0x8000 is zero (Bosch rounds the offset to -4.1768 g). The roll
 // rate comes negative with respect to the right-hand rule about x (Bosch's driver inverts it); we
 // invert it too, so the sample is right-handed in the sensor's x, y, z. A status nibble other
-// than 0 flags a signal the sensor itself does not trust. The CRC byte is not checked (Bosch's
-// driver does not either; its polynomial is not published with the layout).
+// than 0 flags a signal the sensor itself does not trust.
+//
+// The CRC byte (bits 56-63) is carried but NOT verified, and CanImuSender writes 0 there. No
+// public source says how the MM7.10 computes it: the data sheet's table names the signal only,
+// and Bosch's own driver declares the three messages without a CRC position (crc_index =
+// std::nullopt in off_highway_mm7p10/src/receiver.cpp), although its CAN library checks an SAE
+// J1850 CRC-8 (polynomial 0x1D, initial value and final XOR 0xFF) on the messages of Bosch's
+// off-highway radar. An AUTOSAR E2E-style CRC over these bytes would also need a per-message data
+// ID that nobody publishes, so guessing would reject every frame of a real sensor or accept
+// garbage anyway. Lost and damaged frames are caught otherwise: the CAN bus's own 15-bit CRC
+// drops corrupted frames in the controller, the identifier filter and the length check reject
+// foreign frames, each message's counter reveals lost frames, the three frames of a sample must
+// carry the same counter in order, and the status nibbles drop samples the sensor distrusts.
 //
 // The three frames of one sample carry the same 4-bit message counter; each message's counter
 // steps by one per sample, so a gap counts lost frames of that message. A sample is delivered

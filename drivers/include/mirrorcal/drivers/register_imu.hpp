@@ -3,7 +3,11 @@
 // DriverError when the part is missing, of another kind or does not take its configuration.
 // next() waits for the sample (the data-ready line's rising edge if there is one, else the next
 // period on CLOCK_MONOTONIC; wait_ns() says how long), reads the data registers in one burst and
-// converts with the data sheet's scales. Nothing is allocated after opening.
+// converts with the data sheet's scales. Nothing is allocated after opening. A part that stops
+// answering ends the stream with kError and error() saying how: a failed transfer (after one
+// retry), no data-ready edge for 20 periods (at least 200 ms), a data block no working part gives
+// (all 0x00 or 0xff bytes, the ICM-42688-P's -32768 of sensors off) at once, a changed WHO_AM_I
+// within a second.
 #pragma once
 
 #include <cstdint>
@@ -63,9 +67,15 @@ class RegisterImu : public hal::ImuSource {
   double gyro_lsb_per_dps_ = 1.0, accel_lsb_per_g_ = 1.0;
   // Offsets of the big-endian accelerometer and gyro triples in the data block.
   std::size_t accel_offset_ = 0, gyro_offset_ = 6;
+  // The value a part reads on every axis when it has no data (sensors off), if it has one.
+  bool no_data_value_valid_ = false;
+  std::int16_t no_data_value_ = 0;
 
  private:
   bool read_with_retry(std::uint8_t first, std::uint8_t* out, std::size_t n);
+  // Why a data block cannot be a sample of a working part (a bus nobody drives, a part that
+  // reset), or nullptr when it can.
+  const char* no_data(const std::uint8_t* raw) const;
 
   std::unique_ptr<RegisterBus> bus_;
   hal::DataReadyLine* drdy_;

@@ -22,9 +22,14 @@ struct RenderConfig {
   std::vector<double> brightness{80.0, 120.0, 180.0};
   double background_low = 10.0, background_high = 40.0;  // DN, the scene behind the markers
   double noise_sigma = 2.0;                              // DN, read noise per pixel
+  // Measurement noise drawn into the frames, px per coordinate: each spot displaced from its true
+  // projection by a fresh normal draw per frame (the same whenever that frame is drawn again), as
+  // the listed reflections carry the scenario's pixel noise. 0: spots at the true projections.
+  double spot_noise_px = 0.0;
 };
 
-// What was drawn in one frame: the true pixel of each marker whose spot is in the image.
+// What was drawn in one frame: the pixel each marker's spot was drawn at, if it is in the image
+// (its true projection, displaced by RenderConfig::spot_noise_px).
 struct RenderedTruth {
   std::int64_t t_ns = 0;
   std::vector<bool> visible;
