@@ -64,6 +64,12 @@ class CalibrationFilter {
   Pinhole<S> intrinsics() const { return intrinsics_of(filter_.mean(), fixed_); }
 
  private:
+  // Predict's new covariance (kDim^2 scalars: 69 KB at M = 24, double) in thread_workspace, off
+  // the stack.
+  struct PredictWorkspace {
+    Covariance next;
+  };
+
   CalibrationConfig config_;
   Filter filter_;
   Vec3<S> gravity_;
@@ -100,7 +106,8 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   const Eigen::Matrix<S, D, D> fp_dd_t = fp.template leftCols<D>().transpose();
   Eigen::Matrix<S, D, D> p_dd;
   f.left_multiply(fp_dd_t, p_dd);
-  Covariance next = p;
+  Covariance& next = thread_workspace<PredictWorkspace>().next;
+  next = p;
   next.template topLeftCorner<D, D>() = p_dd + imu_process_noise<S>(config_.imu, dt);
   next.template topRightCorner<D, C>() = fp.template rightCols<C>();
   next.template bottomLeftCorner<C, D>() = fp.template rightCols<C>().transpose();

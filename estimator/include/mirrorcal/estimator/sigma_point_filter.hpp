@@ -24,8 +24,26 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <new>
 
 namespace mirrorcal {
+
+// Storage for an operation's large temporaries: one T per thread, in static (thread-local)
+// storage, neither on the stack nor in the filter object. Fixed-size matrices grow with the square
+// of the state, and the update's reach 0.8 MB at 24 markers, which no stack frame should hold
+// (the target is 64 KiB), while the filter object should stay small (32 KiB). T names its user
+// (a workspace type of its own per operation and configuration), so users never share one; the
+// operation must not be re-entered on the same thread while it uses it (it calls nothing that
+// could). The object is built in raw storage at first use and never destroyed: a thread_local
+// object with a destructor would register it with the thread at first use, which allocates, and
+// the fixed-size matrices and factorisations held here release nothing.
+template <class T>
+T& thread_workspace() {
+  alignas(T) static thread_local unsigned char storage[sizeof(T)];
+  static thread_local T* workspace = nullptr;
+  if (workspace == nullptr) workspace = ::new (static_cast<void*>(storage)) T;
+  return *workspace;
+}
 
 // Scaled unscented transform (Julier 2002). With n the dimension of the sampled block:
 //   lambda = alpha^2 (n + kappa) - n, sigma points at the mean and at +-gamma times the columns of
@@ -241,21 +259,23 @@ class SigmaPointFilter {
     for (bool a : active) n_active += a ? 1 : 0;
     if (n_active == 0) return result;
 
-    MeasurementSample<L, Z> ms;
-    if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ms)) {
+    UpdateWorkspace<L, Z>& ws = thread_workspace<UpdateWorkspace<L, Z>>();
+    MeasurementSample<L, Z>& ms = ws.ms;
+    if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ws)) {
       result.status = FilterStatus::kCovarianceNotPositiveDefinite;
       return result;
     }
     for (int b = 0; b < kBlocks; ++b)
       if (active[b] && !ok[b]) ++result.invalid;
     if (spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag) > Scalar(params_.cross_terms_above)) {
-      add_cross_terms<B, L, kRows, kBlocks>(h, ok, ms);
+      add_cross_terms<B, L, kRows, kBlocks>(h, ok, ws);
       result.cross_terms = true;
     }
 
     // Gate each block on its own marginal innovation covariance.
     ZVec innovation = z - ms.z_mean;
-    ZMat s = ms.p_zz;
+    ZMat& s = ws.s;
+    s = ms.p_zz;
     s.diagonal() += r_diag;
     for (int b = 0; b < kBlocks; ++b) {
       if (!ok[b]) continue;
@@ -276,10 +296,12 @@ class SigmaPointFilter {
       return result;
     }
     {
-      ZMat s_used = s;
+      ZMat& s_used = ws.s_used;
+      s_used = s;
       ZVec nu_used = innovation;
       make_inert<kRows, kBlocks>(ok, s_used, nu_used);
-      Eigen::LLT<ZMat> llt_s(s_used);
+      Eigen::LLT<ZMat>& llt_s = ws.llt_s;
+      llt_s.compute(s_used);
       if (llt_s.info() != Eigen::Success) {
         result.status = FilterStatus::kInnovationNotPositiveDefinite;
         return result;
@@ -289,18 +311,19 @@ class SigmaPointFilter {
 
     // A step that fails after others were applied must not leave them applied.
     const State mean_before = mean_;
-    const Covariance cov_before = cov_;
+    Covariance& cov_before = ws.cov_before;
+    cov_before = cov_;
     Scalar remaining = 1;  // of the measurement's information
     int steps = 0;
     for (int k = 0; remaining > 0; ++k) {
       if (k > 0) {
-        if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ms)) {
+        if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ws)) {
           mean_ = mean_before;
           cov_ = cov_before;
           result.status = FilterStatus::kCovarianceNotPositiveDefinite;
           return result;
         }
-        if (result.cross_terms) add_cross_terms<B, L, kRows, kBlocks>(h, ok, ms);
+        if (result.cross_terms) add_cross_terms<B, L, kRows, kBlocks>(h, ok, ws);
         innovation = z - ms.z_mean;
       }
       const Scalar ratio = spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag);
@@ -309,7 +332,7 @@ class SigmaPointFilter {
       remaining -= beta;
       s = ms.p_zz;
       s.diagonal() += r_diag / beta;
-      const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ms, s, innovation, ok);
+      const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ws, innovation, ok);
       ++steps;
       if (st != FilterStatus::kOk) {
         mean_ = mean_before;
@@ -344,22 +367,46 @@ class SigmaPointFilter {
     Eigen::Matrix<Scalar, Z, L> z_plus;    // h at the + sigma points
   };
 
+  // The update's matrices of the sampled block (L) and measurement (Z) sizes and of the state's,
+  // in thread_workspace: the measurement sample, the intermediate products of the transform, the
+  // innovation covariance, the covariance kept for a failed step, the gain and the new covariance.
+  // Each product is evaluated into one of them where Eigen would otherwise make a temporary on the
+  // stack, by the same kernel: the results are those of the expressions bit for bit.
+  template <int L, int Z>
+  struct UpdateWorkspace {
+    MeasurementSample<L, Z> ms;
+    Eigen::Matrix<Scalar, L, L> chol;           // lower Cholesky factor of the sampled block
+    Eigen::Matrix<Scalar, Z, L> z_minus, a, b;  // h at the - sigma points; the transform's a, b
+    Eigen::Matrix<Scalar, Z, Z> aa, bb, dd;     // a a^T, b b^T, and the mean shift's outer product
+    Eigen::Matrix<Scalar, L, Z> chol_at;        // chol a^T
+    Eigen::Matrix<Scalar, Z, Z> s, s_used;      // innovation covariance; with unused blocks inert
+    Eigen::LLT<Eigen::Matrix<Scalar, Z, Z>> llt_s;
+    Covariance cov_before;
+    Eigen::Matrix<Scalar, L, Z> g;  // P_bb^-1 P_bz
+    Eigen::Matrix<Scalar, N, Z> p_xz, gain;
+    // Row-major: the type Eigen gives the solution for a transposed right-hand side, whose
+    // triangular solves then run in the same order.
+    Eigen::Matrix<Scalar, Z, N, Eigen::RowMajor> gain_t;
+    Covariance cov_new;
+  };
+
   template <int B, int L, int kRows, int kBlocks, class Measure>
   bool sample_measurement(Measure& h, std::array<bool, kBlocks>& ok,
-                          MeasurementSample<L, kRows * kBlocks>& ms) const {
+                          UpdateWorkspace<L, kRows * kBlocks>& ws) const {
     constexpr int Z = kRows * kBlocks;
-    using BlockMat = Eigen::Matrix<Scalar, L, L>;
     using BlockVec = Eigen::Matrix<Scalar, L, 1>;
     using ZVec = Eigen::Matrix<Scalar, Z, 1>;
-    using ZBlock = Eigen::Matrix<Scalar, Z, L>;
+    MeasurementSample<L, Z>& ms = ws.ms;
     ms.llt_p.compute(cov_.template block<L, L>(B, B));
     if (ms.llt_p.info() != Eigen::Success) return false;
-    const BlockMat chol = ms.llt_p.matrixL();
+    ws.chol = ms.llt_p.matrixL();
+    const auto& chol = ws.chol;
     const auto w = SigmaWeights<Scalar, L>::make(params_.unscented);
 
     ZVec z0 = ZVec::Zero();
     h(mean_, z0, ok);
-    ZBlock z_plus, z_minus;
+    auto& z_plus = ms.z_plus;
+    auto& z_minus = ws.z_minus;
     for (int j = 0; j < L; ++j) {
       for (int sign = 0; sign < 2; ++sign) {
         State sp = mean_;
@@ -376,15 +423,21 @@ class SigmaPointFilter {
       z_plus.template middleRows<kRows>(b * kRows).setZero();
       z_minus.template middleRows<kRows>(b * kRows).setZero();
     }
-    const ZBlock a = Scalar(0.5) * (z_plus - z_minus);
-    const ZBlock b = Scalar(0.5) * (z_plus + z_minus) - z0.replicate(1, L);
+    auto& a = ws.a;
+    auto& b = ws.b;
+    a = Scalar(0.5) * (z_plus - z_minus);
+    b = Scalar(0.5) * (z_plus + z_minus) - z0.replicate(1, L);
     const ZVec shift = w.inv_gamma2 * b.rowwise().sum();
     ms.z_mean = z0 + shift;
-    ms.p_zz = w.inv_gamma2 * (a * a.transpose() + b * b.transpose()) +
-              w.mean_correction * (shift * shift.transpose());
-    ms.p_bz = chol * a.transpose() / w.gamma;  // sum of w (chi - x)(z - z_mean)^T
+    // p_zz = inv_gamma2 (a a^T + b b^T) + mean_correction shift shift^T, each product evaluated
+    // as Eigen evaluates it inside that expression (a scalar times a product scales its left side).
+    ws.aa.noalias() = a * a.transpose();
+    ws.bb.noalias() = b * b.transpose();
+    ws.dd.noalias() = (w.mean_correction * shift) * shift.transpose();
+    ms.p_zz = w.inv_gamma2 * (ws.aa + ws.bb) + ws.dd;
+    ws.chol_at.noalias() = chol * a.transpose();
+    ms.p_bz = ws.chol_at / w.gamma;  // sum of w (chi - x)(z - z_mean)^T
     ms.z_centre = z0;
-    ms.z_plus = z_plus;
     return true;
   }
 
@@ -398,9 +451,11 @@ class SigmaPointFilter {
   // mixed second difference along columns i and j: L(L-1)/2 more evaluations of h.
   template <int B, int L, int kRows, int kBlocks, class Measure>
   void add_cross_terms(Measure& h, const std::array<bool, kBlocks>& ok,
-                       MeasurementSample<L, kRows * kBlocks>& ms) const {
+                       UpdateWorkspace<L, kRows * kBlocks>& ws) const {
     using ZVec = Eigen::Matrix<Scalar, kRows * kBlocks, 1>;
-    const Eigen::Matrix<Scalar, L, L> chol = ms.llt_p.matrixL();
+    MeasurementSample<L, kRows* kBlocks>& ms = ws.ms;
+    ws.chol = ms.llt_p.matrixL();
+    const auto& chol = ws.chol;
     const auto w = SigmaWeights<Scalar, L>::make(params_.unscented);
     for (int i = 0; i < L; ++i) {
       for (int j = i + 1; j < L; ++j) {
@@ -413,7 +468,8 @@ class SigmaPointFilter {
         ZVec c = w.inv_gamma2 * (zij - ms.z_plus.col(i) - ms.z_plus.col(j) + ms.z_centre);
         for (int b = 0; b < kBlocks; ++b)  // a block h cannot evaluate there adds nothing
           if (!ok_ij[b]) c.template segment<kRows>(b * kRows).setZero();
-        ms.p_zz += c * c.transpose();
+        // The outer product added in place: each term c_i c_j is the one its temporary would hold.
+        ms.p_zz.noalias() += c * c.transpose();
       }
     }
   }
@@ -446,22 +502,25 @@ class SigmaPointFilter {
   }
 
   template <int B, int L, int kRows, int kBlocks>
-  FilterStatus apply_update(MeasurementSample<L, kRows * kBlocks>& ms,
-                            Eigen::Matrix<Scalar, kRows * kBlocks, kRows * kBlocks>& s,
+  FilterStatus apply_update(UpdateWorkspace<L, kRows * kBlocks>& ws,
                             Eigen::Matrix<Scalar, kRows * kBlocks, 1>& innovation,
                             const std::array<bool, kBlocks>& ok) {
-    constexpr int Z = kRows * kBlocks;
-    make_inert<kRows, kBlocks>(ok, s, innovation);
+    MeasurementSample<L, kRows* kBlocks>& ms = ws.ms;
+    make_inert<kRows, kBlocks>(ok, ws.s, innovation);
     for (int b = 0; b < kBlocks; ++b)
       if (!ok[b]) ms.p_bz.template middleCols<kRows>(b * kRows).setZero();
-    Eigen::LLT<Eigen::Matrix<Scalar, Z, Z>> llt_s(s);
+    auto& llt_s = ws.llt_s;
+    llt_s.compute(ws.s);
     if (llt_s.info() != Eigen::Success) return FilterStatus::kInnovationNotPositiveDefinite;
     // P_xz for the whole state: P[:, block] P_bb^-1 P_bz (the regression carries the rest).
-    const Eigen::Matrix<Scalar, L, Z> g = ms.llt_p.solve(ms.p_bz);
-    const Eigen::Matrix<Scalar, N, Z> p_xz = cov_.template middleCols<L>(B) * g;
-    const Eigen::Matrix<Scalar, N, Z> gain = llt_s.solve(p_xz.transpose()).transpose();
+    ws.g.noalias() = ms.llt_p.solve(ms.p_bz);
+    ws.p_xz.noalias() = cov_.template middleCols<L>(B) * ws.g;
+    ws.gain_t.noalias() = llt_s.solve(ws.p_xz.transpose());  // the gain, transposed
+    ws.gain = ws.gain_t.transpose();
+    const auto& gain = ws.gain;
     const ErrorVector dx = gain * innovation;
-    Covariance cov_new = cov_ - gain * p_xz.transpose();
+    Covariance& cov_new = ws.cov_new;
+    cov_new.noalias() = cov_ - gain * ws.p_xz.transpose();  // cov_ copied, then the product
     cov_new = Scalar(0.5) * (cov_new + cov_new.transpose());
     if (!dx.allFinite() || !cov_new.allFinite() || !(cov_new.diagonal().array() > Scalar(0)).all())
       return FilterStatus::kNonFinite;
