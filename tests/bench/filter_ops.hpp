@@ -17,11 +17,12 @@ class FilterOps {
  public:
   virtual ~FilterOps() = default;
   virtual int markers() const = 0;
-  virtual int dim() const = 0;                   // error-state dimension
-  virtual std::size_t filter_bytes() const = 0;  // sizeof the filter object
-  virtual void restore() = 0;                    // back to the prepared filter
-  virtual bool predict() = 0;                    // one IMU step (5 ms); true if it succeeded
-  virtual bool update() = 0;                     // one frame, every marker seen
+  virtual int dim() const = 0;                      // error-state dimension
+  virtual std::size_t filter_bytes() const = 0;     // sizeof the filter object
+  virtual std::size_t workspace_bytes() const = 0;  // its thread-local workspaces
+  virtual void restore() = 0;                       // back to the prepared filter
+  virtual bool predict() = 0;                       // one IMU step (5 ms); true if it succeeded
+  virtual bool update() = 0;                        // one frame, every marker seen
 };
 
 // The configuration, or nullptr if it is not built.

@@ -59,6 +59,7 @@ class FilterOpsOf final : public FilterOps {
   int markers() const override { return M; }
   int dim() const override { return Filter::kDim; }
   std::size_t filter_bytes() const override { return sizeof(Filter); }
+  std::size_t workspace_bytes() const override { return Filter::workspace_bytes(); }
   void restore() override { filter_ = prepared_; }
   bool predict() override { return filter_.predict(s0_, s1_) == FilterStatus::kOk; }
   bool update() override { return filter_.update(frame_).status == FilterStatus::kOk; }

@@ -5,7 +5,10 @@
 //                                            (restore: the filter reset that precedes each
 //                                            operation, alone, to subtract)
 //   mirrorcal_opcount recording <N>          N runs of the whole loop over the 60 s recording
-//   mirrorcal_opcount sizes                  sizeof the filter of every configuration built
+//   mirrorcal_opcount shipped <N>            N calibrations of it as mirrorcal runs them
+//                                            (two passes)
+//   mirrorcal_opcount sizes                  sizeof the filter of every configuration built,
+//                                            and of its thread-local workspaces
 //   mirrorcal_opcount stack                  peak stack depth of predict and update, measured, of
 //                                            every configuration built
 #include <cstdint>
@@ -24,7 +27,7 @@ namespace {
 int usage() {
   std::fputs(
       "usage: mirrorcal_opcount predict|update|restore <M> <float|double> <N>\n"
-      "       mirrorcal_opcount recording <N>\n"
+      "       mirrorcal_opcount recording|shipped <N>\n"
       "       mirrorcal_opcount sizes|stack\n",
       stderr);
   return 2;
@@ -67,8 +70,8 @@ int main(int argc, char** argv) {
     for (const bool single : {false, true})
       for (const int m : mb::built_marker_counts()) {
         const auto ops = mb::make_filter_ops(m, single);
-        std::printf("%s %d %d %zu\n", single ? "float" : "double", m, ops->dim(),
-                    ops->filter_bytes());
+        std::printf("%s %d %d %zu %zu\n", single ? "float" : "double", m, ops->dim(),
+                    ops->filter_bytes(), ops->workspace_bytes());
       }
     return 0;
   }
@@ -88,13 +91,14 @@ int main(int argc, char** argv) {
       }
     return 0;
   }
-  if (what == "recording" && argc == 3) {
+  if ((what == "recording" || what == "shipped") && argc == 3) {
     const long n = std::atol(argv[2]);
     const mb::Recording rec = mb::paper_recording();
     std::printf("imu samples %zu, frames %zu, %.0f s\n", rec.data.imu.size(),
                 rec.data.frames.size(), rec.scenario.duration_s);
     std::uint64_t used = 0;
-    for (long i = 0; i < n; ++i) used += mb::calibrate(rec);
+    for (long i = 0; i < n; ++i)
+      used += what == "shipped" ? mb::calibrate_as_shipped(rec) : mb::calibrate(rec);
     std::printf("markers used %llu\n", static_cast<unsigned long long>(used));
     return 0;
   }

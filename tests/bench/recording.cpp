@@ -33,4 +33,14 @@ std::uint64_t calibrate(const Recording& r) {
   return filter.counters().markers_used;
 }
 
+std::uint64_t calibrate_as_shipped(const Recording& r) {
+  const auto prior = sim::draw_prior<3>(r.scenario, r.data, 1);
+  app::SimRun<0>::State x0;
+  app::SimRun<0>::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  const app::SimRun<0> run = app::run_loop<0>(app::scenario_config(r.scenario), x0, p0,
+                                              app::loop_data(r.scenario, r.data), nullptr);
+  return run.filter_counters.markers_used;
+}
+
 }  // namespace mirrorcal::bench

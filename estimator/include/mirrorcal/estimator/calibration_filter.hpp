@@ -62,6 +62,12 @@ class CalibrationFilter {
   const CalibrationConfig& config() const { return config_; }
   const FilterCounters& counters() const { return counters_; }
   Pinhole<S> intrinsics() const { return intrinsics_of(filter_.mean(), fixed_); }
+  // Bytes of thread_workspace (one per configuration and thread, outside the object) that predict
+  // and update use.
+  static constexpr std::size_t workspace_bytes() {
+    return Filter::template update_workspace_bytes<State::kMeasuredDim, 2 * M>() +
+           sizeof(PredictWorkspace);
+  }
 
  private:
   // Predict's new covariance (kDim^2 scalars: 69 KB at M = 24, double) in thread_workspace, off

@@ -157,6 +157,11 @@ class SigmaPointFilter {
   const State& mean() const { return mean_; }
   const Covariance& covariance() const { return cov_; }
   const SigmaPointParams& params() const { return params_; }
+  // Bytes of thread_workspace an update of a block of L states by Z measurement rows uses.
+  template <int L, int Z>
+  static constexpr std::size_t update_workspace_bytes() {
+    return sizeof(UpdateWorkspace<L, Z>);
+  }
 
   // Propagates the state through f(State&), which may change only the error-state block
   // [B, B+L); Q is the process noise added on that block.
