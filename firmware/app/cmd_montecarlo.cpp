@@ -155,7 +155,7 @@ int cmd_montecarlo(int argc, char** argv) {
     if (out[i].suspect) suspects += (suspects.empty() ? "" : ", ") + std::to_string(i);
   if (!suspects.empty())
     std::printf(
-        "runs a user would have been warned of (more than 1 %% of the markers gated; included "
+        "runs a user would have been warned of (more than 0.5 %% of the markers gated; included "
         "above): %s\n",
         suspects.c_str());
   DetectionReport detection;

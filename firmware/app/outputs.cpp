@@ -113,7 +113,8 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "markers_used: %llu\nmarkers_gated: %llu\n",
                static_cast<unsigned long long>(r.markers_used),
                static_cast<unsigned long long>(r.markers_gated));
-  std::fprintf(o, "consistent: %s  # false: more than 1 %% of the markers gated, do not trust it\n",
+  std::fprintf(o,
+               "consistent: %s  # false: more than 0.5 %% of the markers gated, do not trust it\n",
                convergence_warning(r).empty() ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
