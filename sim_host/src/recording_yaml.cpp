@@ -443,6 +443,11 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
                       std::to_string(out.features_c.size()) +
                       (out.features_c.size() == 1 ? " marker), " : " markers), ") +
                       std::to_string(n + 4) + " or " + std::to_string(n + 5) + " (and intrinsics)");
+  // Every row the right length before anything is allocated (a damaged file could list many).
+  for (std::size_t i = 0; i < dim; ++i)
+    if (!rows[i].IsSequence() || rows[i].size() != dim)
+      return y.fail(rows[i], "covariance",
+                    "expected a list of " + std::to_string(dim) + " numbers");
   Eigen::MatrixXd full(dim, dim);
   std::vector<double> row(dim);
   for (std::size_t i = 0; i < dim; ++i) {
