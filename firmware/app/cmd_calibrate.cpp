@@ -103,7 +103,7 @@ int cmd_calibrate(int argc, char** argv) {
   sim::CalibrationStart start;
   const sim::CalibrationStart* from = nullptr;
   if (o.flag("from")) {
-    if (!sim::read_calibration_start(o.get("from", ""), start, err)) fail(err, 1);
+    if (!sim::read_calibration_start(o.get("from", ""), kMarkers, start, err)) fail(err, 1);
     from = &start;
     std::printf(
         "mirrorcal calibrate: the camera pose and markers start from %s (estimate and "

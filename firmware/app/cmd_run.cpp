@@ -129,11 +129,7 @@ int cmd_run(int argc, char** argv) {
   sim::CalibrationStart start;
   const sim::CalibrationStart* from = nullptr;
   if (o.flag("from")) {
-    if (!sim::read_calibration_start(o.get("from", ""), start, error)) fail(error, 1);
-    if (start.features_c.size() != static_cast<std::size_t>(kMarkers))
-      fail(o.get("from", "") + ": has " + std::to_string(start.features_c.size()) +
-               " markers; this build calibrates M = " + std::to_string(kMarkers),
-           1);
+    if (!sim::read_calibration_start(o.get("from", ""), kMarkers, start, error)) fail(error, 1);
     from = &start;
   }
 

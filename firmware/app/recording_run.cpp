@@ -30,14 +30,7 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
   typename SimRun<NK>::State x0;
   typename SimRun<NK>::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  if (from != nullptr) {
-    if (from->features_c.size() != static_cast<std::size_t>(kMarkers)) {
-      error = "the calibration to start from has " + std::to_string(from->features_c.size()) +
-              " markers; this build calibrates M = " + std::to_string(kMarkers);
-      return false;
-    }
-    start_from(*from, x0, p0);
-  }
+  if (from != nullptr) start_from(*from, x0, p0);  // read_calibration_start checked its M
   // A simulated recording's truth: each history row gets the error and NEES against it.
   typename SimRun<NK>::State truth;
   if (r.has_truth) {

@@ -438,13 +438,20 @@ bool RecordingWriter::close(std::string& error) {
   return error_.empty();
 }
 
-bool read_calibration_start(const std::string& path, CalibrationStart& out, std::string& error) {
+bool read_calibration_start(const std::string& path, int markers, CalibrationStart& out,
+                            std::string& error) {
   std::error_code ec;
   const std::string file =
       std::filesystem::is_directory(path, ec) ? path + "/mirrorcal-result.yaml" : path;
   std::string text;
-  if (!read_file(file, text, error)) return false;
-  return parse_calibration_start(text, file, out, error);
+  if (!read_file(file, text, error) || !parse_calibration_start(text, file, out, error))
+    return false;
+  if (out.features_c.size() != static_cast<std::size_t>(markers)) {
+    error = file + ": lists " + std::to_string(out.features_c.size()) +
+            " markers; this build calibrates M = " + std::to_string(markers);
+    return false;
+  }
+  return true;
 }
 
 }  // namespace mirrorcal::sim

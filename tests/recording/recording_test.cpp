@@ -204,7 +204,7 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   ASSERT_TRUE(mc::app::write_result_yaml(tmp.path + "/mirrorcal-result.yaml", r, err)) << err;
 
   mc::sim::CalibrationStart start;
-  ASSERT_TRUE(mc::sim::read_calibration_start(tmp.path, start, err)) << err;  // the folder
+  ASSERT_TRUE(mc::sim::read_calibration_start(tmp.path, 3, start, err)) << err;  // the folder
   expect_same(start.p_b_c, r.p_b_c, "p_b_c");
   EXPECT_TRUE(start.q_b_c.coeffs() == r.q_b_c.coeffs());
   ASSERT_EQ(start.features_c.size(), 3u);
@@ -250,6 +250,13 @@ TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {
   refused(short_row, "covariance: expected a list of 9 numbers");
   refused(head + "covariance: [[nan]]", "r.yaml:5: covariance");
   const std::string missing = "/nonexistent/mirrorcal-result.yaml";
-  EXPECT_FALSE(mc::sim::read_calibration_start(missing, s, err));
+  EXPECT_FALSE(mc::sim::read_calibration_start(missing, 1, s, err));
   EXPECT_NE(err.find(missing + ": cannot open"), std::string::npos) << err;
+  // A start for another number of markers than the build's.
+  const TempDir tmp("start-markers");
+  spit(tmp.path + "/mirrorcal-result.yaml", head + rows(good));
+  EXPECT_FALSE(mc::sim::read_calibration_start(tmp.path, 3, s, err));
+  EXPECT_NE(err.find("mirrorcal-result.yaml: lists 1 markers; this build calibrates M = 3"),
+            std::string::npos)
+      << err;
 }

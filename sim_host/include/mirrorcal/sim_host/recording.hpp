@@ -116,9 +116,11 @@ struct CalibrationStart {
   Eigen::MatrixXd covariance;  // (6 + 3M) square, symmetric positive definite
 };
 
-// Reads a mirrorcal-result.yaml (path, or a folder holding one) as a start; on bad input false
-// with a message naming the file, the line and what is wrong.
-bool read_calibration_start(const std::string& path, CalibrationStart& out, std::string& error);
+// Reads a mirrorcal-result.yaml (path, or a folder holding one) as a start for a calibration with
+// M = markers; on bad input (or another number of markers) false with a message naming the file,
+// the line and what is wrong.
+bool read_calibration_start(const std::string& path, int markers, CalibrationStart& out,
+                            std::string& error);
 bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,
                              std::string& error);
 
