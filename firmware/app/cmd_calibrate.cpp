@@ -75,9 +75,10 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const auto& lc = run.loop_counters;
   const auto& fc = run.filter_counters;
   std::printf(
-      "loop: %llu IMU samples, %llu frames (%llu without markers, %llu outside the IMU data "
+      "loop, last of %d passes: %llu IMU samples, %llu frames (%llu without markers, %llu "
+      "outside the IMU data "
       "skipped), %llu IMU gaps, %llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
-      (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
+      run.result.passes, (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
       (unsigned long long)lc.frames_without_markers, (unsigned long long)rec.frames_outside_imu,
       (unsigned long long)lc.imu_gaps, (unsigned long long)fc.markers_used,
       (unsigned long long)fc.markers_gated, (unsigned long long)fc.failures, wall);

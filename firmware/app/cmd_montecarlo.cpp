@@ -38,7 +38,10 @@ int cmd_montecarlo(int argc, char** argv) {
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const int passes = static_cast<int>(parse_count(o, "passes", kDefaultPasses, 1));
+  // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
+  const Passes passes = o.flag("passes")
+                            ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))
+                            : Passes{};
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/montecarlo");

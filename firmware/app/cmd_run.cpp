@@ -192,8 +192,8 @@ int cmd_run(int argc, char** argv) {
   CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
   if (!log.frames.empty()) {
     std::printf(
-        "calibrating from the run's %zu IMU samples and %zu labelled frames%s, %d passes as "
-        "`mirrorcal calibrate` does\n",
+        "calibrating from the run's %zu IMU samples and %zu labelled frames%s, in %d passes "
+        "(more if one gates too many) as `mirrorcal calibrate` does\n",
         log.imu.size(), log.frames.size(),
         log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
     log.to_recording(sensors);

@@ -38,7 +38,10 @@ int cmd_sim(int argc, char** argv) {
   const sim::Scenario s =
       o.flag("hold-skew") ? without_skew(scenario_option(o)) : scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const int passes = static_cast<int>(parse_count(o, "passes", kDefaultPasses, 1));
+  // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
+  const Passes passes = o.flag("passes")
+                            ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))
+                            : Passes{};
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/sim");
@@ -78,9 +81,10 @@ int cmd_sim(int argc, char** argv) {
                 params.size(), last.nees, chi2_quantile(0.025, double(params.size())),
                 chi2_quantile(0.975, double(params.size())));
     std::printf(
-        "loop: %llu IMU samples, %llu frames (%llu without markers), %llu IMU gaps, "
+        "loop, last of %d passes: %llu IMU samples, %llu frames (%llu without markers), %llu "
+        "IMU gaps, "
         "%llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
-        (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
+        run.result.passes, (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
         (unsigned long long)lc.frames_without_markers, (unsigned long long)lc.imu_gaps,
         (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
         (unsigned long long)fc.failures, wall);

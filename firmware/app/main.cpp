@@ -23,7 +23,8 @@ const std::vector<Command>& commands() {
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
        "              [--spot-noise PX] [--pixel-sigma PX]  (with --frames: the pixel noise drawn\n"
        "              into the frames and the one the filter assumes; default the scenario's)\n"
-       "              [--passes N]  (passes over the data, default 2; the last is reported)\n"
+       "              [--passes N]  (exactly N passes over the data; default 2, up to 4 while the\n"
+       "              last gates over 0.5 % of the markers; the last pass is reported)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},

@@ -71,18 +71,22 @@ bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
   return finish(f, path, error);
 }
 
+bool gated_too_many(const CalibrationResult& r) {
+  const double seen = double(r.markers_used + r.markers_gated);
+  return seen > 0.0 && double(r.markers_gated) > kSuspectGatedFraction * seen;
+}
+
 std::string convergence_warning(const CalibrationResult& r) {
   const double seen = double(r.markers_used + r.markers_gated);
   if (seen == 0.0) return "no marker was used: nothing was calibrated beyond the priors";
-  const double gated = double(r.markers_gated) / seen;
-  if (gated <= kSuspectGatedFraction) return {};
-  char text[400];
+  if (!gated_too_many(r)) return {};
+  char text[480];
   std::snprintf(text, sizeof text,
-                "%.1f %% of the markers were rejected by the 99.9 %% gate (a consistent "
-                "calibration rejects about 0.1 %%): it has most likely locked onto a wrong "
-                "solution. Start from better guesses (or estimate the intrinsics in a second "
-                "stage, calibrate --from), and check the recording.",
-                100.0 * gated);
+                "%.1f %% of the markers were rejected by the 99.9 %% gate in the last pass (of %d) "
+                "(a consistent calibration rejects about 0.1 %%): it has most likely "
+                "locked onto a wrong solution. Start from better guesses (or estimate the "
+                "intrinsics in a second stage, calibrate --from), and check the recording.",
+                100.0 * double(r.markers_gated) / seen, r.passes);
   return text;
 }
 
@@ -110,8 +114,8 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
-  std::fprintf(o, "markers_used: %llu\nmarkers_gated: %llu\n",
-               static_cast<unsigned long long>(r.markers_used),
+  std::fprintf(o, "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n",
+               r.passes, static_cast<unsigned long long>(r.markers_used),
                static_cast<unsigned long long>(r.markers_gated));
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, do not trust it\n",

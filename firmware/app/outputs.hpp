@@ -26,6 +26,7 @@ struct CalibrationResult {
   Eigen::MatrixXd covariance;  // of the calibration block, same order
   std::vector<ParamInfo> params;
   std::uint64_t markers_used = 0, markers_gated = 0;  // over the last pass
+  int passes = 1;                                     // passes over the data (sim_run.hpp)
 };
 
 // A filter that calibrated consistently rejects about 0.1 % of the markers at its 99.9 % gate (9 of
@@ -34,6 +35,8 @@ struct CalibrationResult {
 // (161, 465 and 3783 gated) and run 11 of the frames campaign (64, NEES 322) did, against at most
 // 20 in the 400 good runs of the campaigns.
 constexpr double kSuspectGatedFraction = 0.005;
+// More than kSuspectGatedFraction of the markers offered to the filter were gated.
+bool gated_too_many(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do.
 std::string convergence_warning(const CalibrationResult& r);
 

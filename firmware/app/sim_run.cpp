@@ -1,5 +1,6 @@
 #include "sim_run.hpp"
 
+#include <algorithm>
 #include <optional>
 
 #include "mirrorcal/sim_host/simulator.hpp"
@@ -98,16 +99,19 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
                     const std::function<void(double)>& progress,
-                    const std::function<LoopHooks(int pass)>& hooks, int passes) {
+                    const std::function<LoopHooks(int pass)>& hooks, Passes passes) {
   using State = typename SimRun<NK>::State;
   State start = x0;
   SimRun<NK> run;
-  for (int pass = 0; pass < passes; ++pass) {
+  for (int pass = 0; pass < passes.max; ++pass) {
+    if (pass >= passes.min && !gated_too_many(run.result)) break;
+    const int planned = std::max(passes.min, pass + 1);
     const auto pass_progress = [&](double f) {
-      if (progress) progress((pass + f) / passes);
+      if (progress) progress((pass + f) / planned);
     };
     run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
                        hooks ? hooks(pass) : LoopHooks{});
+    run.result.passes = pass + 1;
     // The next pass starts the calibration parameters at this pass's estimate, with the prior's
     // covariance: the data are linearised about a far better guess (see sim_run.hpp). Only where
     // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result
@@ -135,7 +139,7 @@ template MIRRORCAL_RUN_LOOP(5);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const std::function<void(double)>& progress, const FrameMode& frames,
-                         firmware::LoopProfiler* profiler, int passes) {
+                         firmware::LoopProfiler* profiler, Passes passes) {
   using Run = SimRun<0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -148,7 +152,8 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   std::uint64_t wrong_labels_before = 0;
   const auto hooks = [&](int pass) {
     LoopHooks h;
-    if (pass == passes - 1) h.profiler = profiler;  // the timing of one pass, the final one
+    // The timing of one pass: the last of those always made.
+    if (pass == passes.min - 1) h.profiler = profiler;
     if (frames.enabled) {
       sim::RenderConfig render;
       render.format = frames.format;
