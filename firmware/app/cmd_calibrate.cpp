@@ -37,7 +37,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   std::fprintf(stderr, "\rcalibrating done   \n");
 
   const CalibrationResult& r = run.result;
-  const auto& first = run.history.front();
+  const auto& first = run.first_frame;
   const auto& last = run.history.back();
   const Eigen::Vector3d angles = display_angles(r.q_b_c);
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);

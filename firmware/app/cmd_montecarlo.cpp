@@ -61,6 +61,7 @@ int cmd_montecarlo(int argc, char** argv) {
     std::vector<double> error, sigma;  // display units
     double nees = 0, wall_s = 0;
     std::uint64_t gated = 0, failures = 0;
+    int passes = 0;        // passes over the data (more than the default after a bad one)
     bool suspect = false;  // convergence_warning() would warn a user of this run
     ErrorSeries series;
     DetectionReport detection;  // --frames only
@@ -87,6 +88,7 @@ int cmd_montecarlo(int argc, char** argv) {
         oc.nees = last.nees;
         oc.gated = r.filter_counters.markers_gated;
         oc.suspect = !convergence_warning(r.result).empty();
+        oc.passes = r.result.passes;
         oc.failures = r.filter_counters.failures;
         oc.series = error_series(r.history, r.result.params);
         oc.detection = r.detection;
@@ -156,6 +158,16 @@ int cmd_montecarlo(int argc, char** argv) {
   std::string suspects;
   for (std::size_t i = 0; i < out.size(); ++i)
     if (out[i].suspect) suspects += (suspects.empty() ? "" : ", ") + std::to_string(i);
+  std::string extra;
+  for (std::size_t i = 0; i < out.size(); ++i)
+    if (out[i].passes > kDefaultPasses)
+      extra += (extra.empty() ? "" : ", ") + std::to_string(i) + " (" +
+               std::to_string(out[i].passes) + ")";
+  if (!extra.empty())
+    std::printf(
+        "runs given more passes because a pass gated more than 0.5 %% of the markers (passes "
+        "made): %s\n",
+        extra.c_str());
   if (!suspects.empty())
     std::printf(
         "runs a user would have been warned of (more than 0.5 %% of the markers gated; included "
@@ -195,7 +207,7 @@ int cmd_montecarlo(int argc, char** argv) {
   std::fprintf(f, "run,seed");
   for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
-  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s");
+  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s,passes");
   if (frames.enabled)
     std::fprintf(f, ",markers_drawn,markers_labelled,wrong_labels,centroid_rms_px,centroid_max_px");
   std::fprintf(f, "\n");
@@ -203,8 +215,8 @@ int cmd_montecarlo(int argc, char** argv) {
     std::fprintf(f, "%zu,%llu", i, (unsigned long long)out[i].seed);
     for (double e : out[i].error) std::fprintf(f, ",%.6g", e);
     for (double e : out[i].sigma) std::fprintf(f, ",%.6g", e);
-    std::fprintf(f, ",%.4f,%llu,%llu,%.3f", out[i].nees, (unsigned long long)out[i].gated,
-                 (unsigned long long)out[i].failures, out[i].wall_s);
+    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d", out[i].nees, (unsigned long long)out[i].gated,
+                 (unsigned long long)out[i].failures, out[i].wall_s, out[i].passes);
     if (frames.enabled) {
       const DetectionReport& d = out[i].detection;
       std::fprintf(f, ",%llu,%llu,%llu,%.4f,%.4f", (unsigned long long)d.markers_drawn,

@@ -63,7 +63,7 @@ int cmd_sim(int argc, char** argv) {
 
     const auto& params = run.result.params;
     const auto truth = truth_display(s, std::decay_t<decltype(run)>::State::kIntrinsics);
-    const auto& first = run.history.front();
+    const auto& first = run.first_frame;
     const auto& last = run.history.back();
     std::printf("\n%-8s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth",
                 "after 1st frame +-1s", "final +-1sigma", "error/sig");

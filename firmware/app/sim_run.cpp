@@ -103,6 +103,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   using State = typename SimRun<NK>::State;
   State start = x0;
   SimRun<NK> run;
+  HistoryRow<typename SimRun<NK>::Filter> first_frame;
   for (int pass = 0; pass < passes.max; ++pass) {
     if (pass >= passes.min && !gated_too_many(run.result)) break;
     const int planned = std::max(passes.min, pass + 1);
@@ -112,6 +113,8 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
     run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
                        hooks ? hooks(pass) : LoopHooks{});
     run.result.passes = pass + 1;
+    if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
+    run.first_frame = first_frame;
     // The next pass starts the calibration parameters at this pass's estimate, with the prior's
     // covariance: the data are linearised about a far better guess (see sim_run.hpp). Only where
     // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result

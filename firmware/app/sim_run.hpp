@@ -51,7 +51,8 @@ struct SimRun {
   using Filter = CalibrationFilter<double, kMarkers, NK>;
   using State = typename Filter::State;
   State truth{};
-  std::vector<HistoryRow<Filter>> history;  // one row per frame, and the final one
+  std::vector<HistoryRow<Filter>> history;  // one row per frame, and the final one (last pass)
+  HistoryRow<Filter> first_frame;           // the first pass's first row: after one frame
   typename Filter::Covariance covariance;   // the final one (stage 2 starts from stage 1's)
   CalibrationResult result;
   FilterCounters filter_counters;
