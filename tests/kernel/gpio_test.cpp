@@ -2,8 +2,9 @@
 // button, which qemu pulses (a rising edge, a falling edge about 100 ms later) on each
 // system_powerdown; the guest asks the harness for one with "@@qemu-monitor system_powerdown".
 // The data-ready driver must deliver exactly one rising edge per pulse, with kernel timestamps on
-// CLOCK_MONOTONIC; the trigger driver drives another line and reads it back; a held line, a line
-// the chip lacks and a missing chip give their messages.
+// CLOCK_MONOTONIC, and of edges that queued up while nobody waited only the newest; the trigger
+// driver drives another line and reads it back; a held line, a line the chip lacks and a missing
+// chip give their messages.
 #include <unistd.h>
 
 #include <cstdio>
@@ -45,6 +46,23 @@ int main() {
     std::int64_t t = 0;
     GUEST_CHECK(drdy.wait_rising(300'000'000, t) == hal::SourceStatus::kNotReady);
     GUEST_CHECK(drdy.edges() == static_cast<std::uint64_t>(pulses));
+
+    // A loop that comes late finds several edges queued: it gets the newest one's time (the
+    // part's registers hold the newest sample), and the older ones are counted, not delivered.
+    std::int64_t last_request = 0;
+    for (int i = 0; i < pulses; ++i) {
+      last_request = monotonic_ns();
+      std::printf("@@qemu-monitor system_powerdown\n");
+      std::fflush(stdout);
+      usleep(300'000);
+    }
+    const hal::SourceStatus queued = drdy.wait_rising(1'000'000'000, t);
+    std::printf("%d queued edges: newest at %lld ns, %.3f ms after the last request\n", pulses,
+                static_cast<long long>(t), (t - last_request) / 1e6);
+    GUEST_CHECK(queued == hal::SourceStatus::kOk);
+    GUEST_CHECK(t >= last_request && t > last);
+    GUEST_CHECK(drdy.edges() == static_cast<std::uint64_t>(2 * pulses));
+    GUEST_CHECK(drdy.wait_rising(300'000'000, t) == hal::SourceStatus::kNotReady);
 
     guest::expect_driver_error("busy", Fault::kBusy,
                                [] { GpioDataReady again(parse_line_spec("gpiochip0:3")); });

@@ -24,6 +24,7 @@ class GpioDataReady final : public hal::DataReadyLine {
 
   hal::SourceStatus wait_rising(std::int64_t timeout_ns, std::int64_t& t_ns) override;
   const char* error() const override { return error_.c_str(); }
+  // Rising edges read from the kernel, those skipped for a newer one included.
   std::uint64_t edges() const { return edges_; }
 
  private:

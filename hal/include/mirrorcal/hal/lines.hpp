@@ -9,12 +9,14 @@
 
 namespace mirrorcal::hal {
 
-// Rising edges of a data-ready line, in order, each with its time on the loop's clock.
+// Rising edges of a data-ready line, each with its time on the loop's clock.
 class DataReadyLine {
  public:
   virtual ~DataReadyLine() = default;
   // Waits up to timeout_ns for the next rising edge: kOk with its time in t_ns, kNotReady when
-  // none came in time, kError when the line failed (error() says why).
+  // none came in time, kError when the line failed (error() says why). Edges that queued up since
+  // the last call (the loop was late) give the newest one's time: a part's data registers hold
+  // only its newest sample, and the caller sees the gap to the previous edge as missed samples.
   virtual SourceStatus wait_rising(std::int64_t timeout_ns, std::int64_t& t_ns) = 0;
   virtual const char* error() const { return ""; }
 };
