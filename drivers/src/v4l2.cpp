@@ -1,5 +1,7 @@
 #include "mirrorcal/drivers/v4l2.hpp"
 
+#include "mirrorcal/drivers/monotonic_clock.hpp"
+
 #include <fcntl.h>
 #include <linux/videodev2.h>
 #include <poll.h>
@@ -45,7 +47,8 @@ FourccText fourcc_text(std::uint32_t f) {
 
 }  // namespace
 
-bool V4l2Stream::fail(const char* fmt, ...) {
+bool V4l2Stream::fail(Fault fault, const char* fmt, ...) {
+  fault_ = fault;
   va_list ap;
   va_start(ap, fmt);
   std::vsnprintf(error_, sizeof error_, fmt, ap);
@@ -88,17 +91,19 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
   fd_ = ::open(p, O_RDWR | O_NONBLOCK | O_CLOEXEC);
   if (fd_ < 0) {
     const int e = errno;
-    if (e == ENOENT) return fail("%s: no such device", p);
-    if (e == EACCES) return fail("%s: permission denied (add the user to group 'video')", p);
-    return fail("%s: cannot open: %s", p, std::strerror(e));
+    if (e == ENOENT || e == ENODEV || e == ENXIO)
+      return fail(Fault::kMissing, "%s: no such device", p);
+    if (e == EACCES)
+      return fail(Fault::kIo, "%s: permission denied (add the user to group 'video')", p);
+    return fail(Fault::kIo, "%s: cannot open: %s", p, std::strerror(e));
   }
 
   v4l2_capability cap{};
   if (xioctl(fd_, VIDIOC_QUERYCAP, &cap) < 0) {
     const int e = errno;
     close();
-    if (e == ENOTTY || e == EINVAL) return fail("%s is not a V4L2 device", p);
-    return fail("%s: VIDIOC_QUERYCAP failed: %s", p, std::strerror(e));
+    if (e == ENOTTY || e == EINVAL) return fail(Fault::kWrongKind, "%s is not a V4L2 device", p);
+    return fail(Fault::kIo, "%s: VIDIOC_QUERYCAP failed: %s", p, std::strerror(e));
   }
   const std::uint32_t caps =
       (cap.capabilities & V4L2_CAP_DEVICE_CAPS) != 0 ? cap.device_caps : cap.capabilities;
@@ -108,14 +113,15 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
   if ((caps & want) == 0) {
     close();
     if ((caps & mplane) != 0)
-      return fail("%s (%s) is a multi-planar video %s device; only single-planar is supported", p,
+      return fail(Fault::kWrongKind,
+                  "%s (%s) is a multi-planar video %s device; only single-planar is supported", p,
                   reinterpret_cast<const char*>(cap.card), what);
-    return fail("%s (%s) is not a video %s device (device capabilities 0x%08x)", p,
-                reinterpret_cast<const char*>(cap.card), what, caps);
+    return fail(Fault::kWrongKind, "%s (%s) is not a video %s device (device capabilities 0x%08x)",
+                p, reinterpret_cast<const char*>(cap.card), what, caps);
   }
   if ((caps & V4L2_CAP_STREAMING) == 0) {
     close();
-    return fail("%s (%s) does not support streaming I/O", p,
+    return fail(Fault::kWrongKind, "%s (%s) does not support streaming I/O", p,
                 reinterpret_cast<const char*>(cap.card));
   }
 
@@ -135,20 +141,22 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
   if (xioctl(fd_, VIDIOC_S_FMT, &fmt) < 0) {
     const int e = errno;
     close();
-    if (e == EBUSY) return fail("%s is busy (another program is streaming from it)", p);
-    return fail("%s: VIDIOC_S_FMT failed: %s", p, std::strerror(e));
+    if (e == EBUSY)
+      return fail(Fault::kBusy, "%s is busy (another program is streaming from it)", p);
+    return fail(Fault::kIo, "%s: VIDIOC_S_FMT failed: %s", p, std::strerror(e));
   }
   const v4l2_pix_format& got = fmt.fmt.pix;
   if (got.pixelformat != fourcc_of(format) || static_cast<int>(got.width) != config.width ||
       static_cast<int>(got.height) != config.height) {
     const FourccText want_t = fourcc_text(fourcc_of(format)), got_t = fourcc_text(got.pixelformat);
     close();
-    return fail("%s does not support %s %dx%d (the driver offers %s %ux%u)", p, want_t.s,
-                config.width, config.height, got_t.s, got.width, got.height);
+    return fail(Fault::kWrongKind, "%s does not support %s %dx%d (the driver offers %s %ux%u)", p,
+                want_t.s, config.width, config.height, got_t.s, got.width, got.height);
   }
   if (got.field != V4L2_FIELD_NONE && got.field != V4L2_FIELD_ANY) {
     close();
-    return fail("%s delivers interlaced frames (field %u); only progressive is supported", p,
+    return fail(Fault::kWrongKind,
+                "%s delivers interlaced frames (field %u); only progressive is supported", p,
                 got.field);
   }
   format_ = format;
@@ -163,8 +171,8 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     const std::size_t need =
         static_cast<std::size_t>(bytes_per_line_) * static_cast<std::size_t>(height_);
     close();
-    return fail("%s reports an image size of %u bytes, less than %zu for %dx%d", p, got.sizeimage,
-                need, width_, height_);
+    return fail(Fault::kWrongKind, "%s reports an image size of %u bytes, less than %zu for %dx%d",
+                p, got.sizeimage, need, width_, height_);
   }
 
   // The frame interval, where the driver tells it (capture: timeperframe; output: timeperframe).
@@ -187,13 +195,15 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
   if (xioctl(fd_, VIDIOC_REQBUFS, &req) < 0) {
     const int e = errno;
     close();
-    if (e == EBUSY) return fail("%s is busy (another program is streaming from it)", p);
-    if (e == EINVAL) return fail("%s does not support memory-mapped streaming", p);
-    return fail("%s: VIDIOC_REQBUFS failed: %s", p, std::strerror(e));
+    if (e == EBUSY)
+      return fail(Fault::kBusy, "%s is busy (another program is streaming from it)", p);
+    if (e == EINVAL)
+      return fail(Fault::kWrongKind, "%s does not support memory-mapped streaming", p);
+    return fail(Fault::kIo, "%s: VIDIOC_REQBUFS failed: %s", p, std::strerror(e));
   }
   if (req.count < 2) {
     close();
-    return fail("%s granted %u buffers; at least 2 are needed", p, req.count);
+    return fail(Fault::kWrongKind, "%s granted %u buffers; at least 2 are needed", p, req.count);
   }
   const int granted = req.count > kMaxBuffers ? kMaxBuffers : static_cast<int>(req.count);
   for (int i = 0; i < granted; ++i) {
@@ -204,14 +214,14 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     if (xioctl(fd_, VIDIOC_QUERYBUF, &b) < 0) {
       const int e = errno;
       close();
-      return fail("%s: VIDIOC_QUERYBUF %d failed: %s", p, i, std::strerror(e));
+      return fail(Fault::kIo, "%s: VIDIOC_QUERYBUF %d failed: %s", p, i, std::strerror(e));
     }
     const int prot = output_ ? PROT_READ | PROT_WRITE : PROT_READ;
     void* m = ::mmap(nullptr, b.length, prot, MAP_SHARED, fd_, b.m.offset);
     if (m == MAP_FAILED) {
       const int e = errno;
       close();
-      return fail("%s: mmap of buffer %d failed: %s", p, i, std::strerror(e));
+      return fail(Fault::kIo, "%s: mmap of buffer %d failed: %s", p, i, std::strerror(e));
     }
     buffers_[static_cast<std::size_t>(i)] = {m, b.length};
     count_ = i + 1;  // so close() unmaps what is mapped so far
@@ -220,12 +230,13 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
 }
 
 bool V4l2Stream::stream_on() {
-  if (fd_ < 0) return fail("camera not open");
+  if (fd_ < 0) return fail(Fault::kIo, "camera not open");
   v4l2_buf_type type = output_ ? V4L2_BUF_TYPE_VIDEO_OUTPUT : V4L2_BUF_TYPE_VIDEO_CAPTURE;
   if (xioctl(fd_, VIDIOC_STREAMON, &type) < 0) {
     const int e = errno;
-    if (e == EBUSY) return fail("%s is busy (another program is streaming from it)", path_.c_str());
-    return fail("%s: VIDIOC_STREAMON failed: %s", path_.c_str(), std::strerror(e));
+    if (e == EBUSY)
+      return fail(Fault::kBusy, "%s is busy (another program is streaming from it)", path_.c_str());
+    return fail(Fault::kIo, "%s: VIDIOC_STREAMON failed: %s", path_.c_str(), std::strerror(e));
   }
   streaming_ = true;
   return true;
@@ -238,13 +249,14 @@ int V4l2Stream::wait_ready(int timeout_ms) {
     r = ::poll(&pfd, 1, timeout_ms);
   } while (r < 0 && errno == EINTR);
   if (r < 0) {
-    fail("%s: poll failed: %s", path_.c_str(), std::strerror(errno));
+    fail(Fault::kIo, "%s: poll failed: %s", path_.c_str(), std::strerror(errno));
     return -1;
   }
   if (r == 0) return 0;
   if ((pfd.revents & (POLLERR | POLLHUP | POLLNVAL)) != 0 &&
       (pfd.revents & (POLLIN | POLLOUT)) == 0) {
-    fail("%s: device error while streaming (disconnected or stream stopped)", path_.c_str());
+    fail(Fault::kNotAnswering, "%s: device error while streaming (disconnected or stream stopped)",
+         path_.c_str());
     return -1;
   }
   return 1;
@@ -265,7 +277,7 @@ bool V4l2Capture::open(const std::string& path, const V4l2Config& config) {
     if (xioctl(fd_, VIDIOC_QBUF, &b) < 0) {
       const int e = errno;
       close();
-      return fail("%s: VIDIOC_QBUF failed: %s", path.c_str(), std::strerror(e));
+      return fail(Fault::kIo, "%s: VIDIOC_QBUF failed: %s", path.c_str(), std::strerror(e));
     }
   }
   return true;
@@ -278,14 +290,14 @@ bool V4l2Capture::requeue_held() {
   b.memory = V4L2_MEMORY_MMAP;
   b.index = static_cast<std::uint32_t>(held_);
   if (xioctl(fd_, VIDIOC_QBUF, &b) < 0)
-    return fail("%s: VIDIOC_QBUF failed: %s", path_.c_str(), std::strerror(errno));
+    return fail(Fault::kIo, "%s: VIDIOC_QBUF failed: %s", path_.c_str(), std::strerror(errno));
   held_ = -1;
   return true;
 }
 
 hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
   if (fd_ < 0 || !streaming_) {
-    if (error_[0] == '\0') fail("camera not streaming");
+    if (error_[0] == '\0') fail(Fault::kIo, "camera not streaming");
     return hal::SourceStatus::kError;
   }
   if (!requeue_held()) return hal::SourceStatus::kError;
@@ -300,9 +312,9 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
     const int e = errno;
     if (e == EAGAIN) return hal::SourceStatus::kNotReady;
     if (e == ENODEV)
-      fail("%s: device disconnected", path_.c_str());
+      fail(Fault::kNotAnswering, "%s: device disconnected", path_.c_str());
     else
-      fail("%s: VIDIOC_DQBUF failed: %s", path_.c_str(), std::strerror(e));
+      fail(Fault::kIo, "%s: VIDIOC_DQBUF failed: %s", path_.c_str(), std::strerror(e));
     return hal::SourceStatus::kError;
   }
   held_ = static_cast<int>(b.index);
@@ -324,11 +336,17 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
   frame.bytes_per_line = bytes_per_line_;
   frame.data = static_cast<const std::uint8_t*>(buffers_[static_cast<std::size_t>(b.index)].start);
   frame.bytes = b.bytesused != 0 ? b.bytesused : size_image_;
-  frame.t_ns = static_cast<std::int64_t>(b.timestamp.tv_sec) * 1'000'000'000 +
-               static_cast<std::int64_t>(b.timestamp.tv_usec) * 1'000;
   frame.sequence = b.sequence;
   frame.flags = 0;
   monotonic_ = (b.flags & V4L2_BUF_FLAG_TIMESTAMP_MASK) == V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
+  frame.t_ns = capture_time_ns(b.flags,
+                               static_cast<std::int64_t>(b.timestamp.tv_sec) * 1'000'000'000 +
+                                   static_cast<std::int64_t>(b.timestamp.tv_usec) * 1'000,
+                               monotonic_ns());
+  if (!monotonic_) {
+    frame.flags |= hal::kFrameStampedAtDequeue;
+    ++counters_.stamped_at_dequeue;
+  }
   start_of_exposure_ = (b.flags & V4L2_BUF_FLAG_TSTAMP_SRC_MASK) == V4L2_BUF_FLAG_TSTAMP_SRC_SOE;
   if (start_of_exposure_) frame.flags |= hal::kFrameStartOfExposure;
   const std::size_t need =
@@ -338,6 +356,13 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
     ++counters_.corrupt;
   }
   return hal::SourceStatus::kOk;
+}
+
+std::int64_t capture_time_ns(std::uint32_t buffer_flags, std::int64_t buffer_ns,
+                             std::int64_t dequeued_ns) {
+  const bool monotonic =
+      (buffer_flags & V4L2_BUF_FLAG_TIMESTAMP_MASK) == V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
+  return monotonic ? buffer_ns : dequeued_ns;
 }
 
 // ---- output -----------------------------------------------------------------------------------
@@ -358,7 +383,7 @@ bool V4l2Output::reclaim() {
     b.memory = V4L2_MEMORY_MMAP;
     if (xioctl(fd_, VIDIOC_DQBUF, &b) < 0) {
       if (errno == EAGAIN) return true;
-      return fail("%s: VIDIOC_DQBUF failed: %s", path_.c_str(), std::strerror(errno));
+      return fail(Fault::kIo, "%s: VIDIOC_DQBUF failed: %s", path_.c_str(), std::strerror(errno));
     }
     free_[b.index] = true;
   }
@@ -373,7 +398,7 @@ int V4l2Output::free_buffers() {
 }
 
 bool V4l2Output::write(const std::uint8_t* image, int src_bytes_per_line, int timeout_ms) {
-  if (fd_ < 0) return fail("output not open");
+  if (fd_ < 0) return fail(Fault::kIo, "output not open");
   int index = -1;
   for (int attempt = 0; attempt < 2 && index < 0; ++attempt) {
     // Before the stream starts nothing comes back, so only the never-queued buffers are free.
@@ -384,9 +409,9 @@ bool V4l2Output::write(const std::uint8_t* image, int src_bytes_per_line, int ti
     const int ready = wait_ready(timeout_ms);
     if (ready < 0) return false;
     if (ready == 0)
-      return fail("%s: no free output buffer within %d ms", path_.c_str(), timeout_ms);
+      return fail(Fault::kIo, "%s: no free output buffer within %d ms", path_.c_str(), timeout_ms);
   }
-  if (index < 0) return fail("%s: no free output buffer", path_.c_str());
+  if (index < 0) return fail(Fault::kIo, "%s: no free output buffer", path_.c_str());
 
   auto* dst = static_cast<std::uint8_t*>(buffers_[static_cast<std::size_t>(index)].start);
   const auto row = static_cast<std::size_t>(width_ * hal::bytes_per_pixel(format_));
@@ -405,7 +430,7 @@ bool V4l2Output::write(const std::uint8_t* image, int src_bytes_per_line, int ti
   b.timestamp.tv_sec = now.tv_sec;
   b.timestamp.tv_usec = now.tv_nsec / 1000;
   if (xioctl(fd_, VIDIOC_QBUF, &b) < 0)
-    return fail("%s: VIDIOC_QBUF failed: %s", path_.c_str(), std::strerror(errno));
+    return fail(Fault::kIo, "%s: VIDIOC_QBUF failed: %s", path_.c_str(), std::strerror(errno));
   free_[static_cast<std::size_t>(index)] = false;
   last_ = dst;
   ++written_;

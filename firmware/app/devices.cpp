@@ -31,7 +31,7 @@ std::unique_ptr<Camera> open_camera(const RunSettings& s, int width, int height)
   config.height = height;
   config.buffers = kCameraBuffers;
   if (!camera->capture.open(spec.device, config) || !camera->capture.start())
-    throw drivers::DriverError(drivers::Fault::kWrongKind, camera->capture.error());
+    throw drivers::DriverError(camera->capture.fault(), camera->capture.error());
   // 20 frame periods of silence, at least 2 s (20 Hz when the driver reports no frame interval).
   const std::int64_t period = camera->capture.frame_period_ns();
   camera->watchdog = std::make_unique<drivers::FrameWatchdog>(
@@ -51,7 +51,10 @@ void print_camera_counters(const Camera& camera) {
       "%s\n",
       static_cast<unsigned long long>(f.frames), static_cast<unsigned long long>(f.dropped),
       static_cast<unsigned long long>(f.corrupt), static_cast<unsigned long long>(f.restarts),
-      camera.capture.timestamps_monotonic() ? "CLOCK_MONOTONIC" : "NOT CLOCK_MONOTONIC (unusable)",
+      camera.capture.timestamps_monotonic()
+          ? "CLOCK_MONOTONIC"
+          : "NOT CLOCK_MONOTONIC (frames stamped when dequeued instead: late by the readout and "
+            "the loop's latency, expect a poorer calibration)",
       camera.capture.start_of_exposure() ? "start of exposure" : "end of frame");
   std::printf(
       "markers: %llu labelled, %llu in doubt, %llu crossing, %llu blobs refused, %llu blobs "

@@ -4,7 +4,8 @@
 //                       output frame and lags by the output queue), plus the driver's errors for
 //                       a busy device, a size the device will not do, and an output node
 //   drops               vivid's "Percentage of Dropped Buffers" shows as sequence gaps, counted
-//                       by the driver as the sequence numbers say, and never fatal
+//                       by the driver as the sequence numbers say, its "Inject
+//                       V4L2_BUF_FLAG_ERROR" as frames flagged corrupt, counted; neither fatal
 //   calibrate grey|yuyv the full loop calibrates from markers detected in frames that crossed
 //                       the kernel (a short run of the paper scenario)
 // vivid is loaded with one HDMI input (/dev/video0) and one HDMI output (/dev/video1); DESIGN.md,
@@ -36,6 +37,7 @@ namespace mc = mirrorcal;
 namespace {
 
 using mc::guest::configure_vivid;
+using mc::guest::find_control;
 using mc::guest::kPercentDropped;
 using mc::guest::set_control;
 constexpr const char* kCapture = mc::guest::kVividCapture;
@@ -292,6 +294,41 @@ int drops() {
   GUEST_CHECK(cap.counters().frames == none.frames + half.frames);
   GUEST_CHECK(half.rate() > none.rate() + 0.2);
   GUEST_CHECK(half.rate() < 0.9);
+
+  // Damaged frames: vivid's "Inject V4L2_BUF_FLAG_ERROR" flags the next buffer it returns. Each
+  // comes through flagged corrupt and counted, and the stream goes on.
+  const int fd1 = open(kCapture, O_RDWR);
+  const std::uint32_t inject_error = fd1 >= 0 ? find_control(fd1, "Inject V4L2_BUF_FLAG_ERROR") : 0;
+  GUEST_CHECK(inject_error != 0 && set_control(fd1, kPercentDropped, 0));
+  const std::uint64_t corrupt_before = cap.counters().corrupt;
+  constexpr int kInjected = 3;
+  int flagged = 0, after_last = 0;
+  for (int i = 0; i < kInjected && inject_error != 0; ++i) {
+    GUEST_CHECK(set_control(fd1, inject_error, 1));
+    after_last = 0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (after_last < 5 && std::chrono::steady_clock::now() < deadline) {
+      mc::hal::FrameView f;
+      const mc::hal::SourceStatus st = cap.wait(200, f);
+      if (!GUEST_CHECK(st != mc::hal::SourceStatus::kError)) break;  // never fatal
+      if (st != mc::hal::SourceStatus::kOk) continue;
+      if ((f.flags & mc::hal::kFrameCorrupt) != 0) {
+        ++flagged;
+        after_last = 0;
+      } else if (flagged == i + 1) {
+        ++after_last;
+      }
+    }
+  }
+  if (fd1 >= 0) close(fd1);
+  std::printf(
+      "vivid flagging %d buffers V4L2_BUF_FLAG_ERROR: %d frames flagged corrupt, the driver "
+      "counted %llu, %d good frames after the last\n",
+      kInjected, flagged, (unsigned long long)(cap.counters().corrupt - corrupt_before),
+      after_last);
+  GUEST_CHECK(flagged == kInjected);
+  GUEST_CHECK(cap.counters().corrupt - corrupt_before == static_cast<std::uint64_t>(kInjected));
+  GUEST_CHECK(after_last == 5);
 
   // Every buffer dropped: the camera stops answering. Polled as the loop polls it (never
   // blocking), the watchdog ends the stream after its timeout with a message naming the device.

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <cstdint>
+#include <cstring>
 
 #include "guest_check.hpp"
 #include "mirrorcal/drivers/v4l2.hpp"
@@ -28,6 +29,18 @@ inline bool set_control(int fd, std::uint32_t id, int value) {
   c.id = id;
   c.value = value;
   return ioctl(fd, VIDIOC_S_CTRL, &c) == 0;
+}
+
+// The id of the control named `name` (vivid's error-injection buttons have no fixed public id),
+// 0 when the node has none.
+inline std::uint32_t find_control(int fd, const char* name) {
+  v4l2_queryctrl q{};
+  q.id = V4L2_CTRL_FLAG_NEXT_CTRL;
+  while (ioctl(fd, VIDIOC_QUERYCTRL, &q) == 0) {
+    if (std::strcmp(reinterpret_cast<const char*>(q.name), name) == 0) return q.id;
+    q.id |= V4L2_CTRL_FLAG_NEXT_CTRL;
+  }
+  return 0;
 }
 
 // Same DV timings (640x480p59.94) on both nodes, text off, loop on (or not), drops as asked:

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <string>
 
+#include "mirrorcal/drivers/driver_error.hpp"
 #include "mirrorcal/hal/frames.hpp"
 
 namespace mirrorcal::drivers {
@@ -37,6 +38,8 @@ class V4l2Stream {
   bool is_open() const { return fd_ >= 0; }
   int fd() const { return fd_; }
   const char* error() const { return error_; }
+  // What kind of failure error() describes (missing, busy, wrong kind, not answering, other).
+  Fault fault() const { return fault_; }
   int width() const { return width_; }
   int height() const { return height_; }
   int bytes_per_line() const { return bytes_per_line_; }
@@ -53,7 +56,7 @@ class V4l2Stream {
   ~V4l2Stream() { close(); }
   bool open_stream(const std::string& path, const V4l2Config& config);
   bool stream_on();
-  bool fail(const char* fmt, ...) __attribute__((format(printf, 2, 3)));
+  bool fail(Fault fault, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
   // Waits up to timeout_ms for the device to be ready (POLLIN for capture, POLLOUT for output):
   // 1 ready, 0 timed out, -1 error (message set).
   int wait_ready(int timeout_ms);
@@ -67,6 +70,7 @@ class V4l2Stream {
   bool streaming_ = false;
   std::string path_;
   char error_[256] = "";
+  Fault fault_ = Fault::kIo;
   int width_ = 0, height_ = 0, bytes_per_line_ = 0;
   std::size_t size_image_ = 0;
   hal::PixelFormat format_ = hal::PixelFormat::kGrey;
@@ -74,6 +78,14 @@ class V4l2Stream {
   std::array<Buffer, kMaxBuffers> buffers_{};
   int count_ = 0;
 };
+
+// A captured frame's time on the loop's clock (CLOCK_MONOTONIC): the buffer's own timestamp when
+// the driver says it is on that clock (V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC, as most drivers), else
+// the time it was dequeued (a driver that copies timestamps or leaves them unknown: its times
+// are on no clock the IMU's can be compared with, the dequeue is late by the readout and the
+// loop's latency, but on the right clock).
+std::int64_t capture_time_ns(std::uint32_t buffer_flags, std::int64_t buffer_ns,
+                             std::int64_t dequeued_ns);
 
 // Capture: frames in the order the device fills them. The buffer of the frame last delivered
 // goes back to the device at the next poll, so the view stays valid until then.
