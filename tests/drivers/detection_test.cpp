@@ -335,6 +335,87 @@ TEST(MarkerIdentifier, BrightnessNamesMarkersWithoutAPrediction) {
   EXPECT_FALSE(f.seen[0] || f.seen[1] || f.seen[2]);
 }
 
+TEST(DetectingMarkerSource, FramesTheDeviceFlaggedCorruptAreSkippedAndCounted) {
+  // Three frames from the device, the middle one flagged damaged (V4L2_BUF_FLAG_ERROR) and
+  // holding garbage blobs: the loop gets the first and the third, never the second.
+  struct ScriptedFrames final : mc::hal::FrameSource {
+    std::vector<mc::hal::FrameView> views;
+    std::size_t next = 0;
+    mc::hal::SourceStatus poll(mc::hal::FrameView& v) override {
+      if (next == views.size()) return mc::hal::SourceStatus::kNotReady;
+      v = views[next++];
+      return mc::hal::SourceStatus::kOk;
+    }
+  };
+  const mc::sim::RenderConfig rc;
+  const std::array<Eigen::Vector2d, M> truth = {
+      Eigen::Vector2d(200.3, 150.6), Eigen::Vector2d(260.7, 180.2), Eigen::Vector2d(150.5, 260.4)};
+  Canvas first, damaged, third;  // each frame its own buffer, as a device's
+  for (int i = 0; i < M; ++i) {
+    first.renderer.add_spot(truth[i].x(), truth[i].y(), rc.brightness[i]);
+    damaged.renderer.add_spot(500.5 - 40 * i, 400.5, rc.brightness[i]);
+    third.renderer.add_spot(truth[i].x(), truth[i].y(), rc.brightness[i]);
+  }
+  ScriptedFrames frames;
+  frames.views = {first.finish(), damaged.finish(), third.finish()};
+  for (std::size_t k = 0; k < frames.views.size(); ++k)
+    frames.views[k].t_ns = static_cast<std::int64_t>(k) * 16'666'667;
+  frames.views[1].flags = mc::hal::kFrameCorrupt;
+
+  mc::drivers::DetectionConfig<M> config;
+  config.identify = identifier_config();
+  mc::drivers::DetectingMarkerSource<M> source(frames, config, 640, 480);
+  for (const std::int64_t expected_t : {std::int64_t{0}, std::int64_t{2 * 16'666'667}}) {
+    mc::MarkerFrame<M> f;
+    ASSERT_EQ(source.poll(f), mc::hal::SourceStatus::kOk);
+    EXPECT_EQ(f.t_ns, expected_t);
+    for (int i = 0; i < M; ++i) {
+      ASSERT_TRUE(f.seen[i]);
+      EXPECT_LT((f.uv[i] - truth[i]).norm(), 0.3);
+    }
+  }
+  mc::MarkerFrame<M> f;
+  EXPECT_EQ(source.poll(f), mc::hal::SourceStatus::kNotReady);
+  EXPECT_EQ(source.counters().frames, 2u);
+  EXPECT_EQ(source.counters().corrupt_skipped, 1u);
+}
+
+TEST(MarkerIdentifier, WithoutAPredictionTheBrightestBlobsAreTheCandidates) {
+  // Dim spots (glints, indicator lights) come first in the image's order, more of them than the
+  // identifier weighs per marker. Labelled by brightness alone (as `record` does), the markers must
+  // still be found and no dim spot taken for one. Blobs as the detector reports them, the dim ones
+  // a quarter of the dimmest marker (a third would fit the brightness ratios one step down).
+  const mc::sim::RenderConfig rc;
+  constexpr int kDim = mc::drivers::MarkerIdentifier<M>::kCandidates + 2;
+  std::vector<Blob> blobs;
+  for (int k = 0; k < kDim; ++k) {
+    Blob dim;
+    dim.u = 30.0 + 45.0 * k;
+    dim.v = 30.0;
+    dim.flux = 0.25 * 8 * rc.brightness[0];
+    dim.spread = 1.5;
+    blobs.push_back(dim);
+  }
+  const std::array<Eigen::Vector2d, M> truth = {
+      Eigen::Vector2d(210.4, 300.6), Eigen::Vector2d(330.2, 350.3), Eigen::Vector2d(450.7, 320.1)};
+  for (int i = 0; i < M; ++i) {
+    Blob marker;
+    marker.u = truth[i].x();
+    marker.v = truth[i].y();
+    marker.flux = 8 * rc.brightness[i];
+    marker.spread = 1.5;
+    blobs.push_back(marker);
+  }
+  mc::drivers::MarkerIdentifier<M> id(identifier_config());
+  mc::MarkerFrame<M> f;
+  const auto counts = id.identify(blobs.data(), static_cast<int>(blobs.size()), nullptr, f);
+  for (int i = 0; i < M; ++i) {
+    ASSERT_TRUE(f.seen[i]) << "marker " << i;
+    EXPECT_EQ(f.uv[i], truth[i]) << "marker " << i;
+  }
+  EXPECT_EQ(counts.unassigned, static_cast<std::uint64_t>(kDim));
+}
+
 TEST(MarkerIdentifier, SpotsCutByTheImageEdgeAreWithheld) {
   // A spot whose core the edge cuts has its centroid pulled inwards (by up to a pixel): found as a
   // blob, flagged, and not used as a marker.

@@ -73,7 +73,8 @@ template <int M>
 class MarkerIdentifier {
  public:
   static constexpr int kMaxBlobs = 32;
-  static constexpr int kCandidates = 6;  // the nearest blobs considered per marker
+  // The blobs considered per marker: the nearest to its prediction, or without one the brightest.
+  static constexpr int kCandidates = 6;
 
   explicit MarkerIdentifier(const IdentifierConfig<M>& config) : config_(config) {
     for (int i = 0; i < M; ++i)
@@ -106,14 +107,17 @@ class MarkerIdentifier {
       }
       for (int j = 0; j < n; ++j) {
         if (!single_spot(blobs[j])) continue;
-        double d2 = 0.0;
-        if (prediction != nullptr) {
-          const Eigen::Vector2d r =
-              Eigen::Vector2d(blobs[j].u, blobs[j].v) - prediction->uv[static_cast<std::size_t>(i)];
-          d2 = r.dot(info * r);
-          if (!(d2 <= config_.gate_chi2)) continue;
+        if (prediction == nullptr) {
+          // Without a prediction every blob is as near as any other: the brightest are the
+          // candidates (markers are the scene's bright spots), whatever their order in the image.
+          insert_candidate(i, j, 0.0, -blobs[j].flux);
+          continue;
         }
-        insert_candidate(i, j, d2);
+        const Eigen::Vector2d r =
+            Eigen::Vector2d(blobs[j].u, blobs[j].v) - prediction->uv[static_cast<std::size_t>(i)];
+        const double d2 = r.dot(info * r);
+        if (!(d2 <= config_.gate_chi2)) continue;
+        insert_candidate(i, j, d2, d2);
       }
     }
     for (int j = 0; j < n; ++j)
@@ -160,19 +164,22 @@ class MarkerIdentifier {
     return !b.crowded && !b.truncated && b.spread <= config_.max_spread_px2;
   }
 
-  void insert_candidate(int i, int j, double d2) {
+  // Keeps marker i's kCandidates blobs of lowest rank, each with its cost d2.
+  void insert_candidate(int i, int j, double d2, double rank) {
     int k = count_[i] < kCandidates ? count_[i]++ : kCandidates;
     if (k == kCandidates) {
-      if (d2 >= cand_d2_[i][kCandidates - 1]) return;
+      if (rank >= cand_rank_[i][kCandidates - 1]) return;
       k = kCandidates - 1;
     }
-    while (k > 0 && cand_d2_[i][k - 1] > d2) {
+    while (k > 0 && cand_rank_[i][k - 1] > rank) {
       cand_[i][k] = cand_[i][k - 1];
       cand_d2_[i][k] = cand_d2_[i][k - 1];
+      cand_rank_[i][k] = cand_rank_[i][k - 1];
       --k;
     }
     cand_[i][k] = j;
     cand_d2_[i][k] = d2;
+    cand_rank_[i][k] = rank;
   }
 
   // Markers whose predictions coincide while both are confident: crossing reflections.
@@ -246,6 +253,7 @@ class MarkerIdentifier {
   int count_[M]{};
   int cand_[M][kCandidates]{};
   double cand_d2_[M][kCandidates]{};
+  double cand_rank_[M][kCandidates]{};
   std::array<bool, kMaxBlobs> used_{};
   std::array<int, M> current_{}, best_{};
   std::array<double, M> alt_cost_{};
