@@ -23,18 +23,21 @@ int record_devices(const Options& o, const std::string& dir) {
   const RunSettings s = device_settings(o, "record", false);
   sim::Recording sensors;
   if (!s.sensors.empty()) read_sensors(s.sensors, sensors);
-  const Devices devices = open_devices(s, sensors.sensors.width, sensors.sensors.height);
+  const double imu_rate_hz = s.sensors.empty() ? s.rate_hz : sensors.sensors.imu_rate_hz;
+  const Devices devices =
+      open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz);
 
   std::string err;
   sim::RecordingWriter writer;
   if (!writer.open(dir, err)) fail(err, 1);
-  std::printf("mirrorcal record: IMU %s, %s; %s into %s\n", s.imu.c_str(),
+  std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
               describe_camera(s, devices).c_str(),
+              describe_trigger(s, devices, imu_rate_hz).c_str(),
               s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
                                : "until Ctrl-C or the IMU stops",
               dir.c_str());
   std::fflush(stdout);
-  StoppingImu imu(*devices.imu, static_cast<std::int64_t>(s.duration_s * 1e9));
+  StoppingImu imu(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
   hal::SourceStatus imu_status, frame_status = hal::SourceStatus::kNotReady;
   std::uint64_t frames = 0;
   {

@@ -134,7 +134,8 @@ int cmd_run(int argc, char** argv) {
   }
 
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
-  const Devices devices = open_devices(s, sensors.sensors.width, sensors.sensors.height);
+  const Devices devices =
+      open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz);
   const std::unique_ptr<Camera>& camera = devices.camera;
   std::filesystem::create_directories(s.out);
 
@@ -144,7 +145,7 @@ int cmd_run(int argc, char** argv) {
   Filter::Covariance p0;
   initialise(prior, x0, p0);
   filter.reset(x0, p0);
-  StoppingImu stopping(*devices.imu, static_cast<std::int64_t>(s.duration_s * 1e9));
+  StoppingImu stopping(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
   const std::int64_t imu_period = imu_period_ns(sensors.sensors.imu_rate_hz);
   // The frame path's budget: the camera's frame interval where the driver reports one, else 20 Hz.
   const std::int64_t frame_period = camera && camera->capture.frame_period_ns() > 0
@@ -168,9 +169,10 @@ int cmd_run(int argc, char** argv) {
   lc.profiler = profiler.get();
   firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc);
   if (camera) loop.set_identifier(logged_markers.get());
-  std::printf("mirrorcal run: IMU %s%s%s, %s; %s\n", s.imu.c_str(),
+  std::printf("mirrorcal run: IMU %s%s%s, %s%s; %s\n", s.imu.c_str(),
               s.drdy.empty() ? "" : ", data-ready ", s.drdy.c_str(),
               describe_camera(s, devices).c_str(),
+              describe_trigger(s, devices, sensors.sensors.imu_rate_hz).c_str(),
               s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
                                : "until the IMU stops");
   std::fflush(stdout);

@@ -1,6 +1,8 @@
 #include "devices.hpp"
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -138,9 +140,13 @@ void read_sensors(const std::string& dir, sim::Recording& r) {
     fail(error, 2);
 }
 
-Devices open_devices(const RunSettings& s, int width, int height) {
+Devices open_devices(const RunSettings& s, int width, int height, double imu_rate_hz) {
   Devices d;
+  if (!s.trigger.empty() && s.camera.empty())
+    fail("--trigger " + s.trigger + ": a camera trigger needs a camera (--camera DEV)", 2);
   try {
+    if (!s.trigger.empty())
+      d.trigger = std::make_unique<drivers::GpioTrigger>(drivers::parse_line_spec(s.trigger));
     d.camera = open_camera(s, width, height);
     const drivers::ImuSpec spec = drivers::parse_imu_spec(s.imu);
     if (!s.drdy.empty())
@@ -153,7 +159,33 @@ Devices open_devices(const RunSettings& s, int width, int height) {
   } catch (const drivers::DriverError& e) {
     fail(e.what(), 1);
   }
+  if (d.trigger) {
+    int every = s.trigger_every;
+    if (every == 0) {
+      const std::int64_t frame = d.camera->capture.frame_period_ns() > 0
+                                     ? d.camera->capture.frame_period_ns()
+                                     : 50'000'000;
+      // The fastest rate the camera keeps up with: whole IMU periods, at least one frame interval
+      // (and two periods: a pulse lasts one).
+      every = std::max(
+          2, static_cast<int>(std::ceil(static_cast<double>(frame) * 1e-9 * imu_rate_hz - 1e-6)));
+    }
+    d.triggering = std::make_unique<firmware::TriggeringImu>(*d.imu, *d.trigger, every);
+  }
   return d;
+}
+
+std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz) {
+  if (!d.triggering) return "";
+  const int every = d.triggering->every();
+  char text[160];
+  std::snprintf(text, sizeof text, ", camera trigger %s every %d%s IMU sample (%.4g Hz)",
+                s.trigger.c_str(), every,
+                every == 2   ? "nd"
+                : every == 3 ? "rd"
+                             : "th",
+                imu_rate_hz / every);
+  return text;
 }
 
 std::string describe_camera(const RunSettings& s, const Devices& d) {
@@ -170,6 +202,9 @@ std::string describe_camera(const RunSettings& s, const Devices& d) {
 
 void print_device_counters(const Devices& d) {
   print_imu_counters(*d.imu);
+  if (d.triggering)
+    std::printf("trigger: %llu pulses, one every %d IMU samples\n",
+                static_cast<unsigned long long>(d.triggering->pulses()), d.triggering->every());
   if (d.camera) print_camera_counters(*d.camera);
 }
 

@@ -15,6 +15,7 @@
 #include "mirrorcal/drivers/gpio_lines.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/v4l2.hpp"
+#include "mirrorcal/firmware/triggering_imu.hpp"
 #include "mirrorcal/hal/sources.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "run_config.hpp"
@@ -45,13 +46,24 @@ void read_sensors(const std::string& dir, sim::Recording& r);
 struct Devices {
   std::unique_ptr<drivers::GpioDataReady> drdy;
   std::unique_ptr<hal::ImuSource> imu;
-  std::unique_ptr<Camera> camera;  // null without one
+  std::unique_ptr<Camera> camera;                       // null without one
+  std::unique_ptr<drivers::GpioTrigger> trigger;        // null without one
+  std::unique_ptr<firmware::TriggeringImu> triggering;  // the IMU driving the trigger, with one
+
+  // The IMU stream a command reads: the one that drives the camera's trigger when there is one.
+  hal::ImuSource& imu_stream() const {
+    return triggering ? static_cast<hal::ImuSource&>(*triggering) : *imu;
+  }
 };
 
 // Opens the devices s names, the camera (streaming, width x height) first. A device that is
 // missing, busy or of the wrong kind, or a malformed specification, fails the command (exit 1)
-// with a message naming it.
-Devices open_devices(const RunSettings& s, int width, int height);
+// with a message naming it. imu_rate_hz sets how many IMU samples a camera trigger pulse takes
+// when --trigger-every does not (one frame interval's worth, 20 Hz where none is reported).
+Devices open_devices(const RunSettings& s, int width, int height, double imu_rate_hz);
+
+// ", camera trigger gpiochip0:18 every 4th IMU sample (50 Hz)", or "" without a trigger.
+std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz);
 
 // "camera /dev/video0 (GREY 640x480, 59.940 Hz)", or "no camera (IMU only)".
 std::string describe_camera(const RunSettings& s, const Devices& d);

@@ -41,7 +41,8 @@ const std::vector<Command>& commands() {
        "              [--two-stage [--hold-skew]]  (DIR/stage1 and DIR/stage2 of sim "
        "--intrinsics)\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"
-       "              [--duration S] [--drdy CHIP:LINE] [--config FILE]\n",
+       "              [--duration S] [--drdy CHIP:LINE] [--trigger CHIP:LINE [--trigger-every N]]\n"
+       "              [--config FILE]\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
@@ -55,7 +56,10 @@ const std::vector<Command>& commands() {
        "  run         calibrate on the board's devices\n"
        "              --imu spi:/dev/spidevB.C | i2c:/dev/i2c-N[:ADDR] | can:IFACE\n"
        "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml) [--drdy CHIP:LINE]\n"
-       "              [--camera /dev/videoN] [--out DIR] [--duration S] [--rate HZ]\n"
+       "              [--camera /dev/videoN] [--trigger CHIP:LINE [--trigger-every N]]\n"
+       "              (drive the camera's trigger input on every Nth IMU sample; by default\n"
+       "              the fewest samples that span the camera's frame interval)\n"
+       "              [--out DIR] [--duration S] [--rate HZ]\n"
        "              [--gyro-range DPS] [--accel-range G] [--config FILE] [--profile]\n"
        "              [--from RESULT]  (start from an earlier calibration, as calibrate --from)\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",

@@ -6,8 +6,9 @@
 
 namespace mirrorcal::app {
 
-const char* const kRunKeys[9] = {"imu",      "drdy", "camera",     "sensors",    "out",
-                                 "duration", "rate", "gyro-range", "accel-range"};
+const char* const kRunKeys[11] = {"imu",    "drdy",       "trigger",    "trigger-every",
+                                  "camera", "sensors",    "out",        "duration",
+                                  "rate",   "gyro-range", "accel-range"};
 
 namespace {
 
@@ -45,6 +46,17 @@ bool set_run_setting(RunSettings& s, const std::string& key, const std::string& 
   };
   if (key == "imu") return text(s.imu);
   if (key == "drdy") return text(s.drdy);
+  if (key == "trigger") return text(s.trigger);
+  if (key == "trigger-every") {
+    double every = 0.0;
+    if (number(value, 2.0, every) && every == std::floor(every) && every <= 1e6) {
+      s.trigger_every = static_cast<int>(every);
+      return true;
+    }
+    error = key + ": '" + value +
+            "' is not a whole number of IMU samples >= 2 (a pulse lasts one IMU period)";
+    return false;
+  }
   if (key == "camera") return text(s.camera);
   if (key == "sensors") return text(s.sensors);
   if (key == "out") return text(s.out);

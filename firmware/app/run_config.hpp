@@ -9,6 +9,9 @@ namespace mirrorcal::app {
 struct RunSettings {
   std::string imu;      // device spec: spi:/dev/spidev0.0, i2c:/dev/i2c-1:0x68, can:can0
   std::string drdy;     // the IMU's data-ready line, CHIP:LINE (optional)
+  std::string trigger;  // the camera's trigger input, driven as a GPIO output, CHIP:LINE (optional)
+  int trigger_every =
+      0;                // IMU samples per trigger pulse (>= 2); 0: from the camera's frame interval
   std::string camera;   // /dev/videoN (optional)
   std::string sensors;  // directory with imu.yaml, camchain.yaml, mirrorcal.yaml
   std::string out = "out/run";
@@ -19,7 +22,7 @@ struct RunSettings {
 };
 
 // The settings' keys, which are also the command line's option names (--imu, --duration, ...).
-extern const char* const kRunKeys[9];
+extern const char* const kRunKeys[11];
 
 // Sets one setting from its key and text; false with a message naming the key and the value.
 bool set_run_setting(RunSettings& s, const std::string& key, const std::string& value,

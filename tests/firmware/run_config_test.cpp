@@ -12,6 +12,8 @@ TEST(RunConfig, ReadsEveryKey) {
       "# the board in the lab\n"
       "imu: i2c:/dev/i2c-1:0x69   # MPU-6050 at AD0 high\n"
       "drdy: gpiochip0:17\n"
+      "trigger: gpiochip0:18\n"
+      "trigger-every: 5\n"
       "camera: \"/dev/video2\"\n"
       "\n"
       "sensors: /etc/mirrorcal\n"
@@ -25,6 +27,8 @@ TEST(RunConfig, ReadsEveryKey) {
   ASSERT_TRUE(parse_run_config(text, "run.yaml", s, error)) << error;
   EXPECT_EQ(s.imu, "i2c:/dev/i2c-1:0x69");
   EXPECT_EQ(s.drdy, "gpiochip0:17");
+  EXPECT_EQ(s.trigger, "gpiochip0:18");
+  EXPECT_EQ(s.trigger_every, 5);
   EXPECT_EQ(s.camera, "/dev/video2");
   EXPECT_EQ(s.sensors, "/etc/mirrorcal");
   EXPECT_EQ(s.out, "/var/lib/mirrorcal/run-1");
@@ -43,6 +47,8 @@ TEST(RunConfig, KeepsDefaultsForWhatIsNotGiven) {
   EXPECT_EQ(s.duration_s, d.duration_s);
   EXPECT_EQ(s.rate_hz, d.rate_hz);
   EXPECT_TRUE(s.drdy.empty());
+  EXPECT_TRUE(s.trigger.empty());
+  EXPECT_EQ(s.trigger_every, 0);  // from the camera's frame interval
 }
 
 TEST(RunConfig, RefusesMalformedLinesNamingThem) {
@@ -57,6 +63,13 @@ TEST(RunConfig, RefusesMalformedLinesNamingThem) {
       {"rate: 0\n", "run.yaml:1: rate: '0' is not a rate in Hz (> 0)"},
       {"# x\n\nimu can:can0\n", "run.yaml:3: expected `key: value`, got 'imu can:can0'"},
       {"imu:\n", "run.yaml:1: imu: empty value"},
+      {"trigger-every: 1\n",
+       "run.yaml:1: trigger-every: '1' is not a whole number of IMU samples >= 2 (a pulse lasts "
+       "one "
+       "IMU period)"},
+      {"trigger-every: 2.5\n",
+       "run.yaml:1: trigger-every: '2.5' is not a whole number of IMU samples >= 2 (a pulse lasts "
+       "one IMU period)"},
   };
   for (const auto& c : cases) {
     RunSettings s;

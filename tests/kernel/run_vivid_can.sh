@@ -43,6 +43,10 @@ feeder_status=$?
 cat /tmp/feeder.log /tmp/run.log
 [ "$status" -eq 0 ] || fail "mirrorcal $command exited with $status"
 [ "$feeder_status" -eq 0 ] || fail "the feeder failed"
+# A camera trigger (a GPIO output, --trigger CHIP:LINE) must have fired through the run.
+case " $* " in
+  *" --trigger "*) grep -Eq "^trigger: [1-9][0-9]* pulses" /tmp/run.log || fail "the trigger never fired" ;;
+esac
 if [ $command = record ]; then
   "$mirrorcal" calibrate /tmp/rec --out /tmp/out || fail "mirrorcal calibrate failed on the recording"
 fi
