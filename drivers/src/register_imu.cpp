@@ -123,24 +123,46 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
       error_.set("%s: data-ready line failed: %s", bus_->device().c_str(), drdy_->error());
       return hal::SourceStatus::kError;
     }
-    // The part counts on: edges further apart than a period mean samples nobody read.
-    if (last_edge_ns_ >= 0) {
-      const long long periods =
-          std::llround(static_cast<double>(t_ns - last_edge_ns_) / static_cast<double>(period_ns_));
+  } else if (pace_) {
+    // Without a data-ready line the part's own data-ready status tells when a new sample is in
+    // its registers: polled every eighth of a period from shortly before the next one is due.
+    // No sample is read twice (a part whose clock runs slower than the host's), and each is timed
+    // within an eighth of a period of its arrival.
+    const std::int64_t poll_ns = std::max<std::int64_t>(period_ns_ / 8, 50'000);
+    const std::int64_t start = monotonic_ns();
+    if (next_due_ns_ < start - period_ns_) next_due_ns_ = start;  // the first, or fell behind
+    sleep_until_ns(next_due_ns_);
+    const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
+    for (;;) {
+      std::uint8_t status = 0;
+      if (!read_with_retry(status_register_, &status, 1)) {
+        error_.set("%s: stops answering: reading the status at 0x%02x failed: %s",
+                   bus_->device().c_str(), status_register_, std::strerror(errno));
+        return hal::SourceStatus::kError;
+      }
+      t_ns = monotonic_ns();
+      if ((status & status_ready_mask_) != 0) break;
+      if (t_ns - start > timeout_ns) {
+        error_.set("%s: stops answering: no new sample for %lld ms (status 0x%02x at 0x%02x)",
+                   bus_->device().c_str(), static_cast<long long>(timeout_ns / 1'000'000), status,
+                   status_register_);
+        return hal::SourceStatus::kError;
+      }
+      sleep_until_ns(t_ns + poll_ns);
+    }
+    wait_ns_ = t_ns - start;
+    next_due_ns_ = t_ns + period_ns_ - 2 * poll_ns;
+  } else {
+    t_ns = monotonic_ns();
+  }
+  // The part counts on: samples further apart than a period are samples nobody read.
+  if (drdy_ != nullptr || pace_) {
+    if (last_sample_ns_ >= 0) {
+      const long long periods = std::llround(static_cast<double>(t_ns - last_sample_ns_) /
+                                             static_cast<double>(period_ns_));
       if (periods > 1) counters_.missed_samples += static_cast<std::uint64_t>(periods - 1);
     }
-    last_edge_ns_ = t_ns;
-  } else {
-    if (pace_) {
-      const std::int64_t now = monotonic_ns();
-      next_due_ns_ = next_due_ns_ == 0 ? now : next_due_ns_ + period_ns_;
-      if (next_due_ns_ < now - period_ns_) next_due_ns_ = now;  // fell behind: start again
-      sleep_until_ns(next_due_ns_);
-      t_ns = monotonic_ns();
-      wait_ns_ = t_ns - now;
-    } else {
-      t_ns = monotonic_ns();
-    }
+    last_sample_ns_ = t_ns;
   }
 
   std::uint8_t raw[32];
@@ -207,6 +229,8 @@ Mpu6050::Mpu6050(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& conf
   write_checked(kIntEnable, 0x01);  // DATA_RDY_EN
 
   data_register_ = kAccelXoutH;
+  status_register_ = kIntStatus;  // any read clears it (INT_PIN_CFG's INT_RD_CLEAR above)
+  status_ready_mask_ = kDataRdyInt;
   data_length_ = 14;  // accel (6), temperature (2), gyro (6)
   accel_offset_ = 0;
   gyro_offset_ = 8;
@@ -259,6 +283,8 @@ Icm42688::Icm42688(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& co
                                              " after writing 0x0f (not an ICM-42688-P?)");
 
   data_register_ = kAccelDataX1;
+  status_register_ = kIntStatus;
+  status_ready_mask_ = kDataRdyInt;
   data_length_ = 12;
   no_data_value_valid_ = true;  // its data registers read -32768 while a sensor is off
   no_data_value_ = -32768;

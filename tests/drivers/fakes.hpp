@@ -36,6 +36,14 @@ class FakeMpu6050 final : public RegisterBus {
     regs_[0x75] = 0x68;
     regs_[0x6B] = 0x40; /* reset value: asleep */
   }
+  // The part's sample clock: a new sample every (1 + SMPLRT_DIV) ms of its own oscillator, which
+  // runs clock_scale times the nominal rate. INT_STATUS's DATA_RDY_INT says a sample came since
+  // the last read (INT_RD_CLEAR: any read clears it); last_data_sample is the sample the last
+  // read of the data registers got, so tests can tell samples apart.
+  double clock_scale = 1.0;
+  std::int64_t start_ns = monotonic_ns();
+  std::int64_t last_data_sample = -1;
+  std::int64_t frozen_sample = -1;  // >= 0: the part stopped sampling at this sample
   double gyro_dps[3] = {0, 0, 0};
   double accel_g[3] = {0, 0, 1};  // at rest, z up
   bool dead = false;              // the part stops answering: every transfer fails with dead_errno
@@ -54,8 +62,18 @@ class FakeMpu6050 final : public RegisterBus {
     ++reads;
     largest_read = n > largest_read ? n : largest_read;
     refresh();
+    const std::int64_t sample = sample_number();
+    regs_[0x3A] = sample != read_sample_ ? 0x01 : 0x00;
     for (std::size_t i = 0; i < n; ++i) out[i] = regs_[(first + i) & 0xff];
+    if (first <= 0x3B && first + n > 0x3B) last_data_sample = sample;
+    read_sample_ = sample;
     return true;
+  }
+  // The sample in the data registers now.
+  std::int64_t sample_number() const {
+    if (frozen_sample >= 0) return frozen_sample;
+    const double period_ns = 1e6 * (1 + regs_[0x19]) / clock_scale;
+    return static_cast<std::int64_t>(static_cast<double>(monotonic_ns() - start_ns) / period_ns);
   }
   const std::string& device() const override { return name_; }
 
@@ -74,6 +92,7 @@ class FakeMpu6050 final : public RegisterBus {
       put_be16(&regs_[0x43 + 2 * i], asleep ? 0 : gyro_dps[i] * gl);
     }
   }
+  std::int64_t read_sample_ = -1;
   std::string name_ = "fake-mpu6050";
 };
 
@@ -103,7 +122,11 @@ class FakeIcm42688 final : public SpiTransport {
     const std::uint8_t addr = tx[0] & 0x7f;
     if (tx[0] & 0x80) {
       refresh();
-      for (std::size_t i = 1; i < n; ++i) rx[i] = reg((addr + i - 1) & 0x7f);
+      for (std::size_t i = 1; i < n; ++i) {
+        const int a = (addr + static_cast<int>(i) - 1) & 0x7f;
+        rx[i] = reg(a);
+        if (a == 0x2D && bank == 0) read_sample_ = sample_number();  // INT_STATUS clears on read
+      }
     } else {
       for (std::size_t i = 1; i < n; ++i) write((addr + i - 1) & 0x7f, tx[i]);
     }
@@ -112,7 +135,45 @@ class FakeIcm42688 final : public SpiTransport {
   const std::string& device() const override { return name_; }
 
  private:
+  // The part's sample clock: a new sample every period of the configured ODR (the gyro's,
+  // GYRO_CONFIG0's low bits); INT_STATUS's DATA_RDY_INT says one came since INT_STATUS was read.
+  std::int64_t sample_number() const {
+    double hz = 1000;
+    switch (bank0[0x4F] & 0x0F) {
+      case 3:
+        hz = 8000;
+        break;
+      case 4:
+        hz = 4000;
+        break;
+      case 5:
+        hz = 2000;
+        break;
+      case 15:
+        hz = 500;
+        break;
+      case 7:
+        hz = 200;
+        break;
+      case 8:
+        hz = 100;
+        break;
+      case 9:
+        hz = 50;
+        break;
+      case 10:
+        hz = 25;
+        break;
+      case 11:
+        hz = 12.5;
+        break;
+      default:
+        break;
+    }
+    return static_cast<std::int64_t>(static_cast<double>(monotonic_ns() - start_ns_) * hz * 1e-9);
+  }
   std::uint8_t reg(int a) const {
+    if (a == 0x2D && bank == 0) return sample_number() != read_sample_ ? 0x08 : 0x00;
     if (a == 0x76) return bank;
     return bank == 0 ? bank0[static_cast<std::size_t>(a)] : 0x00;
   }
@@ -149,6 +210,7 @@ class FakeIcm42688 final : public SpiTransport {
       put_be16(&bank0[static_cast<std::size_t>(0x25 + 2 * i)], gyro_on ? gyro_dps[i] * gl : -32768);
     }
   }
+  std::int64_t start_ns_ = monotonic_ns(), read_sample_ = -1;
   std::string name_ = "fake-icm42688";
 };
 

@@ -267,6 +267,74 @@ TEST(Icm42688, NoticesWithinASecondWhenThePartIsReplaced) {
   EXPECT_NE(std::string(imu.error()).find("WHO_AM_I reads 0x6f"), std::string::npos) << imu.error();
 }
 
+// Without a data-ready line the part's data-ready status paces the reads: whether its oscillator
+// runs 3 % slow or fast against the host's clock, every sample is read once, in order, at the
+// part's own rate (a host pacing by its clock alone would read some twice or skip some).
+TEST(Mpu6050, PacedWithoutDataReadyReadsEachSampleOnceWhateverThePartsClock) {
+  for (const double clock_scale : {0.97, 1.03}) {
+    auto bus = std::make_unique<FakeMpu6050>();
+    FakeMpu6050& part = *bus;
+    part.clock_scale = clock_scale;
+    RegisterImuConfig c = unpaced(200);
+    c.pace = true;
+    Mpu6050 imu(std::move(bus), c);
+    std::int64_t last = -1, first_t = 0;
+    ImuSample s;
+    constexpr int kSamples = 60;
+    for (int i = 0; i < kSamples; ++i) {
+      ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk) << imu.error();
+      if (i == 0) first_t = s.t_ns;
+      EXPECT_EQ(part.last_data_sample, last < 0 ? part.last_data_sample : last + 1)
+          << "clock " << clock_scale << ", sample " << i;
+      last = part.last_data_sample;
+    }
+    // The samples came at the part's rate, not the host's nominal one (within a poll interval).
+    const double seconds = static_cast<double>(s.t_ns - first_t) * 1e-9;
+    EXPECT_NEAR(seconds, (kSamples - 1) * 0.005 / clock_scale, 0.005 / 8 + 0.002);
+    EXPECT_EQ(imu.counters().missed_samples, 0u);
+  }
+}
+
+TEST(Mpu6050, PacedWithoutDataReadyCountsTheSamplesALateLoopMissed) {
+  auto bus = std::make_unique<FakeMpu6050>();
+  FakeMpu6050& part = *bus;
+  RegisterImuConfig c = unpaced(200);
+  c.pace = true;
+  Mpu6050 imu(std::move(bus), c);
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  const std::int64_t before = part.last_data_sample;
+  sleep_until_ns(monotonic_ns() + 3 * 5'000'000 + 1'000'000);  // the loop is busy 3.2 periods
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  const std::int64_t skipped = part.last_data_sample - before - 1;
+  EXPECT_GE(skipped, 2);
+  EXPECT_EQ(imu.counters().missed_samples, static_cast<std::uint64_t>(skipped));
+}
+
+TEST(Mpu6050, PacedWithoutDataReadyAPartThatStopsSamplingIsNamed) {
+  auto bus = std::make_unique<FakeMpu6050>();
+  FakeMpu6050& part = *bus;
+  RegisterImuConfig c = unpaced(200);
+  c.pace = true;
+  Mpu6050 imu(std::move(bus), c);
+  ImuSample s;
+  ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
+  part.frozen_sample = part.sample_number();  // no new sample: data-ready never set again
+  std::int64_t t0 = monotonic_ns();
+  hal::SourceStatus st = imu.next(s);
+  if (st == hal::SourceStatus::kOk) {  // the one that came since the last read
+    t0 = monotonic_ns();
+    st = imu.next(s);
+  }
+  EXPECT_EQ(st, hal::SourceStatus::kError);
+  EXPECT_GE(monotonic_ns() - t0, 200'000'000);
+  EXPECT_NE(
+      std::string(imu.error()).find("fake-mpu6050: stops answering: no new sample for 200 ms"),
+      std::string::npos)
+      << imu.error();
+}
+
 TEST(Icm42688, PacedByTheClockWithoutDataReady) {
   auto transport = std::make_unique<FakeIcm42688>();
   RegisterImuConfig c = unpaced(1000);
@@ -279,9 +347,10 @@ TEST(Icm42688, PacedByTheClockWithoutDataReady) {
   const std::int64_t start = monotonic_ns();
   ASSERT_EQ(imu.next(first), hal::SourceStatus::kOk);
   for (int i = 0; i < 20; ++i) ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
-  // 20 periods of 1 ms: never faster than the part's rate.
-  EXPECT_GE(s.t_ns - start, 20 * 1'000'000);
-  // The sleep to the next period is the wait, and a read lasts no longer than its wait and more.
+  // 20 new samples of the part's 1 kHz: never faster than its rate (the first may have been in
+  // its registers already, the 20th came at least 19 periods later).
+  EXPECT_GE(s.t_ns - start, 19 * 1'000'000);
+  // The poll for the part's status is the wait, and a read lasts no longer than its wait and more.
   const std::int64_t t0 = monotonic_ns();
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   EXPECT_GT(imu.wait_ns(), 0);

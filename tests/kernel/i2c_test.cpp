@@ -1,8 +1,8 @@
 // I2C on a real kernel (i2c-stub at 0x68, i2c-dev): an MPU-6050 register file written in with
 // busybox's i2cset is read back by the project's driver through SMBus I2C-block reads, value for
-// value; the configuration the driver writes is read back with i2cget; a missing adapter, a
-// non-I2C node, an address nobody answers and an address a kernel client holds give their
-// messages.
+// value, paced by its INT_STATUS (a status that stays clear ends the stream); the configuration
+// the driver writes is read back with i2cget; a missing adapter, a non-I2C node, an address
+// nobody answers and an address a kernel client holds give their messages.
 #include <dirent.h>
 
 #include <cmath>
@@ -72,6 +72,9 @@ int main() {
                       0x0083, -131 /* 0xFF7D */, 0x7FFF};
   GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x75, 0x68) == 0);
   GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x6B, 0x40) == 0);
+  // INT_STATUS's DATA_RDY_INT, which paces the reads without a data-ready line: set for good
+  // (i2c-stub's registers do not clear when read), a new sample at every poll.
+  GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x3A, 0x01) == 0);
   for (int i = 0; i < 7; ++i) {
     const unsigned u = static_cast<std::uint16_t>(raw[i]);
     GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x3B + 2 * i, u >> 8) == 0);
@@ -116,6 +119,16 @@ int main() {
         std::printf("read: accel %.9f %.9f %.9f m/s^2, gyro %.9f %.9f %.9f rad/s\n", s.accel[0],
                     s.accel[1], s.accel[2], s.gyro[0], s.gyro[1], s.gyro[2]);
     }
+    // The part stops sampling: DATA_RDY_INT stays clear, and after 20 periods (at least 200 ms)
+    // the stream ends with a message.
+    GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x3A, 0x00) == 0);
+    {
+      ImuSample s;
+      GUEST_CHECK(imu.next(s) == hal::SourceStatus::kError);
+      std::printf("no new sample: %s\n", imu.error());
+      GUEST_CHECK(std::strstr(imu.error(), "stops answering: no new sample for 200 ms") != nullptr);
+    }
+    GUEST_CHECK(run("i2cset -y %d 0x68 0x%02x 0x%02x b", bus, 0x3A, 0x01) == 0);
     // Mid-run the part resets (a brown-out): its data registers read 0x00. The next read ends the
     // stream with a message instead of handing the filter a sample of zeros.
     for (int i = 0; i < 14; ++i)

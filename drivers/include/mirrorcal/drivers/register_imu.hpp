@@ -1,11 +1,12 @@
 // IMUs read through byte registers (register_bus.hpp): the MPU-6050 family over I2C and the
 // ICM-42688-P over SPI. Opening checks WHO_AM_I, configures rate and full scale and throws
 // DriverError when the part is missing, of another kind or does not take its configuration.
-// next() waits for the sample (the data-ready line's rising edge if there is one, else the next
-// period on CLOCK_MONOTONIC; wait_ns() says how long), reads the data registers in one burst and
-// converts with the data sheet's scales. Nothing is allocated after opening. A part that stops
-// answering ends the stream with kError and error() saying how: a failed transfer (after one
-// retry), no data-ready edge for 20 periods (at least 200 ms), a data block no working part gives
+// next() waits for the sample (the data-ready line's rising edge if there is one, else the part's
+// data-ready status bit, polled from shortly before the next period on CLOCK_MONOTONIC; wait_ns()
+// says how long), reads the data registers in one burst and converts with the data sheet's
+// scales. Nothing is allocated after opening. A part that stops answering ends the stream with
+// kError and error() saying how: a failed transfer (after one retry), no data-ready edge or status
+// for 20 periods (at least 200 ms), a data block no working part gives
 // (all 0x00 or 0xff bytes, the ICM-42688-P's -32768 of sensors off) at once, a changed WHO_AM_I
 // within a second.
 #pragma once
@@ -26,12 +27,12 @@ struct RegisterImuConfig {
   double rate_hz = 200.0;       // output data rate; the part's nearest supported rate is used
   double gyro_range_dps = 500;  // the smallest full scale covering this is chosen
   double accel_range_g = 4;     // likewise
-  bool pace = true;             // without a data-ready line: sleep to the next period
+  bool pace = true;  // without a data-ready line: poll the part's data-ready status each period
 };
 
 struct RegisterImuCounters {
   std::uint64_t samples = 0;
-  std::uint64_t missed_samples = 0;  // data-ready edges further apart than one period
+  std::uint64_t missed_samples = 0;  // samples (edges, or statuses) further apart than one period
   std::uint64_t read_retries = 0;    // bus transfers that failed once and then worked
 };
 
@@ -39,7 +40,7 @@ class RegisterImu : public hal::ImuSource {
  public:
   hal::SourceStatus next(ImuSample& sample) override;
   const char* error() const override { return error_.c_str(); }
-  // The wait on the data-ready edge, or the sleep to the next period.
+  // The wait on the data-ready edge, or for the part's data-ready status.
   std::int64_t wait_ns() const override { return wait_ns_; }
 
   const RegisterImuCounters& counters() const { return counters_; }
@@ -61,6 +62,8 @@ class RegisterImu : public hal::ImuSource {
   // Set by the part's constructor: where the data is, how to read it, the scales.
   std::uint8_t data_register_ = 0;
   std::size_t data_length_ = 12;
+  // The part's data-ready status bit, polled when paced without a data-ready line (read clears it).
+  std::uint8_t status_register_ = 0, status_ready_mask_ = 0;
   std::uint8_t who_am_i_register_ = 0;
   std::uint8_t who_am_i_ = 0;
   std::int64_t period_ns_ = 5'000'000;
@@ -81,7 +84,7 @@ class RegisterImu : public hal::ImuSource {
   hal::DataReadyLine* drdy_;
   bool pace_;
   std::int64_t next_due_ns_ = 0;
-  std::int64_t last_edge_ns_ = -1;
+  std::int64_t last_sample_ns_ = -1;
   std::int64_t wait_ns_ = 0;
   RegisterImuCounters counters_{};
   ErrorText error_;
@@ -108,12 +111,14 @@ class Icm42688 final : public RegisterImu {
 // Register addresses and values both the drivers and the tests' fakes use (from the data sheets).
 namespace mpu6050 {
 constexpr std::uint8_t kSmplrtDiv = 0x19, kConfig = 0x1A, kGyroConfig = 0x1B, kAccelConfig = 0x1C;
-constexpr std::uint8_t kIntPinCfg = 0x37, kIntEnable = 0x38, kAccelXoutH = 0x3B;
+constexpr std::uint8_t kIntPinCfg = 0x37, kIntEnable = 0x38, kIntStatus = 0x3A, kAccelXoutH = 0x3B;
+constexpr std::uint8_t kDataRdyInt = 0x01;  // INT_STATUS
 constexpr std::uint8_t kPwrMgmt1 = 0x6B, kWhoAmI = 0x75, kWhoAmIValue = 0x68;
 }  // namespace mpu6050
 
 namespace icm42688 {
 constexpr std::uint8_t kDeviceConfig = 0x11, kIntConfig = 0x14, kAccelDataX1 = 0x1F;
+constexpr std::uint8_t kIntStatus = 0x2D, kDataRdyInt = 0x08;  // INT_STATUS, cleared on read
 constexpr std::uint8_t kPwrMgmt0 = 0x4E, kGyroConfig0 = 0x4F, kAccelConfig0 = 0x50;
 constexpr std::uint8_t kIntConfig1 = 0x64, kIntSource0 = 0x65, kWhoAmI = 0x75, kBankSel = 0x76;
 constexpr std::uint8_t kWhoAmIValue = 0x47;
