@@ -28,6 +28,13 @@ RegisterImuConfig unpaced(double rate_hz = 200, double gyro_dps = 500, double ac
   return c;
 }
 
+// Paced by the part's data-ready status, as without a data-ready line on the board.
+RegisterImuConfig paced(double rate_hz) {
+  RegisterImuConfig c = unpaced(rate_hz);
+  c.pace = true;
+  return c;
+}
+
 template <class Fn>
 DriverError expect_throw(Fn fn) {
   try {
@@ -278,9 +285,7 @@ TEST(Mpu6050, PacedWithoutDataReadyReadsEachSampleOnceWhateverThePartsClock) {
     auto bus = std::make_unique<FakeMpu6050>();
     FakeMpu6050& part = *bus;
     part.clock_scale = clock_scale;
-    RegisterImuConfig c = unpaced(kRate);
-    c.pace = true;
-    Mpu6050 imu(std::move(bus), c);
+    Mpu6050 imu(std::move(bus), paced(kRate));
     std::int64_t last = -1, first_t = 0;
     ImuSample s;
     for (int i = 0; i < kSamples; ++i) {
@@ -300,9 +305,7 @@ TEST(Mpu6050, PacedWithoutDataReadyReadsEachSampleOnceWhateverThePartsClock) {
 TEST(Mpu6050, PacedWithoutDataReadyCountsTheSamplesALateLoopMissed) {
   auto bus = std::make_unique<FakeMpu6050>();
   FakeMpu6050& part = *bus;
-  RegisterImuConfig c = unpaced(50);
-  c.pace = true;
-  Mpu6050 imu(std::move(bus), c);
+  Mpu6050 imu(std::move(bus), paced(50));
   ImuSample s;
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
@@ -317,9 +320,7 @@ TEST(Mpu6050, PacedWithoutDataReadyCountsTheSamplesALateLoopMissed) {
 TEST(Mpu6050, PacedWithoutDataReadyAPartThatStopsSamplingIsNamed) {
   auto bus = std::make_unique<FakeMpu6050>();
   FakeMpu6050& part = *bus;
-  RegisterImuConfig c = unpaced(200);
-  c.pace = true;
-  Mpu6050 imu(std::move(bus), c);
+  Mpu6050 imu(std::move(bus), paced(200));
   ImuSample s;
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   part.frozen_sample = part.sample_number();  // no new sample: data-ready never set again
@@ -339,9 +340,7 @@ TEST(Mpu6050, PacedWithoutDataReadyAPartThatStopsSamplingIsNamed) {
 
 TEST(Icm42688, PacedByTheClockWithoutDataReady) {
   auto transport = std::make_unique<FakeIcm42688>();
-  RegisterImuConfig c = unpaced(1000);
-  c.pace = true;
-  Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), c);
+  Icm42688 imu(std::make_unique<SpiRegisterBus>(std::move(transport)), paced(1000));
   ImuSample first, s;
   // The samples are due at absolute times from the first call on (a late one is caught up, not
   // the schedule shifted), so measure from before that call: a loaded machine may wake the first
