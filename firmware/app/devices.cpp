@@ -179,12 +179,8 @@ std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_
   if (!d.triggering) return "";
   const int every = d.triggering->every();
   char text[160];
-  std::snprintf(text, sizeof text, ", camera trigger %s every %d%s IMU sample (%.4g Hz)",
-                s.trigger.c_str(), every,
-                every == 2   ? "nd"
-                : every == 3 ? "rd"
-                             : "th",
-                imu_rate_hz / every);
+  std::snprintf(text, sizeof text, ", camera trigger %s every %d IMU samples (%.4g Hz)",
+                s.trigger.c_str(), every, imu_rate_hz / every);
   return text;
 }
 

@@ -62,7 +62,7 @@ struct Devices {
 // when --trigger-every does not (one frame interval's worth, 20 Hz where none is reported).
 Devices open_devices(const RunSettings& s, int width, int height, double imu_rate_hz);
 
-// ", camera trigger gpiochip0:18 every 4th IMU sample (50 Hz)", or "" without a trigger.
+// ", camera trigger gpiochip0:18 every 4 IMU samples (50 Hz)", or "" without a trigger.
 std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz);
 
 // "camera /dev/video0 (GREY 640x480, 59.940 Hz)", or "no camera (IMU only)".
