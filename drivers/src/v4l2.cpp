@@ -1,7 +1,5 @@
 #include "mirrorcal/drivers/v4l2.hpp"
 
-#include "mirrorcal/drivers/monotonic_clock.hpp"
-
 #include <fcntl.h>
 #include <linux/videodev2.h>
 #include <poll.h>
@@ -14,6 +12,8 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+
+#include "mirrorcal/drivers/monotonic_clock.hpp"
 
 namespace mirrorcal::drivers {
 
@@ -343,10 +343,7 @@ hal::SourceStatus V4l2Capture::wait(int timeout_ms, hal::FrameView& frame) {
                                static_cast<std::int64_t>(b.timestamp.tv_sec) * 1'000'000'000 +
                                    static_cast<std::int64_t>(b.timestamp.tv_usec) * 1'000,
                                monotonic_ns());
-  if (!monotonic_) {
-    frame.flags |= hal::kFrameStampedAtDequeue;
-    ++counters_.stamped_at_dequeue;
-  }
+  if (!monotonic_) ++counters_.stamped_at_dequeue;
   start_of_exposure_ = (b.flags & V4L2_BUF_FLAG_TSTAMP_SRC_MASK) == V4L2_BUF_FLAG_TSTAMP_SRC_SOE;
   if (start_of_exposure_) frame.flags |= hal::kFrameStartOfExposure;
   const std::size_t need =

@@ -53,11 +53,13 @@ void print_camera_counters(const Camera& camera) {
       "%s\n",
       static_cast<unsigned long long>(f.frames), static_cast<unsigned long long>(f.dropped),
       static_cast<unsigned long long>(f.corrupt), static_cast<unsigned long long>(f.restarts),
-      camera.capture.timestamps_monotonic()
-          ? "CLOCK_MONOTONIC"
-          : "NOT CLOCK_MONOTONIC (frames stamped when dequeued instead: late by the readout and "
-            "the loop's latency, expect a poorer calibration)",
+      f.stamped_at_dequeue == 0 ? "CLOCK_MONOTONIC" : "NOT CLOCK_MONOTONIC",
       camera.capture.start_of_exposure() ? "start of exposure" : "end of frame");
+  if (f.stamped_at_dequeue > 0)
+    std::printf(
+        "camera: %llu frames stamped when dequeued (the driver's timestamps are on another "
+        "clock): late by the readout and the loop's latency, expect a poorer calibration\n",
+        static_cast<unsigned long long>(f.stamped_at_dequeue));
   std::printf(
       "markers: %llu labelled, %llu in doubt, %llu crossing, %llu blobs refused, %llu blobs "
       "unassigned; detection %.2f ms per frame\n",

@@ -236,6 +236,7 @@ int loopback(mc::hal::PixelFormat format) {
   GUEST_CHECK(last_tag + 1 == kFrames);
   GUEST_CHECK(tags.size() >= kFrames / 2);
   GUEST_CHECK(cap.timestamps_monotonic());
+  GUEST_CHECK(cap.counters().stamped_at_dequeue == 0);  // vivid's own times kept, none replaced
   return mc::guest::finish("vivid loopback");
 }
 

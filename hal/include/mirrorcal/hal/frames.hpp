@@ -28,9 +28,6 @@ enum FrameFlag : std::uint32_t {
   // The timestamp is taken at the start of exposure; without it, at the end of the frame (the
   // last line read out), which is what most V4L2 drivers report.
   kFrameStartOfExposure = 1u << 1,
-  // The device's timestamp is on no clock the loop's can be compared with: the frame was stamped
-  // when it was dequeued, late by the readout and the loop's latency.
-  kFrameStampedAtDequeue = 1u << 2,
 };
 
 // One image in a buffer the source owns; valid until the source's next poll().
@@ -57,7 +54,8 @@ struct FrameCounters {
   std::uint64_t dropped = 0;   // frames missing from the sequence numbers
   std::uint64_t corrupt = 0;   // frames the device flagged as damaged (delivered, flagged)
   std::uint64_t restarts = 0;  // sequence numbers that stepped back (the device restarted)
-  std::uint64_t stamped_at_dequeue = 0;  // frames whose device timestamp was not CLOCK_MONOTONIC
+  // Frames whose device timestamp was not CLOCK_MONOTONIC: stamped when dequeued instead.
+  std::uint64_t stamped_at_dequeue = 0;
 };
 
 // Frames in timestamp order. poll() does not block: kOk with a view valid until the next poll,
