@@ -57,10 +57,11 @@ std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_
   return v;
 }
 
-sim::Scenario scenario_option(const Options& o) {
+sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
   sim::Scenario s;
   const std::string name = o.get("scenario", "paper");
-  if (!sim::scenario_by_name(name, s)) fail("unknown scenario '" + name + "' (known: paper)");
+  if (!sim::scenario_by_name(name, seed, s))
+    fail("unknown scenario '" + name + "' (known: paper, random)");
   return s;
 }
 

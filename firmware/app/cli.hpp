@@ -43,8 +43,8 @@ Options parse(int argc, char** argv, int first, const std::vector<std::string>& 
 std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
                           std::uint64_t min);
 
-// The scenario named by --scenario (default "paper").
-sim::Scenario scenario_option(const Options& o);
+// The scenario named by --scenario (default "paper"); the random family's draw for seed.
+sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
 
 // Creates --out (or def) and returns it.
 std::string make_out_dir(const Options& o, const std::string& def);

@@ -19,6 +19,117 @@
 
 namespace mirrorcal::app {
 
+namespace {
+
+// One run of a campaign, as the reports need it.
+struct Outcome {
+  std::uint64_t seed = 0;
+  std::vector<double> error, sigma;  // display units
+  double nees = 0, wall_s = 0;
+  std::uint64_t gated = 0, failures = 0;
+  int passes = 0;  // passes over the data (more than the default after a bad one)
+  double nis_per_dof = 0, pass_change = 0;
+  bool suspect = false;  // convergence_warning() would warn a user of this run
+  ErrorSeries series;
+  DetectionReport detection;  // --frames only
+  sim::Scenario scenario;     // the run's rig (a family draws one per run)
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// The largest |error| / sigma over a run's calibration states.
+double worst_sigmas(const Outcome& oc) {
+  double worst = 0.0;
+  for (std::size_t j = 0; j < oc.error.size(); ++j)
+    worst = std::max(worst, std::abs(oc.error[j]) / oc.sigma[j]);
+  return worst;
+}
+
+// A random family's campaign: no common truth, so statistics of the errors by parameter group
+// (p_b_c, rotation, markers: rows 0-2, 3-5, 6..), over all runs and by each axis the family draws
+// (mirror, motion, camera rate, pixel noise, prior width), into summary.csv and on stdout.
+void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_hi,
+                   const std::string& dir) {
+  struct Group {
+    std::string axis, value;
+    std::function<bool(const sim::Scenario&)> has;
+  };
+  const std::vector<Group> groups = {
+      {"all", "all", [](const sim::Scenario&) { return true; }},
+      {"mirror", "wall", [](const sim::Scenario& s) { return s.mirror == "wall"; }},
+      {"mirror", "floor", [](const sim::Scenario& s) { return s.mirror == "floor"; }},
+      {"motion", "slow", [](const sim::Scenario& s) { return s.motion_kind == "slow"; }},
+      {"motion", "fast", [](const sim::Scenario& s) { return s.motion_kind == "fast"; }},
+      {"camera", "20-40 Hz", [](const sim::Scenario& s) { return s.camera_rate_hz < 40.0; }},
+      {"camera", "40-60 Hz", [](const sim::Scenario& s) { return s.camera_rate_hz >= 40.0; }},
+      {"pixel noise", "0.25-0.6 px", [](const sim::Scenario& s) { return s.pixel_sigma < 0.6; }},
+      {"pixel noise", "0.6-1 px", [](const sim::Scenario& s) { return s.pixel_sigma >= 0.6; }},
+      {"imu noise", "1-3x", [](const sim::Scenario& s) { return s.imu_noise_scale < 3.0; }},
+      {"imu noise", "3-5x", [](const sim::Scenario& s) { return s.imu_noise_scale >= 3.0; }},
+      {"marker prior", "3-6.5 cm", [](const sim::Scenario& s) { return s.priors.marker < 0.065; }},
+      {"marker prior", "6.5-10 cm",
+       [](const sim::Scenario& s) { return s.priors.marker >= 0.065; }},
+  };
+  // Parameter groups by row: p_b_c (cm), rotation (deg), markers (cm; shown in mm).
+  const auto group_of = [](std::size_t j) { return j < 3 ? 0 : j < 6 ? 1 : 2; };
+  const std::string path = dir + "/summary.csv";
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) fail("cannot write " + path, 1);
+  std::fprintf(f,
+               "axis,value,runs,nees_mean,nees_median,runs_beyond_4_sigma,flagged,"
+               "rms_p_b_c [cm],rms_rot_b_c [deg],rms_markers [mm],sigma_p_b_c [cm],"
+               "sigma_rot_b_c [deg],sigma_markers [mm]\n");
+  std::printf("\n%-13s %-11s %4s %6s %6s %5s %4s | %8s %8s %8s | %8s %8s %8s\n", "axis", "value",
+              "runs", "NEES", "median", ">4sig", "flag", "p cm", "rot deg", "mark mm", "s p",
+              "s rot", "s mark");
+  for (const Group& g : groups) {
+    std::vector<double> nees;
+    double sq[3] = {0, 0, 0}, var[3] = {0, 0, 0}, count[3] = {0, 0, 0};
+    int beyond = 0, flagged = 0;
+    for (const Outcome& oc : out) {
+      if (!g.has(oc.scenario)) continue;
+      nees.push_back(oc.nees);
+      const bool far = worst_sigmas(oc) > 4.0;
+      beyond += far ? 1 : 0;
+      flagged += oc.suspect ? 1 : 0;
+      for (std::size_t j = 0; j < oc.error.size(); ++j) {
+        const int k = group_of(j);
+        sq[k] += oc.error[j] * oc.error[j];
+        var[k] += oc.sigma[j] * oc.sigma[j];
+        count[k] += 1.0;
+      }
+    }
+    if (nees.empty()) continue;
+    double mean = 0;
+    for (double v : nees) mean += v / double(nees.size());
+    double rms[3], sig[3];
+    for (int k = 0; k < 3; ++k) {
+      const double unit = k == 2 ? 10.0 : 1.0;  // markers in mm
+      rms[k] = unit * std::sqrt(sq[k] / count[k]);
+      sig[k] = unit * std::sqrt(var[k] / count[k]);
+    }
+    std::printf("%-13s %-11s %4zu %6.1f %6.1f %5d %4d | %8.3f %8.4f %8.3f | %8.3f %8.4f %8.3f\n",
+                g.axis.c_str(), g.value.c_str(), nees.size(), mean, median(nees), beyond, flagged,
+                rms[0], rms[1], rms[2], sig[0], sig[1], sig[2]);
+    std::fprintf(f, "%s,%s,%zu,%.4f,%.4f,%d,%d,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f\n", g.axis.c_str(),
+                 g.value.c_str(), nees.size(), mean, median(nees), beyond, flagged, rms[0], rms[1],
+                 rms[2], sig[0], sig[1], sig[2]);
+  }
+  std::fprintf(f, "# nees_99_lo=%.4f nees_99_hi=%.4f\n", nees_lo, nees_hi);
+  if (std::fclose(f) != 0) fail("cannot write " + path, 1);
+  std::printf(
+      "(RMS errors and root-mean-square filter sigmas by parameter group; NEES of the 15 "
+      "calibration states, its 99 %% interval over the runs %.2f..%.2f)\n",
+      nees_lo, nees_hi);
+}
+
+}  // namespace
+
 int cmd_montecarlo(int argc, char** argv) {
   const Options o = parse(
       argc, argv, 2,
@@ -32,12 +143,18 @@ int cmd_montecarlo(int argc, char** argv) {
   if (intrinsics && frames.enabled)
     fail("--intrinsics runs on listed markers (not yet with --frames)");
   if (!o.flag("runs")) fail(std::string("montecarlo needs --runs N\n") + usage());
-  // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
-  const sim::Scenario s = hold_skew ? without_skew(scenario_option(o)) : scenario_option(o);
+  // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
+  // draws each run's rig from the run's seed.
+  const auto scenario_for = [&](std::uint64_t run_seed) {
+    return hold_skew ? without_skew(scenario_option(o, run_seed)) : scenario_option(o, run_seed);
+  };
+  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
+  const sim::Scenario s = scenario_for(seed);
+  const bool family = s.name == "random";  // a rig of its own for every run
+  if (family && intrinsics) fail("--scenario random runs stage 1 (not yet with --intrinsics)");
   const std::uint64_t runs = parse_count(o, "runs", 0, 1);
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
   const Passes passes = o.flag("passes")
                             ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))
@@ -56,16 +173,6 @@ int cmd_montecarlo(int argc, char** argv) {
               frames.enabled ? hal::to_string(frames.format) : "", (unsigned long long)runs,
               (unsigned long long)jobs, (unsigned long long)seed);
 
-  struct Outcome {
-    std::uint64_t seed = 0;
-    std::vector<double> error, sigma;  // display units
-    double nees = 0, wall_s = 0;
-    std::uint64_t gated = 0, failures = 0;
-    int passes = 0;        // passes over the data (more than the default after a bad one)
-    bool suspect = false;  // convergence_warning() would warn a user of this run
-    ErrorSeries series;
-    DetectionReport detection;  // --frames only
-  };
   std::vector<Outcome> out(runs);
   std::vector<ParamInfo> params;
   std::atomic<std::uint64_t> next{0}, done{0};
@@ -74,11 +181,13 @@ int cmd_montecarlo(int argc, char** argv) {
   auto worker = [&] {
     for (std::uint64_t i; (i = next++) < runs;) {
       const std::uint64_t run_seed = sim::derive_seed(seed, 1000 + i);
+      const sim::Scenario rs = scenario_for(run_seed);
       const auto t = std::chrono::steady_clock::now();
       Outcome& oc = out[i];
       // Either stage: the same statistics of whichever run it was.
       const auto record = [&](const auto& r) {
         oc.seed = run_seed;
+        oc.scenario = rs;
         oc.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
         const auto& last = r.history.back();
         for (std::size_t j = 0; j < r.result.params.size(); ++j) {
@@ -89,6 +198,8 @@ int cmd_montecarlo(int argc, char** argv) {
         oc.gated = r.filter_counters.markers_gated;
         oc.suspect = !convergence_warning(r.result).empty();
         oc.passes = r.result.passes;
+        oc.nis_per_dof = r.result.nis_per_dof;
+        oc.pass_change = r.result.pass_change;
         oc.failures = r.filter_counters.failures;
         oc.series = error_series(r.history, r.result.params);
         oc.detection = r.detection;
@@ -96,13 +207,13 @@ int cmd_montecarlo(int argc, char** argv) {
         if (params.empty()) params = r.result.params;
       };
       if (intrinsics && hold_skew)
-        record(one_stage ? run_one_stage_simulation<4>(s, run_seed)
-                         : run_two_stage_simulation<4>(s, run_seed));
+        record(one_stage ? run_one_stage_simulation<4>(rs, run_seed)
+                         : run_two_stage_simulation<4>(rs, run_seed));
       else if (intrinsics)
-        record(one_stage ? run_one_stage_simulation<5>(s, run_seed)
-                         : run_two_stage_simulation<5>(s, run_seed));
+        record(one_stage ? run_one_stage_simulation<5>(rs, run_seed)
+                         : run_two_stage_simulation<5>(rs, run_seed));
       else
-        record(run_simulation(s, run_seed, {}, frames, nullptr, passes));
+        record(run_simulation(rs, run_seed, {}, frames, nullptr, passes));
       std::lock_guard<std::mutex> lock(mu);
       print_progress("runs done:", double(++done) / double(runs));
     }
@@ -131,30 +242,43 @@ int cmd_montecarlo(int argc, char** argv) {
   const double nees_lo = chi2_quantile(0.025, n * double(np)) / n;
   const double nees_hi = chi2_quantile(0.975, n * double(np)) / n;
 
-  std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
-              !intrinsics ? " and II"
-              : one_stage ? ", II and III (one stage)"
-                          : ", II and III (after stage 2)",
-              (unsigned long long)runs);
-  std::printf("%-7s %-4s %9s | %9s %7s | %9s %8s %8s %8s | %s\n", "param", "unit", "truth", "paper",
-              "sigma", "mean", "std", "rms err", "filter s", "rms < paper sigma");
-  int beaten = 0;
-  for (std::size_t j = 0; j < np; ++j) {
-    const double r = std::sqrt(rms[j]);
-    const PaperRow& p = paper_tables()[j];
-    const bool ok = r < p.sigma;
-    beaten += ok ? 1 : 0;
-    std::printf("%-7s %-4s %9.3f | %9.2f %7.2f | %9.4f %8.4f %8.4f %8.4f | %s\n",
-                params[j].name.c_str(), params[j].unit.c_str(), truth[j], p.final_value, p.sigma,
-                truth[j] + mean[j], std::sqrt(std_[j]), r, std::sqrt(sig[j]), ok ? "yes" : "NO");
+  if (family) {
+    std::vector<double> each;
+    for (const auto& oc : out) each.push_back(oc.nees);
+    const double lo99 = chi2_quantile(0.005, n * double(np)) / n,
+                 hi99 = chi2_quantile(0.995, n * double(np)) / n;
+    std::printf(
+        "\naverage NEES of the %zu calibration states over %llu rigs: %.2f (99 %% interval "
+        "%.2f..%.2f), median of the runs %.2f: %s\n",
+        np, (unsigned long long)runs, nees, lo99, hi99, median(each),
+        nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
+    report_family(out, lo99, hi99, dir);
+  } else {
+    std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
+                !intrinsics ? " and II"
+                : one_stage ? ", II and III (one stage)"
+                            : ", II and III (after stage 2)",
+                (unsigned long long)runs);
+    std::printf("%-7s %-4s %9s | %9s %7s | %9s %8s %8s %8s | %s\n", "param", "unit", "truth",
+                "paper", "sigma", "mean", "std", "rms err", "filter s", "rms < paper sigma");
+    int beaten = 0;
+    for (std::size_t j = 0; j < np; ++j) {
+      const double r = std::sqrt(rms[j]);
+      const PaperRow& p = paper_tables()[j];
+      const bool ok = r < p.sigma;
+      beaten += ok ? 1 : 0;
+      std::printf("%-7s %-4s %9.3f | %9.2f %7.2f | %9.4f %8.4f %8.4f %8.4f | %s\n",
+                  params[j].name.c_str(), params[j].unit.c_str(), truth[j], p.final_value, p.sigma,
+                  truth[j] + mean[j], std::sqrt(std_[j]), r, std::sqrt(sig[j]), ok ? "yes" : "NO");
+    }
+    std::printf("\n%d of %zu parameters below the paper's sigma\n", beaten, np);
+    std::printf(
+        "average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f, 99 %% "
+        "%.2f..%.2f): %s\n",
+        np, nees, nees_lo, nees_hi, chi2_quantile(0.005, n * double(np)) / n,
+        chi2_quantile(0.995, n * double(np)) / n,
+        nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
   }
-  std::printf("\n%d of %zu parameters below the paper's sigma\n", beaten, np);
-  std::printf(
-      "average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f, 99 %% "
-      "%.2f..%.2f): %s\n",
-      np, nees, nees_lo, nees_hi, chi2_quantile(0.005, n * double(np)) / n,
-      chi2_quantile(0.995, n * double(np)) / n,
-      nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
   std::string suspects;
   for (std::size_t i = 0; i < out.size(); ++i)
     if (out[i].suspect) suspects += (suspects.empty() ? "" : ", ") + std::to_string(i);
@@ -165,14 +289,12 @@ int cmd_montecarlo(int argc, char** argv) {
                std::to_string(out[i].passes) + ")";
   if (!extra.empty())
     std::printf(
-        "runs given more passes because a pass gated more than 0.5 %% of the markers (passes "
-        "made): %s\n",
+        "runs given more passes because a pass looked suspect (more than 0.5 %% of the markers "
+        "gated, or a normalised innovation squared well above 1; passes made): %s\n",
         extra.c_str());
   if (!suspects.empty())
-    std::printf(
-        "runs a user would have been warned of (more than 0.5 %% of the markers gated; included "
-        "above): %s\n",
-        suspects.c_str());
+    std::printf("runs a user would have been warned of (consistent: false; included above): %s\n",
+                suspects.c_str());
   DetectionReport detection;
   if (frames.enabled) {
     std::vector<DetectionReport> each;
@@ -183,31 +305,37 @@ int cmd_montecarlo(int argc, char** argv) {
   std::printf("wall time %.1f s (%.2f s per run on %llu jobs)\n", wall, wall / n * double(jobs),
               (unsigned long long)jobs);
 
-  std::FILE* f = std::fopen((dir + "/summary.csv").c_str(), "w");
-  if (!f) fail("cannot write " + dir + "/summary.csv", 1);
-  std::fprintf(f, "parameter,unit,truth,mean_estimate,std,rms_error,paper_std\n");
-  for (std::size_t j = 0; j < np; ++j)
-    std::fprintf(f, "%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f\n", params[j].name.c_str(),
-                 params[j].unit.c_str(), truth[j], truth[j] + mean[j], std::sqrt(std_[j]),
-                 std::sqrt(rms[j]), paper_tables()[j].sigma);
-  std::fprintf(f,
-               "# nees_mean=%.4f nees_95_lo=%.4f nees_95_hi=%.4f runs=%llu wall_s=%.2f jobs=%llu\n",
-               nees, nees_lo, nees_hi, (unsigned long long)runs, wall, (unsigned long long)jobs);
-  if (frames.enabled)
-    std::fprintf(f,
-                 "# frames=%s markers_drawn=%llu markers_labelled=%llu wrong_labels=%llu "
-                 "centroid_rms_px=%.4f centroid_max_px=%.4f ms_per_frame=%.3f\n",
-                 hal::to_string(frames.format), (unsigned long long)detection.markers_drawn,
-                 (unsigned long long)detection.markers_labelled,
-                 (unsigned long long)detection.wrong_labels, detection.centroid_rms_px,
-                 detection.centroid_max_px, detection.ms_per_frame);
-  std::fclose(f);
+  std::FILE* f = nullptr;
+  if (!family) {
+    f = std::fopen((dir + "/summary.csv").c_str(), "w");
+    if (!f) fail("cannot write " + dir + "/summary.csv", 1);
+    std::fprintf(f, "parameter,unit,truth,mean_estimate,std,rms_error,paper_std\n");
+    for (std::size_t j = 0; j < np; ++j)
+      std::fprintf(f, "%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f\n", params[j].name.c_str(),
+                   params[j].unit.c_str(), truth[j], truth[j] + mean[j], std::sqrt(std_[j]),
+                   std::sqrt(rms[j]), paper_tables()[j].sigma);
+    std::fprintf(
+        f, "# nees_mean=%.4f nees_95_lo=%.4f nees_95_hi=%.4f runs=%llu wall_s=%.2f jobs=%llu\n",
+        nees, nees_lo, nees_hi, (unsigned long long)runs, wall, (unsigned long long)jobs);
+    if (frames.enabled)
+      std::fprintf(f,
+                   "# frames=%s markers_drawn=%llu markers_labelled=%llu wrong_labels=%llu "
+                   "centroid_rms_px=%.4f centroid_max_px=%.4f ms_per_frame=%.3f\n",
+                   hal::to_string(frames.format), (unsigned long long)detection.markers_drawn,
+                   (unsigned long long)detection.markers_labelled,
+                   (unsigned long long)detection.wrong_labels, detection.centroid_rms_px,
+                   detection.centroid_max_px, detection.ms_per_frame);
+    std::fclose(f);
+  }
   f = std::fopen((dir + "/runs.csv").c_str(), "w");
   if (!f) fail("cannot write " + dir + "/runs.csv", 1);
   std::fprintf(f, "run,seed");
   for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
-  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s,passes");
+  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s,passes,nis_per_dof,pass_change");
+  std::fprintf(f,
+               ",mirror,motion,camera_hz,pixel_sigma,imu_noise_scale,prior_marker [cm],"
+               "prior_p_b_c [cm],prior_rot_b_c [deg]");
   if (frames.enabled)
     std::fprintf(f, ",markers_drawn,markers_labelled,wrong_labels,centroid_rms_px,centroid_max_px");
   std::fprintf(f, "\n");
@@ -215,8 +343,14 @@ int cmd_montecarlo(int argc, char** argv) {
     std::fprintf(f, "%zu,%llu", i, (unsigned long long)out[i].seed);
     for (double e : out[i].error) std::fprintf(f, ",%.6g", e);
     for (double e : out[i].sigma) std::fprintf(f, ",%.6g", e);
-    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d", out[i].nees, (unsigned long long)out[i].gated,
-                 (unsigned long long)out[i].failures, out[i].wall_s, out[i].passes);
+    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d,%.4f,%.4g", out[i].nees,
+                 (unsigned long long)out[i].gated, (unsigned long long)out[i].failures,
+                 out[i].wall_s, out[i].passes, out[i].nis_per_dof, out[i].pass_change);
+    const sim::Scenario& rs = out[i].scenario;
+    std::fprintf(f, ",%s,%s,%.2f,%.3f,%.2f,%.2f,%.2f,%.2f", rs.mirror.c_str(),
+                 rs.motion_kind.c_str(), rs.camera_rate_hz, rs.pixel_sigma, rs.imu_noise_scale,
+                 100.0 * rs.priors.marker, 100.0 * rs.priors.p_b_c,
+                 rs.priors.rot_b_c * 180.0 / M_PI);
     if (frames.enabled) {
       const DetectionReport& d = out[i].detection;
       std::fprintf(f, ",%llu,%llu,%llu,%.4f,%.4f", (unsigned long long)d.markers_drawn,

@@ -133,8 +133,9 @@ int cmd_record(int argc, char** argv) {
   if (two_stage && o.flag("intrinsics"))
     fail("--two-stage records stage 1 without and stage 2 with the intrinsics; drop --intrinsics");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
-  const sim::Scenario s = hold_skew ? without_skew(scenario_option(o)) : scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
+  const sim::Scenario s =
+      hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
   const std::string dir = make_out_dir(o, "");
   if (!two_stage) {
     write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, dir);

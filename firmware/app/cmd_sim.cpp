@@ -35,9 +35,9 @@ int cmd_sim(int argc, char** argv) {
     fail("--hold-skew and --one-stage apply with --intrinsics");
   const bool one_stage = o.flag("one-stage");
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
-  const sim::Scenario s =
-      o.flag("hold-skew") ? without_skew(scenario_option(o)) : scenario_option(o);
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
+  const sim::Scenario s =
+      o.flag("hold-skew") ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
   // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
   const Passes passes = o.flag("passes")
                             ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))

@@ -1,6 +1,8 @@
 #include "outputs.hpp"
 
+#include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -76,11 +78,31 @@ bool gated_too_many(const CalibrationResult& r) {
   return seen > 0.0 && double(r.markers_gated) > kSuspectGatedFraction * seen;
 }
 
+bool innovations_too_large(const CalibrationResult& r) {
+  if (r.nis_dof == 0) return false;
+  const double band = std::max(kSuspectNisExcess, 5.0 * std::sqrt(2.0 / double(r.nis_dof)));
+  return r.nis_per_dof > 1.0 + band;
+}
+
+bool suspect(const CalibrationResult& r) {
+  return gated_too_many(r) || innovations_too_large(r);
+}
+
 std::string convergence_warning(const CalibrationResult& r) {
   const double seen = double(r.markers_used + r.markers_gated);
   if (seen == 0.0) return "no marker was used: nothing was calibrated beyond the priors";
-  if (!gated_too_many(r)) return {};
   char text[480];
+  if (!gated_too_many(r)) {
+    if (!innovations_too_large(r)) return {};
+    std::snprintf(text, sizeof text,
+                  "the markers fit %.2f times worse than the filter's covariance says (normalised "
+                  "innovation squared per degree of freedom over the last pass, of %d; about 1 "
+                  "for a consistent calibration): it is over-confident or has locked onto a "
+                  "wrong solution. Move the rig more (tilts and moves toward the mirror), start "
+                  "from better guesses, and check the recording.",
+                  r.nis_per_dof, r.passes);
+    return text;
+  }
   std::snprintf(text, sizeof text,
                 "%.1f %% of the markers were rejected by the 99.9 %% gate in the last pass (of %d) "
                 "(a consistent calibration rejects about 0.1 %%): it has most likely "
@@ -118,7 +140,12 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
                r.passes, static_cast<unsigned long long>(r.markers_used),
                static_cast<unsigned long long>(r.markers_gated));
   std::fprintf(o,
-               "consistent: %s  # false: more than 0.5 %% of the markers gated, do not trust it\n",
+               "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
+               "pass_change: %.6g  # the last pass's move from the one before, squared sigmas\n",
+               r.nis_per_dof, r.pass_change);
+  std::fprintf(o,
+               "consistent: %s  # false: more than 0.5 %% of the markers gated, or nis_per_dof "
+               "well above 1: do not trust it\n",
                convergence_warning(r).empty() ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)

@@ -92,6 +92,69 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   return run;
 }
 
+// The first stretch of the data, for imu_start_from(): from the first IMU sample to the one after
+// the kImuStartFrames-th frame with markers, at most kImuStartMaxS long. Empty if it holds fewer
+// than two such frames.
+LoopData first_stretch(const LoopData& data) {
+  LoopData out;
+  if (data.imu.empty()) return out;
+  const std::int64_t t0 = data.imu.front().t_ns;
+  const std::int64_t latest = t0 + static_cast<std::int64_t>(kImuStartMaxS * 1e9);
+  int with_markers = 0;
+  std::int64_t end = latest;
+  for (const sim::ObservedFrame& f : data.frames) {
+    if (f.t_ns > latest) break;
+    out.frames.push_back(f);
+    if (!f.markers.empty() && ++with_markers == kImuStartFrames) {
+      end = f.t_ns;
+      break;
+    }
+  }
+  if (with_markers < 2) return {};
+  for (const ImuSample& s : data.imu) {
+    out.imu.push_back(s);
+    if (s.t_ns > end) break;
+  }
+  out.imu_period_ns = data.imu_period_ns;
+  out.width = data.width;
+  out.height = data.height;
+  return out;
+}
+
+// Where the next pass starts the IMU: the first stretch of the data calibrated from this pass's
+// calibration (estimate and covariance) and the prior's IMU guess, which pins the rig's distance
+// from the mirror, its tilt and their rates within a fraction of a second, then integrated back to
+// the first IMU sample. False (x unchanged) if the stretch has too few frames or the run fails.
+template <int NK>
+bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
+                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
+                    typename SimRun<NK>::State& x) {
+  using State = typename SimRun<NK>::State;
+  constexpr int B = State::kPbc, L = State::kDim - B;
+  const LoopData stretch = first_stretch(data);
+  if (stretch.imu.size() < 2) return false;
+  State start = pass.history.back().state;
+  start.p = x.p;
+  start.v = x.v;
+  start.q_n_b = x.q_n_b;
+  start.b_a = x.b_a;
+  start.b_g = x.b_g;
+  typename SimRun<NK>::Filter::Covariance p = p0;
+  p.template block<L, State::kDim>(B, 0).setZero();
+  p.template block<State::kDim, L>(0, B).setZero();
+  p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
+  const SimRun<NK> fit = run_pass<NK>(config, start, p, stretch, nullptr, {}, LoopHooks{});
+  if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
+  State back = fit.history.back().state;
+  for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
+    propagate_imu(back, stretch.imu[k], stretch.imu[k - 1], config.gravity_n);
+  if (!back.p.allFinite() || !back.v.allFinite()) return false;
+  x.p = back.p;
+  x.v = back.v;
+  x.q_n_b = back.q_n_b;
+  return true;
+}
+
 }  // namespace
 
 template <int NK>
@@ -105,14 +168,22 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   SimRun<NK> run;
   HistoryRow<typename SimRun<NK>::Filter> first_frame;
   for (int pass = 0; pass < passes.max; ++pass) {
-    if (pass >= passes.min && !gated_too_many(run.result)) break;
+    if (pass >= passes.min && !suspect(run.result)) break;
     const int planned = std::max(passes.min, pass + 1);
     const auto pass_progress = [&](double f) {
       if (progress) progress((pass + f) / planned);
     };
+    const std::optional<State> before =
+        run.history.empty() ? std::nullopt : std::optional<State>(run.history.back().state);
     run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
                        hooks ? hooks(pass) : LoopHooks{});
     run.result.passes = pass + 1;
+    if (before && !run.history.empty()) {
+      constexpr int B = State::kPbc, L = State::kDim - B;
+      const Eigen::Matrix<double, L, 1> d =
+          run.history.back().state.template boxminus_block<B, L>(*before);
+      run.result.pass_change = d.dot(run.covariance.template block<L, L>(B, B).ldlt().solve(d));
+    }
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
     run.first_frame = first_frame;
     // The next pass starts the calibration parameters at this pass's estimate, with the prior's
@@ -132,6 +203,10 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       if (prior_negligible(State::kPi + 3 * m, 3))
         start.markers.template segment<3>(3 * m) = est.markers.template segment<3>(3 * m);
     if (NK > 0 && prior_negligible(State::kK, NK)) start.intrinsics = est.intrinsics;
+    // And the IMU's start, which every pass otherwise begins from the prior's guess (10 cm and
+    // 5 deg off for a user's hand-held start): the frames of the first seconds would pull the
+    // calibration towards that guess again.
+    imu_start_from<NK>(config, run, p0, data, start);
   }
   return run;
 }

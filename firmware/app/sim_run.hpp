@@ -111,6 +111,10 @@ constexpr double kNegligiblePriorWeight = 1e-2;
 // pass that gated too many is followed by another, up to kMaxPasses; a good run gates about 0.1 %
 // and stops at kDefaultPasses.
 constexpr int kMaxPasses = 4;
+// The stretch of data a later pass's IMU start is found from (sim_run.cpp, imu_start_from): up to
+// the kImuStartFrames-th frame with markers, at most kImuStartMaxS seconds.
+constexpr int kImuStartFrames = 10;
+constexpr double kImuStartMaxS = 2.0;
 
 struct Passes {
   int min = kDefaultPasses;  // passes always made

@@ -1,6 +1,7 @@
 #include "mirrorcal/sim_host/scenario.hpp"
 
 #include <cmath>
+#include <random>
 
 namespace mirrorcal::sim {
 
@@ -40,10 +41,21 @@ Kinematics kinematics(const Motion& m, double t) {
                 c = evaluate(m.angles[2], t);
   const Eigen::Matrix3d rx = axis_rotation(0, a.value), ry = axis_rotation(1, b.value),
                         rz = axis_rotation(2, c.value);
-  k.q_n_b = Eigen::Quaterniond(m.q0.toRotationMatrix() * rz * ry * rx).normalized();
+  const Eigen::Matrix3d inner = m.q0.toRotationMatrix() * rz * ry * rx;
   // Body rate of R0 Rz(c) Ry(b) Rx(a): each Euler rate seen through the rotations after it.
   k.omega_b = rx.transpose() * ry.transpose() * Eigen::Vector3d(0, 0, c.rate) +
               rx.transpose() * Eigen::Vector3d(0, b.rate, 0) + Eigen::Vector3d(a.rate, 0, 0);
+  if (m.about_normal.empty() && m.q_tail.w() == 1.0) {  // the paper scenario, bit for bit
+    k.q_n_b = Eigen::Quaterniond(inner).normalized();
+    return k;
+  }
+  // R = Rz_n(psi) inner R_tail: the rate about n's z seen in the body, the inner rate through the
+  // constant tail.
+  const SineSum psi = evaluate(m.about_normal, t);
+  const Eigen::Matrix3d tail = m.q_tail.toRotationMatrix();
+  const Eigen::Matrix3d r = axis_rotation(2, psi.value) * inner * tail;
+  k.q_n_b = Eigen::Quaterniond(r).normalized();
+  k.omega_b = tail.transpose() * k.omega_b + r.transpose() * Eigen::Vector3d(0, 0, psi.rate);
   return k;
 }
 
@@ -89,9 +101,133 @@ Scenario paper_scenario() {
   return s;
 }
 
-bool scenario_by_name(const std::string& name, Scenario& out) {
+namespace {
+
+// Uniform draws for the random family.
+class Draw {
+ public:
+  explicit Draw(std::uint64_t seed) : rng_(seed) {}
+  double uniform(double lo, double hi) {
+    return std::uniform_real_distribution<double>(lo, hi)(rng_);
+  }
+  double normal(double sigma) { return sigma * std::normal_distribution<double>()(rng_); }
+  bool chance(double p) { return uniform(0.0, 1.0) < p; }
+  double phase() { return uniform(0.0, 2.0 * M_PI); }
+  // A rotation uniform over SO(3): a unit quaternion from four normal draws.
+  Eigen::Quaterniond rotation() {
+    Eigen::Quaterniond q(normal(1.0), normal(1.0), normal(1.0), normal(1.0));
+    return q.normalized();
+  }
+
+ private:
+  std::mt19937_64 rng_;
+};
+
+// A sum of `terms` sines of total amplitude `amplitude` at frequencies in [f_lo, f_hi]; starting at
+// rest puts every term at a crest (zero rate at t = 0).
+std::vector<Sine> sweep(Draw& d, double amplitude, double f_lo, double f_hi, int terms,
+                        bool at_rest) {
+  std::vector<double> share(static_cast<std::size_t>(terms));
+  double total = 0.0;
+  for (double& w : share) total += (w = d.uniform(0.3, 1.0));
+  std::vector<Sine> out;
+  for (double w : share) {
+    const double phase = at_rest ? (d.chance(0.5) ? 0.5 : -0.5) * M_PI : d.phase();
+    out.push_back({amplitude * w / total, d.uniform(f_lo, f_hi), phase});
+  }
+  return out;
+}
+
+// Markers within 10 cm of the optical axis (at least 1.5 cm from it: the lens), 5 cm behind to
+// 1 cm in front of the optical centre, at least 3 cm apart.
+std::vector<Eigen::Vector3d> draw_markers(Draw& d, int count) {
+  std::vector<Eigen::Vector3d> markers;
+  while (static_cast<int>(markers.size()) < count) {
+    const double radius = std::sqrt(d.uniform(0.015 * 0.015, 0.10 * 0.10)), angle = d.phase();
+    const Eigen::Vector3d m(radius * std::cos(angle), radius * std::sin(angle),
+                            d.uniform(-0.05, 0.01));
+    bool apart = true;
+    for (const Eigen::Vector3d& other : markers) apart = apart && (m - other).norm() >= 0.03;
+    if (apart) markers.push_back(m);
+  }
+  return markers;
+}
+
+}  // namespace
+
+Scenario random_scenario(std::uint64_t seed) {
+  constexpr double deg = M_PI / 180.0;
+  Draw d(seed);
+  Scenario s;
+  s.name = "random";
+
+  Rig& r = s.truth;
+  r.q_b_c = d.rotation();
+  r.p_b_c = Eigen::Vector3d(d.uniform(-0.08, 0.08), d.uniform(-0.08, 0.08), d.uniform(-0.08, 0.08));
+  r.markers = draw_markers(d, 3);
+  r.width = 640;
+  r.height = 480;
+  const double fu = d.uniform(450.0, 900.0);
+  r.intrinsics = {fu, fu * (1.0 + d.uniform(-0.02, 0.02)), 319.5 + d.uniform(-15.0, 15.0),
+                  239.5 + d.uniform(-15.0, 15.0), 0.0};
+
+  // Both mirrors are the plane z = 0 of n with the rig above it looking down its normal; they
+  // differ in where gravity points.
+  s.mirror = d.chance(0.5) ? "wall" : "floor";
+  s.gravity_n =
+      s.mirror == "wall" ? Eigen::Vector3d(0.0, -9.81, 0.0) : Eigen::Vector3d(0.0, 0.0, -9.81);
+  const double distance = d.uniform(0.4, 0.8);
+
+  // The camera faces the mirror (optical axis along -z of n, image y along -y); its attitude moves
+  // by tilts about its own x and y axes and by rotation about the mirror normal. The body follows
+  // through R_b_c: R_n_b = R_n_c R_b_c^T.
+  Motion& m = s.motion;
+  Eigen::Matrix3d face;
+  face.col(0) = Eigen::Vector3d(1, 0, 0);
+  face.col(1) = Eigen::Vector3d(0, -1, 0);
+  face.col(2) = Eigen::Vector3d(0, 0, -1);
+  m.q0 = Eigen::Quaterniond(face);
+  m.q_tail = r.q_b_c.conjugate();
+  m.p0 = Eigen::Vector3d(0.0, 0.0, distance) - face * (m.q_tail * r.p_b_c);
+  const bool fast = d.chance(1.0 / 3.0), at_rest = d.chance(0.5);
+  s.motion_kind = fast ? "fast" : "slow";
+  for (int axis = 0; axis < 3; ++axis) {
+    m.position[static_cast<std::size_t>(axis)] =
+        fast ? sweep(d, 0.12, 0.15, 1.1, 2, at_rest) : sweep(d, 0.10, 0.05, 0.5, 2, at_rest);
+  }
+  for (int axis = 0; axis < 2; ++axis) {  // tilts
+    m.angles[static_cast<std::size_t>(axis)] = fast ? sweep(d, 16.0 * deg, 0.3, 2.0, 2, at_rest)
+                                                    : sweep(d, 12.0 * deg, 0.05, 0.5, 2, at_rest);
+  }
+  m.about_normal = fast ? sweep(d, 33.0 * deg, 0.25, 0.9, 2, at_rest)
+                        : sweep(d, 45.0 * deg, 0.05, 0.5, 2, at_rest);
+
+  s.camera_rate_hz = d.uniform(20.0, 60.0);
+  s.camera_offset_s = d.uniform(0.0, 1.0 / s.imu_rate_hz);
+  s.pixel_sigma = d.uniform(0.25, 1.0);
+  s.imu_noise_scale = d.uniform(1.0, 5.0);
+  s.imu.gyro_noise_density *= s.imu_noise_scale;
+  s.imu.gyro_random_walk *= s.imu_noise_scale;
+  s.imu.accel_noise_density *= s.imu_noise_scale;
+  s.imu.accel_random_walk *= s.imu_noise_scale;
+
+  Priors& p = s.priors;
+  p.marker = d.uniform(0.03, 0.10);
+  p.p_b_c = d.uniform(0.01, 0.03);
+  p.rot_b_c = d.uniform(2.0, 5.0) * deg;
+  p.position = 0.10;
+  p.attitude = 5.0 * deg;
+  p.velocity = 0.2;
+  return s;
+}
+
+bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out) {
   if (name == "paper") {
     out = paper_scenario();
+    return true;
+  }
+  if (name == "random") {
+    out = random_scenario(seed);
     return true;
   }
   return false;

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -79,6 +80,50 @@ TEST(Campaign, TenRunsOfStageTwoWithSkewHeldMeetTheBar) {
 // them): two runs, as rendering costs about 10 s of CPU per run.
 TEST(Campaign, TwoRunsFromRenderedFramesMeetTheBar) {
   expect_campaign_meets_bar("--frames", 15, 2);
+}
+
+}  // namespace
+
+namespace {
+
+// The random family (20 rigs, a rig of its own per run, both mirrors, the priors a user has): not
+// yet consistent (docs/campaign/random), so the bounds hold today's figures with room for sampling
+// noise and fail on a regression: the transform that dropped every marker a sigma point put
+// behind the mirror (markers at their prior, RMS 10s of mm), or the per-frame curvature shift of
+// the prediction (median NEES 21-36 over the same rigs).
+TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("mirrorcal-random-" + std::to_string(getpid()));
+  const std::string cmd = std::string(MIRRORCAL_BIN) +
+                          " montecarlo --scenario random --runs 20 --jobs 2 --seed 11 --no-plots"
+                          " --out " +
+                          dir.string() + " > " + (dir.string() + ".log") + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(dir / "summary.csv");
+  ASSERT_TRUE(in) << "no summary.csv";
+  std::string line;
+  std::getline(in, line);
+  ASSERT_EQ(line.rfind("axis,value,runs,nees_mean,nees_median,runs_beyond_4_sigma", 0), 0u);
+  std::getline(in, line);
+  std::stringstream ss(line);
+  std::vector<std::string> cell;
+  for (std::string c; std::getline(ss, c, ',');) cell.push_back(c);
+  ASSERT_GE(cell.size(), 13u);
+  ASSERT_EQ(cell[0], "all");
+  EXPECT_EQ(std::stoi(cell[2]), 20);
+  const double mean = std::stod(cell[3]), med = std::stod(cell[4]);
+  const int beyond = std::stoi(cell[5]);
+  const double rms_markers_mm = std::stod(cell[9]), rms_rot_deg = std::stod(cell[8]);
+  std::printf(
+      "random: NEES average %.1f, median %.1f, %d runs beyond 4 sigma, markers %.2f mm, "
+      "rotation %.4f deg RMS\n",
+      mean, med, beyond, rms_markers_mm, rms_rot_deg);
+  EXPECT_LT(med, 24.0);
+  EXPECT_LT(mean, 100.0);
+  EXPECT_LE(beyond, 6);
+  EXPECT_LT(rms_markers_mm, 5.0);
+  EXPECT_LT(rms_rot_deg, 0.1);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

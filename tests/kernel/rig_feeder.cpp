@@ -52,8 +52,8 @@ bool exists(const char* path) {
   return std::ifstream(path).good();
 }
 
-bool scenario_arg(const char* name, sim::Scenario& s) {
-  if (sim::scenario_by_name(name, s)) return true;
+bool scenario_arg(const char* name, std::uint64_t seed, sim::Scenario& s) {
+  if (sim::scenario_by_name(name, seed, s)) return true;
   std::printf("rig_feeder: unknown scenario '%s'\n", name);
   return false;
 }
@@ -247,9 +247,10 @@ int check(const sim::Scenario& s, const std::string& dir, double k) {
 int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
   sim::Scenario s;
-  if (mode == "play" && argc == 5 && scenario_arg(argv[2], s))
-    return play(s, std::strtoull(argv[3], nullptr, 10), std::atof(argv[4]));
-  if (mode == "check" && argc == 5 && scenario_arg(argv[2], s))
+  const std::uint64_t seed = argc > 3 ? std::strtoull(argv[3], nullptr, 10) : 0;
+  if (mode == "play" && argc == 5 && scenario_arg(argv[2], seed, s))
+    return play(s, seed, std::atof(argv[4]));
+  if (mode == "check" && argc == 5 && scenario_arg(argv[2], 0, s))
     return check(s, argv[3], std::atof(argv[4]));
   std::printf("usage: rig_feeder play SCENARIO SEED SECONDS | check SCENARIO DIR K\n");
   return 2;

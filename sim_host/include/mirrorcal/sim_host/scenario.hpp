@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -44,17 +45,25 @@ struct Sine {
 };
 
 // Smooth motion in front of the mirror: IMU position p0 + sum of sines per axis of n, attitude
-// R_n_b = R0 Rz(c(t)) Ry(b(t)) Rx(a(t)) with the angles a, b, c (about the body's axes) sums of
-// sines. Everything is analytic, so the IMU synthesised from it is exact.
+// R_n_b = Rz_n(psi(t)) R0 Rz(c(t)) Ry(b(t)) Rx(a(t)) R_tail with the angles a, b, c (about the
+// axes of the frame R_tail leads to: the body's in the paper scenario, the camera's in the random
+// family) and psi (about the mirror normal) sums of sines. Everything is analytic, so the IMU
+// synthesised from it is exact.
 struct Motion {
   Eigen::Vector3d p0 = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q0 = Eigen::Quaterniond::Identity();
   std::array<std::vector<Sine>, 3> position;  // x, y, z of n (m)
-  std::array<std::vector<Sine>, 3> angles;    // about body x, y, z (rad)
+  std::array<std::vector<Sine>, 3> angles;    // about the x, y, z axes of R0 R_abc (rad)
+  std::vector<Sine> about_normal;             // psi, about z of n (rad)
+  Eigen::Quaterniond q_tail = Eigen::Quaterniond::Identity();  // R_tail, constant
 };
 
 struct Scenario {
   std::string name;
+  // What the random family drew, for campaigns that group runs by it.
+  std::string mirror = "wall";        // "wall": gravity along the mirror; "floor": along its normal
+  std::string motion_kind = "paper";  // "slow" hand-held sweeps or "fast" (the paper's pace)
+  double imu_noise_scale = 1.0;       // the IMU noise densities against the ADIS16448's
   Eigen::Vector3d gravity_n{0.0, -9.81, 0.0};
   ImuNoise imu{};  // the true noise; the filter is told the same
   double imu_rate_hz = 200.0;
@@ -75,8 +84,13 @@ struct Scenario {
 // a wall mirror with y up, ADIS16448 noise (EuRoC imu0), 1 px, 200 Hz IMU, 20 Hz camera, 60 s.
 Scenario paper_scenario();
 
-// Scenario by name ("paper"); false if unknown.
-bool scenario_by_name(const std::string& name, Scenario& out);
+// A rig a user could build, in front of a wall or floor mirror, moved by hand or at the paper's
+// pace, with the priors such a user has: every draw of the family the README's "The `random`
+// family" describes. Deterministic in seed.
+Scenario random_scenario(std::uint64_t seed);
+
+// Scenario by name: "paper" (seed ignored) or "random" (drawn from seed); false if unknown.
+bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out);
 
 // The true IMU state at time t, with its derivatives, from the analytic motion.
 struct Kinematics {

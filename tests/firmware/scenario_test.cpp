@@ -1,0 +1,111 @@
+// The random scenario family: every draw is a rig the README's "The `random` family" describes,
+// its motion's body rate is the derivative of its attitude, and the camera sees the markers.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <string>
+
+#include "mirrorcal/estimator/so3.hpp"
+#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
+
+namespace mirrorcal::sim {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+TEST(RandomFamily, EveryDrawIsARigTheDocsDescribe) {
+  std::set<std::string> mirrors, motions;
+  for (std::uint64_t seed = 0; seed < 300; ++seed) {
+    const Scenario s = random_scenario(seed);
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    const Rig& r = s.truth;
+    EXPECT_NEAR(r.q_b_c.norm(), 1.0, 1e-12);
+    EXPECT_LE(r.p_b_c.cwiseAbs().maxCoeff(), 0.08);
+    ASSERT_EQ(r.markers.size(), 3u);
+    for (std::size_t i = 0; i < 3; ++i) {
+      const Eigen::Vector3d& m = r.markers[i];
+      EXPECT_LE(m.head<2>().norm(), 0.10);
+      EXPECT_GE(m.head<2>().norm(), 0.015);
+      EXPECT_GE(m.z(), -0.05);
+      EXPECT_LE(m.z(), 0.01);
+      for (std::size_t j = 0; j < i; ++j) EXPECT_GE((m - r.markers[j]).norm(), 0.03);
+    }
+    EXPECT_GE(r.intrinsics.fu, 450.0);
+    EXPECT_LE(r.intrinsics.fu, 900.0);
+    EXPECT_LE(std::abs(r.intrinsics.fv / r.intrinsics.fu - 1.0), 0.02);
+    EXPECT_LE(std::abs(r.intrinsics.cu - 319.5), 15.0);
+    EXPECT_LE(std::abs(r.intrinsics.cv - 239.5), 15.0);
+    EXPECT_EQ(r.intrinsics.skew, 0.0);
+    // Gravity along the mirror (wall) or along its normal (floor).
+    ASSERT_TRUE(s.mirror == "wall" || s.mirror == "floor") << s.mirror;
+    EXPECT_EQ(s.mirror == "wall" ? s.gravity_n.z() : s.gravity_n.head<2>().norm(), 0.0);
+    EXPECT_NEAR(s.gravity_n.norm(), 9.81, 1e-12);
+    mirrors.insert(s.mirror);
+    motions.insert(s.motion_kind);
+    // The camera 0.4-0.8 m in front of the mirror (the sweeps add up to 12 cm) and facing it.
+    const Kinematics k = kinematics(s.motion, 0.0);
+    const Eigen::Vector3d p_n_c = k.p + k.q_n_b * r.p_b_c;
+    EXPECT_GT(p_n_c.z(), 0.4 - 0.13);
+    EXPECT_LT(p_n_c.z(), 0.8 + 0.13);
+    const Eigen::Vector3d axis = (k.q_n_b * r.q_b_c) * Eigen::Vector3d::UnitZ();
+    EXPECT_LT(axis.z(), -std::cos(60.0 * kDeg));
+    EXPECT_GE(s.camera_rate_hz, 20.0);
+    EXPECT_LE(s.camera_rate_hz, 60.0);
+    EXPECT_GE(s.pixel_sigma, 0.25);
+    EXPECT_LE(s.pixel_sigma, 1.0);
+    EXPECT_GE(s.imu_noise_scale, 1.0);
+    EXPECT_LE(s.imu_noise_scale, 5.0);
+    EXPECT_GE(s.priors.marker, 0.03);
+    EXPECT_LE(s.priors.marker, 0.10);
+    EXPECT_GE(s.priors.p_b_c, 0.01);
+    EXPECT_LE(s.priors.p_b_c, 0.03);
+    EXPECT_GE(s.priors.rot_b_c, 2.0 * kDeg);
+    EXPECT_LE(s.priors.rot_b_c, 5.0 * kDeg);
+    EXPECT_EQ(s.priors.position, 0.10);
+    EXPECT_EQ(s.priors.attitude, 5.0 * kDeg);
+    EXPECT_EQ(s.priors.velocity, 0.2);
+  }
+  EXPECT_EQ(mirrors, (std::set<std::string>{"wall", "floor"}));
+  EXPECT_EQ(motions, (std::set<std::string>{"slow", "fast"}));
+}
+
+TEST(RandomFamily, SameSeedSameRigOtherSeedOtherRig) {
+  const Scenario a = random_scenario(7), b = random_scenario(7), c = random_scenario(8);
+  EXPECT_EQ(a.truth.p_b_c, b.truth.p_b_c);
+  EXPECT_EQ(a.truth.markers, b.truth.markers);
+  EXPECT_NE(a.truth.p_b_c, c.truth.p_b_c);
+}
+
+// The IMU the simulator synthesises is exact only if omega_b is the attitude's derivative:
+// checked against a central difference of the attitude, with the rotation about the mirror normal
+// and the constant tail of the random family's motion.
+TEST(RandomFamily, BodyRateIsTheDerivativeOfTheAttitude) {
+  for (std::uint64_t seed = 0; seed < 20; ++seed) {
+    const Scenario s = random_scenario(seed);
+    for (double t : {0.0, 3.7, 21.2, 44.9}) {
+      const double h = 1e-5;
+      const Eigen::Quaterniond q0 = kinematics(s.motion, t - h).q_n_b,
+                               q1 = kinematics(s.motion, t + h).q_n_b;
+      const Eigen::Vector3d rate = so3::boxminus<double>(q1, q0) / (2.0 * h);
+      EXPECT_LT((rate - kinematics(s.motion, t).omega_b).norm(), 1e-6)
+          << "seed " << seed << " t " << t;
+    }
+  }
+}
+
+// The camera sees most reflections over the minute (the tilts take some out of the image).
+TEST(RandomFamily, MostReflectionsAreInTheImage) {
+  for (std::uint64_t seed = 0; seed < 10; ++seed) {
+    const Scenario s = random_scenario(seed);
+    const SimData d = simulate(s, seed);
+    std::size_t seen = 0;
+    for (const ObservedFrame& f : d.frames) seen += f.markers.size();
+    const double share = double(seen) / double(seen + d.markers_out_of_image);
+    EXPECT_GT(share, 0.5) << "seed " << seed;
+  }
+}
+
+}  // namespace
+}  // namespace mirrorcal::sim
