@@ -158,7 +158,8 @@ class SigmaPointFilter {
 
   void reset(const State& mean, const Covariance& cov) {
     mean_ = mean;
-    cov_ = Scalar(0.5) * (cov + cov.transpose());
+    if (&cov != &cov_) cov_ = cov;  // reset(x, covariance()) keeps the covariance
+    symmetrise(cov_);
   }
   const State& mean() const { return mean_; }
   const Covariance& covariance() const { return cov_; }
@@ -364,6 +365,13 @@ class SigmaPointFilter {
   }
 
  private:
+  // m <- (m + m^T) / 2 in place, exactly symmetric. (m = 0.5 * (m + m.transpose()) reads entries
+  // it has already overwritten, and leaves m asymmetric in the last bits.)
+  static void symmetrise(Covariance& m) {
+    for (int j = 0; j < N; ++j)
+      for (int i = j + 1; i < N; ++i) m(i, j) = m(j, i) = Scalar(0.5) * (m(i, j) + m(j, i));
+  }
+
   // dst += lhs * rhs by Eigen's product (from dst = 0, bit for bit what dst = lhs * rhs gives),
   // out of line: the packing buffers of a blocked product, 2 L^2 scalars, then take stack space
   // during the call only, instead of once for each product in the caller's frame.
@@ -543,7 +551,7 @@ class SigmaPointFilter {
     const ErrorVector dx = gain * innovation;
     Covariance& cov_new = ws.cov_new;
     cov_new.noalias() = cov_ - gain * ws.p_xz.transpose();  // cov_ copied, then the product
-    cov_new = Scalar(0.5) * (cov_new + cov_new.transpose());
+    symmetrise(cov_new);
     if (!dx.allFinite() || !cov_new.allFinite() || !(cov_new.diagonal().array() > Scalar(0)).all())
       return FilterStatus::kNonFinite;
     mean_.template boxplus_block<0, N>(dx);
