@@ -55,6 +55,15 @@ class CalibrationFilter {
                S(config.intrinsics.cv), S(config.intrinsics.skew)} {}
 
   void reset(const State& x, const Covariance& p) { filter_.reset(x, p); }
+  // Linearise along a given trajectory instead of along the estimate: after the k-th update the
+  // mean is set to states[k], the covariance kept (nullptr: along the estimate). The covariance so
+  // computed is what the data hold about the states along that trajectory, whatever estimates the
+  // filter passed through on its way (the self-check's reference, sim_run.hpp).
+  void follow(const State* states, std::size_t count) {
+    follow_ = states;
+    follow_count_ = count;
+    follow_next_ = 0;
+  }
 
   // Defined below the class: member functions defined in it would be inline, and an extern
   // template declaration does not stop inline functions from being instantiated in every unit
@@ -86,6 +95,8 @@ class CalibrationFilter {
   Vec3<S> gravity_;
   Pinhole<S> fixed_;
   FilterCounters counters_{};
+  const State* follow_ = nullptr;
+  std::size_t follow_count_ = 0, follow_next_ = 0;
 };
 
 // Only the IMU block [0, 15) moves: the 6 + 3M (+ NK) calibration states are constants. The mean
@@ -151,6 +162,8 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);
   }
   ++counters_.updates;
+  if (follow_ != nullptr && follow_next_ < follow_count_)
+    filter_.reset(follow_[follow_next_++], filter_.covariance());
   counters_.markers_used += static_cast<std::uint64_t>(res.used);
   counters_.markers_gated += static_cast<std::uint64_t>(res.gated);
   counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);
