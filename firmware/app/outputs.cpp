@@ -88,12 +88,26 @@ bool suspect(const CalibrationResult& r) {
   return gated_too_many(r) || innovations_too_large(r);
 }
 
+bool path_gained_false_information(const CalibrationResult& r) {
+  return r.sigma_ratio < kSigmaRatioLimit;
+}
+
 std::string convergence_warning(const CalibrationResult& r) {
   const double seen = double(r.markers_used + r.markers_gated);
   if (seen == 0.0) return "no marker was used: nothing was calibrated beyond the priors";
   char text[480];
+  if (!gated_too_many(r) && !innovations_too_large(r)) {
+    if (!path_gained_false_information(r)) return {};
+    std::snprintf(text, sizeof text,
+                  "the filter's own sigmas came down to %.2f of what the data hold along its "
+                  "final estimate: its way there, from guesses far off, gathered information the "
+                  "data do not hold, and the estimate is likely off by more than the sigmas "
+                  "reported. Move the rig more (tilts and moves toward the mirror), start from "
+                  "better guesses, and check the recording.",
+                  r.sigma_ratio);
+    return text;
+  }
   if (!gated_too_many(r)) {
-    if (!innovations_too_large(r)) return {};
     std::snprintf(text, sizeof text,
                   "the markers fit %.2f times worse than the filter's covariance says (normalised "
                   "innovation squared per degree of freedom over the last pass, of %d; about 1 "
@@ -141,11 +155,12 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
                static_cast<unsigned long long>(r.markers_gated));
   std::fprintf(o,
                "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
-               "pass_change: %.6g  # the last pass's move from the one before, squared sigmas\n",
-               r.nis_per_dof, r.pass_change);
+               "pass_change: %.6g  # the last pass's move from the one before, squared sigmas\n"
+               "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n",
+               r.nis_per_dof, r.pass_change, r.sigma_ratio);
   std::fprintf(o,
-               "consistent: %s  # false: more than 0.5 %% of the markers gated, or nis_per_dof "
-               "well above 1: do not trust it\n",
+               "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
+               "above 1 or sigma_ratio below 0.8: do not trust it\n",
                convergence_warning(r).empty() ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)

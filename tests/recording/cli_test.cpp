@@ -293,6 +293,29 @@ TEST(Cli, ASecondPassThatFitsBadlyIsFollowedByAnother) {
   EXPECT_LT(n.nees, n.high) << r.output;
 }
 
+// A run whose filter gathered information the data do not hold is flagged without the truth: run
+// 35 of `montecarlo --scenario random --seed 1` (a floor mirror, slow sweeps, 0.28 px) ends 18
+// sigma off with its own sigmas at 0.46 of those linearised along its final estimate; a good run
+// of the paper scenario sits near 1 and is not flagged.
+TEST(Cli, ARunThatGainedFalseInformationIsFlagged) {
+  TempDir dir("cli-false-information");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal(
+      "sim --scenario random --seed 5985716714775584979 --no-plots --out " + d + "/bad", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("WARNING: the filter's own sigmas came down"), std::string::npos)
+      << r.output;
+  const YAML::Node bad = YAML::LoadFile(d + "/bad/mirrorcal-result.yaml");
+  EXPECT_FALSE(bad["consistent"].as<bool>());
+  EXPECT_LT(bad["sigma_ratio"].as<double>(), 0.8);
+  r = run_mirrorcal("sim --seed 3 --no-plots --out " + d + "/good", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const YAML::Node good = YAML::LoadFile(d + "/good/mirrorcal-result.yaml");
+  EXPECT_TRUE(good["consistent"].as<bool>());
+  EXPECT_GT(good["sigma_ratio"].as<double>(), 0.9);
+  EXPECT_LE(good["sigma_ratio"].as<double>(), 1.1);
+}
+
 TEST(Cli, CalibrateOnAMissingRecordingNamesTheFileAndFails) {
   TempDir dir("cli-missing");
   const Result r =
