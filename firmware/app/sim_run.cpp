@@ -300,6 +300,32 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   return run;
 }
 
+std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed) {
+  using Run = SimRun<0>;
+  const sim::SimData noisy = sim::simulate(s, seed);
+  Run::State x0;
+  Run::Filter::Covariance p0;
+  initialise(simulation_prior(s, noisy, seed), x0, p0);
+  sim::Scenario clean = s;  // the same rig, motion and true biases; no noise, no bias walk
+  clean.pixel_sigma = 0.0;
+  clean.imu.gyro_noise_density = clean.imu.accel_noise_density = 0.0;
+  clean.imu.gyro_random_walk = clean.imu.accel_random_walk = 0.0;
+  const sim::SimData data = sim::simulate(clean, seed);
+  Run::State start = truth_state<Run::State>(s);
+  const sim::Kinematics k = sim::kinematics(s.motion, 0.0);
+  start.p = k.p;
+  start.v = k.v;
+  start.q_n_b = k.q_n_b;
+  start.b_a = data.b_a0;
+  start.b_g = data.b_g0;
+  const Run run =
+      run_pass<0>(scenario_config(s), start, p0, loop_data(s, data), nullptr, {}, LoopHooks{});
+  std::vector<double> sigma;
+  for (int i = Run::State::kPbc; i < Run::State::kDim; ++i)
+    sigma.push_back(std::sqrt(run.covariance(i, i)));
+  return sigma;
+}
+
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   sim::CalibrationStart s;
   s.p_b_c = earlier.p_b_c;

@@ -170,6 +170,13 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const FrameMode& frames = {}, firmware::LoopProfiler* profiler = nullptr,
                          Passes passes = {});
 
+// What the data of a simulated run can hold: the 1-sigma of each calibration state (SI, in
+// calibration_params() order) that a filter linearised at the truth ends with, on the same rig,
+// motion and sensors with noise-free data, started at the truth from the prior's covariance (one
+// pass; the curvature the transform sees over the prior still widens its first frames a little).
+// The campaigns judge errors against it: a run's estimate can be no better than this.
+std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed);
+
 // The paper's section III and Table III: stage 1 as run_simulation (the camera's intrinsics known),
 // then stage 2 on a second minute of data (the rig moved again, new noise) with the intrinsics
 // estimated too: the calibration parameters start from stage 1's estimate and covariance, the
