@@ -65,7 +65,7 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   if (truth != nullptr) run.truth = *truth;
   Filter filter(config);
   filter.reset(x0, p0);
-  if (along != nullptr) filter.follow(along->data(), along->size());
+  if (along != nullptr) filter.linearise_along(along->data(), along->size());
 
   sim::VectorImuSource imu(data.imu);
   sim::VectorMarkerSource<kMarkers> listed(data.frames);
@@ -158,21 +158,6 @@ bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
   return true;
 }
 
-// Reports `covariance` as the run's: the result's sigmas and covariance, and the last history
-// row's sigmas and NEES (with truth).
-template <int NK>
-void report_covariance(const typename SimRun<NK>::Filter::Covariance& covariance, SimRun<NK>& run) {
-  using State = typename SimRun<NK>::State;
-  constexpr int B = State::kPbc, L = State::kDim - B;
-  run.covariance = covariance;
-  const Eigen::Matrix<double, L, L> p = covariance.template block<L, L>(B, B);
-  run.result.covariance = p;
-  for (int i = 0; i < L; ++i) run.result.sigma[static_cast<std::size_t>(i)] = std::sqrt(p(i, i));
-  auto& last = run.history.back();
-  last.sigma = p.diagonal().cwiseSqrt();
-  last.nees = last.error.dot(p.ldlt().solve(last.error));  // 0 without truth: no error
-}
-
 }  // namespace
 
 template <int NK>
@@ -226,33 +211,51 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
     // calibration towards that guess again.
     imu_start_from<NK>(config, run, p0, data, start);
   }
-  // The covariance reported is the one linearised along the final estimate's trajectory: a pass
-  // from the final estimate with the calibration held near it by its own covariance gives the
-  // trajectory, and a pass from the prior that follows it (CalibrationFilter::follow) the
-  // covariance, as a batch solution's is the inverse of the information at its estimate. The
-  // filter's own was linearised along the estimates it passed through, and where those were far
-  // off it holds information the data do not (random family: sigmas down to a third of this
-  // one's). How much smaller it was is the self-check's sigma_ratio (outputs.hpp).
+  // Gauss-Newton over the whole recording, the filter its linear solver: a pass from the estimate
+  // with the calibration held near it by its own covariance gives a trajectory, and a pass from
+  // the prior with every measurement linearised along that trajectory
+  // (CalibrationFilter::linearise_along) is the Kalman filter of the linearised problem, whose
+  // final estimate of the constant calibration is that problem's batch solution and whose
+  // covariance is the inverse of the information along the trajectory. The free passes above
+  // linearised along the estimates they passed through, and where those were far off, their
+  // covariance holds information the data do not (random family: sigmas down to a third of the
+  // linearised one's) and their estimate lies further from the truth than the data allow. How
+  // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
   if (!run.history.empty()) {
     constexpr int B = State::kPbc, L = State::kDim - B;
-    State from = run.history.back().state;
-    from.p = start.p;
-    from.v = start.v;
-    from.q_n_b = start.q_n_b;
-    typename SimRun<NK>::Filter::Covariance tight = p0;
-    tight.template block<L, State::kDim>(B, 0).setZero();
-    tight.template block<State::kDim, L>(0, B).setZero();
-    tight.template block<L, L>(B, B) = run.covariance.template block<L, L>(B, B);
-    const SimRun<NK> track = run_pass<NK>(config, from, tight, data, nullptr, {}, LoopHooks{});
-    std::vector<State> trajectory;
-    for (const auto& row : track.history) trajectory.push_back(row.state);
-    const SimRun<NK> ref =
-        run_pass<NK>(config, from, p0, data, nullptr, {}, LoopHooks{}, &trajectory);
+    const typename SimRun<NK>::Filter::Covariance own = run.covariance;
+    const int free_passes = run.result.passes;
+    for (int it = 0; it < kRefinements; ++it) {
+      State from = run.history.back().state;
+      from.p = start.p;
+      from.v = start.v;
+      from.q_n_b = start.q_n_b;
+      typename SimRun<NK>::Filter::Covariance tight = p0;
+      tight.template block<L, State::kDim>(B, 0).setZero();
+      tight.template block<State::kDim, L>(0, B).setZero();
+      tight.template block<L, L>(B, B) = run.covariance.template block<L, L>(B, B);
+      const SimRun<NK> track = run_pass<NK>(config, from, tight, data, nullptr, {}, LoopHooks{});
+      std::vector<State> trajectory;
+      for (const auto& row : track.history) trajectory.push_back(row.state);
+      // From the prior's guesses of the calibration (the data count once), and the IMU start the
+      // trajectory has.
+      State prior = x0;
+      prior.p = from.p;
+      prior.v = from.v;
+      prior.q_n_b = from.q_n_b;
+      SimRun<NK> refined =
+          run_pass<NK>(config, prior, p0, data, truth, {}, LoopHooks{}, &trajectory);
+      if (refined.history.empty() || refined.filter_counters.failures > 0) break;
+      refined.first_frame = run.first_frame;
+      refined.result.passes = free_passes;
+      refined.result.pass_change = run.result.pass_change;
+      run = std::move(refined);
+      imu_start_from<NK>(config, run, p0, data, start);
+    }
     double lowest = INFINITY;
     for (int i = B; i < State::kDim; ++i)
-      lowest = std::min(lowest, std::sqrt(run.covariance(i, i) / ref.covariance(i, i)));
+      lowest = std::min(lowest, std::sqrt(own(i, i) / run.covariance(i, i)));
     run.result.sigma_ratio = lowest;
-    report_covariance<NK>(ref.covariance, run);
   }
   return run;
 }

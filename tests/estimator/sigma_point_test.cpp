@@ -482,6 +482,24 @@ TEST(SigmaPointUpdate, ProgressiveStepsFollowAStronglyNonlinearMeasurement) {
   EXPECT_LT(progressive, 0.1);
 }
 
+// For a linear model the line through any point is the model itself: an update linearised at a
+// reference far from the mean is the Kalman update.
+TEST(SigmaPointUpdate, LinearisedAtAnyReferenceIsTheKalmanUpdateForALinearModel) {
+  Pair p = make_filter_pair(700);
+  std::mt19937_64 rng(701);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const VecZ z = VecZ::NullaryExpr([&] { return n(rng); });
+  State ref = p.ukf.mean();
+  for (int i = 0; i < N; ++i) ref.x(i) += 3.0 * n(rng);
+  const UpdateResult res = p.ukf.update<kMeasB, kMeasL, 2, 3>(
+      measure(p.sys), z, Active{true, true, true}, p.sys.r, 1e12, &ref);
+  EXPECT_EQ(res.status, FilterStatus::kOk);
+  EXPECT_EQ(res.used, 3);
+  p.kf.update(p.sys, z, Active{true, true, true});
+  expect_same(p.ukf, p.kf);
+  EXPECT_NEAR(res.nis, p.kf.nis, 1e-9 * (1.0 + p.kf.nis));
+}
+
 TEST(SigmaPointUpdate, NoActiveBlockIsNoMeasurement) {
   Pair p = make_filter_pair(500);
   const State before = p.ukf.mean();

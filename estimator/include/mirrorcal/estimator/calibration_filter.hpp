@@ -55,14 +55,15 @@ class CalibrationFilter {
                S(config.intrinsics.cv), S(config.intrinsics.skew)} {}
 
   void reset(const State& x, const Covariance& p) { filter_.reset(x, p); }
-  // Linearise along a given trajectory instead of along the estimate: after the k-th update the
-  // mean is set to states[k], the covariance kept (nullptr: along the estimate). The covariance so
-  // computed is what the data hold about the states along that trajectory, whatever estimates the
-  // filter passed through on its way (the self-check's reference, sim_run.hpp).
-  void follow(const State* states, std::size_t count) {
-    follow_ = states;
-    follow_count_ = count;
-    follow_next_ = 0;
+  // Linearise the k-th update's measurement at states[k] instead of at the estimate (nullptr: at
+  // the estimate): the filter becomes the Kalman filter of the measurements linearised along that
+  // trajectory, whose final estimate of the constant calibration is the batch solution of the
+  // linearised problem and whose covariance is what the data hold along the trajectory, whatever
+  // estimates it passed through (a Gauss-Newton step over the whole recording; sim_run.hpp).
+  void linearise_along(const State* states, std::size_t count) {
+    along_ = states;
+    along_count_ = count;
+    along_next_ = 0;
   }
 
   // Defined below the class: member functions defined in it would be inline, and an extern
@@ -95,8 +96,8 @@ class CalibrationFilter {
   Vec3<S> gravity_;
   Pinhole<S> fixed_;
   FilterCounters counters_{};
-  const State* follow_ = nullptr;
-  std::size_t follow_count_ = 0, follow_next_ = 0;
+  const State* along_ = nullptr;
+  std::size_t along_count_ = 0, along_next_ = 0;
 };
 
 // Only the IMU block [0, 15) moves: the 6 + 3M (+ NK) calibration states are constants. The mean
@@ -156,14 +157,14 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
           [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
             predict_markers(x, fixed, zp, ok);
           },
-          z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY));
+          z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY),
+          along_ != nullptr && along_next_ < along_count_ ? &along_[along_next_] : nullptr);
+  if (along_ != nullptr) ++along_next_;
   if (gate_on && res.status == FilterStatus::kOk) {
     counters_.nis_sum += res.nis;
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);
   }
   ++counters_.updates;
-  if (follow_ != nullptr && follow_next_ < follow_count_)
-    filter_.reset(follow_[follow_next_++], filter_.covariance());
   counters_.markers_used += static_cast<std::uint64_t>(res.used);
   counters_.markers_gated += static_cast<std::uint64_t>(res.gated);
   counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);

@@ -259,7 +259,8 @@ class SigmaPointFilter {
   template <int B, int L, int kRows, int kBlocks, class Measure>
   UpdateResult update(Measure&& h, const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& z,
                       const std::array<bool, kBlocks>& active,
-                      const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& r_diag, Scalar gate) {
+                      const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& r_diag, Scalar gate,
+                      const State* linearise_at = nullptr) {
     static_assert(B >= 0 && L > 0 && B + L <= N, "block out of range");
     constexpr int Z = kRows * kBlocks;
     using ZVec = Eigen::Matrix<Scalar, Z, 1>;
@@ -273,25 +274,37 @@ class SigmaPointFilter {
 
     UpdateWorkspace<L, Z>& ws = thread_workspace<UpdateWorkspace<L, Z>>();
     MeasurementSample<L, Z>& ms = ws.ms;
+    // Linearised at a reference (a trajectory the caller follows): the points are drawn around it
+    // with this filter's spread, and the measurement is the regression's line through it.
+    const State own = mean_;
+    if (linearise_at != nullptr) mean_ = *linearise_at;
+    bool sampled = false;
     for (int shrink = 0;; ++shrink) {
       ok = active;
       std::array<bool, kBlocks> centre_ok;
       ws.w = SigmaWeights<Scalar, L>::make(params_.unscented, std::ldexp(1.0, -shrink));
-      if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ws, &centre_ok)) {
-        result.status = FilterStatus::kCovarianceNotPositiveDefinite;
-        return result;
-      }
-      if (ok == centre_ok || shrink >= params_.max_shrinks) break;
+      sampled = sample_measurement<B, L, kRows, kBlocks>(h, ok, ws, &centre_ok);
+      if (!sampled || ok == centre_ok || shrink >= params_.max_shrinks) break;
     }
-    for (int b = 0; b < kBlocks; ++b)
-      if (active[b] && !ok[b]) ++result.invalid;
-    if (spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag) > Scalar(params_.cross_terms_above)) {
+    if (sampled &&
+        spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag) > Scalar(params_.cross_terms_above)) {
       add_cross_terms<B, L, kRows, kBlocks>(h, ok, ws);
       result.cross_terms = true;
     }
+    mean_ = own;
+    if (!sampled) {
+      result.status = FilterStatus::kCovarianceNotPositiveDefinite;
+      return result;
+    }
+    for (int b = 0; b < kBlocks; ++b)
+      if (active[b] && !ok[b]) ++result.invalid;
 
     // Gate each block on its own marginal innovation covariance.
     ZVec innovation = z - ms.z_centre;
+    if (linearise_at != nullptr) {  // z ~ h(ref) + A (x - ref), A = (P_bb^-1 P_bz)^T
+      ws.g.noalias() = ms.llt_p.solve(ms.p_bz);
+      innovation.noalias() -= ws.g.transpose() * own.template boxminus_block<B, L>(*linearise_at);
+    }
     ZMat& s = ws.s;
     s = ms.p_zz;
     s.diagonal() += r_diag;
@@ -346,7 +359,9 @@ class SigmaPointFilter {
       }
       const Scalar ratio = spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag);
       const Scalar most = Scalar(params_.spread_per_step) / ratio;  // inf for a zero spread
-      const Scalar beta = k + 1 >= params_.max_steps || !(most < remaining) ? remaining : most;
+      const bool last =
+          k + 1 >= params_.max_steps || !(most < remaining) || linearise_at != nullptr;
+      const Scalar beta = last ? remaining : most;
       remaining -= beta;
       s = ms.p_zz;
       s.diagonal() += r_diag / beta;
