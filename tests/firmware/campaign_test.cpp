@@ -87,11 +87,12 @@ TEST(Campaign, TwoRunsFromRenderedFramesMeetTheBar) {
 namespace {
 
 // The random family (20 rigs, a rig of its own per run, both mirrors, the priors a user has): not
-// yet consistent (docs/campaign/random), so the bounds hold today's figures (average NEES 24.3,
-// median 18.6, 3 runs beyond 4 sigma, 2 of them not flagged) with room for sampling noise and fail
-// on a regression: the transform that dropped every marker a sigma point put behind the mirror
-// (markers at their prior, RMS 10s of mm), the per-frame curvature shift of the prediction (median
-// NEES 21-36 over the same rigs), or the filter's own covariance reported (average 33).
+// yet consistent (docs/campaign/random), so the bounds hold today's figures (average NEES 23.7,
+// median 18.6, 2 runs beyond 4 sigma, both flagged) with room for sampling noise and fail on a
+// regression: the transform that dropped every marker a sigma point put behind the mirror (markers
+// at their prior, RMS 10s of mm), the per-frame curvature shift of the prediction (median NEES
+// 21-36 over the same rigs), or the free passes' own estimate and covariance reported (average 33,
+// 2 of 3 runs beyond 4 sigma not flagged).
 TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("mirrorcal-random-" + std::to_string(getpid()));
@@ -123,7 +124,7 @@ TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
   EXPECT_LT(med, 24.0);
   EXPECT_LT(mean, 50.0);
   EXPECT_LE(beyond, 6);
-  EXPECT_LE(missed, 4);
+  EXPECT_LE(missed, 2);
   EXPECT_LT(rms_markers_mm, 5.0);
   EXPECT_LT(rms_rot_deg, 0.1);
   std::filesystem::remove_all(dir);
