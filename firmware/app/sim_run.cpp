@@ -124,6 +124,20 @@ LoopData first_stretch(const LoopData& data) {
   return out;
 }
 
+// The prior's covariance with the calibration block replaced by a pass's (and no correlation
+// between the two blocks): a pass from it holds the calibration near that pass's estimate.
+template <int NK>
+typename SimRun<NK>::Filter::Covariance calibration_held(
+    const typename SimRun<NK>::Filter::Covariance& p0, const SimRun<NK>& pass) {
+  using State = typename SimRun<NK>::State;
+  constexpr int B = State::kPbc, L = State::kDim - B;
+  typename SimRun<NK>::Filter::Covariance p = p0;
+  p.template block<L, State::kDim>(B, 0).setZero();
+  p.template block<State::kDim, L>(0, B).setZero();
+  p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
+  return p;
+}
+
 // Where the next pass starts the IMU: the first stretch of the data calibrated from this pass's
 // calibration (estimate and covariance) and the prior's IMU guess, which pins the rig's distance
 // from the mirror, its tilt and their rates within a fraction of a second, then integrated back to
@@ -133,7 +147,6 @@ bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     typename SimRun<NK>::State& x) {
   using State = typename SimRun<NK>::State;
-  constexpr int B = State::kPbc, L = State::kDim - B;
   const LoopData stretch = first_stretch(data);
   if (stretch.imu.size() < 2) return false;
   State start = pass.history.back().state;
@@ -142,11 +155,8 @@ bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
   start.q_n_b = x.q_n_b;
   start.b_a = x.b_a;
   start.b_g = x.b_g;
-  typename SimRun<NK>::Filter::Covariance p = p0;
-  p.template block<L, State::kDim>(B, 0).setZero();
-  p.template block<State::kDim, L>(0, B).setZero();
-  p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
-  const SimRun<NK> fit = run_pass<NK>(config, start, p, stretch, nullptr, {}, LoopHooks{});
+  const SimRun<NK> fit = run_pass<NK>(config, start, calibration_held<NK>(p0, pass), stretch,
+                                      nullptr, {}, LoopHooks{});
   if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
   State back = fit.history.back().state;
   for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
@@ -222,7 +232,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   // linearised one's) and their estimate lies further from the truth than the data allow. How
   // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
   if (!run.history.empty()) {
-    constexpr int B = State::kPbc, L = State::kDim - B;
+    constexpr int B = State::kPbc;
     const typename SimRun<NK>::Filter::Covariance own = run.covariance;
     const int free_passes = run.result.passes;
     for (int it = 0; it < kRefinements; ++it) {
@@ -230,11 +240,8 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       from.p = start.p;
       from.v = start.v;
       from.q_n_b = start.q_n_b;
-      typename SimRun<NK>::Filter::Covariance tight = p0;
-      tight.template block<L, State::kDim>(B, 0).setZero();
-      tight.template block<State::kDim, L>(0, B).setZero();
-      tight.template block<L, L>(B, B) = run.covariance.template block<L, L>(B, B);
-      const SimRun<NK> track = run_pass<NK>(config, from, tight, data, nullptr, {}, LoopHooks{});
+      const SimRun<NK> track =
+          run_pass<NK>(config, from, calibration_held<NK>(p0, run), data, nullptr, {}, LoopHooks{});
       std::vector<State> trajectory;
       for (const auto& row : track.history) trajectory.push_back(row.state);
       // From the prior's guesses of the calibration (the data count once), and the IMU start the
