@@ -235,13 +235,17 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
     constexpr int B = State::kPbc;
     const typename SimRun<NK>::Filter::Covariance own = run.covariance;
     const int free_passes = run.result.passes;
+    // Their markers come from where the passes' did (rendered frames through detection with
+    // sim --frames): hooks numbered on from the passes'.
+    int hook = free_passes;
+    const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks{}; };
     for (int it = 0; it < kRefinements; ++it) {
       State from = run.history.back().state;
       from.p = start.p;
       from.v = start.v;
       from.q_n_b = start.q_n_b;
-      const SimRun<NK> track =
-          run_pass<NK>(config, from, calibration_held<NK>(p0, run), data, nullptr, {}, LoopHooks{});
+      const SimRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run), data,
+                                            nullptr, {}, next_hooks());
       std::vector<State> trajectory;
       for (const auto& row : track.history) trajectory.push_back(row.state);
       // From the prior's guesses of the calibration (the data count once), and the IMU start the
@@ -251,7 +255,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       prior.v = from.v;
       prior.q_n_b = from.q_n_b;
       SimRun<NK> refined =
-          run_pass<NK>(config, prior, p0, data, truth, {}, LoopHooks{}, &trajectory);
+          run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
       if (refined.history.empty() || refined.filter_counters.failures > 0) break;
       refined.first_frame = run.first_frame;
       refined.result.passes = free_passes;
