@@ -155,9 +155,8 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
                static_cast<unsigned long long>(r.markers_gated));
   std::fprintf(o,
                "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
-               "pass_change: %.6g  # the last pass's move from the one before, squared sigmas\n"
                "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n",
-               r.nis_per_dof, r.pass_change, r.sigma_ratio);
+               r.nis_per_dof, r.sigma_ratio);
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
                "above 1 or sigma_ratio below 0.8: do not trust it\n",

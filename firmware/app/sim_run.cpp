@@ -186,17 +186,9 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
     const auto pass_progress = [&](double f) {
       if (progress) progress((pass + f) / planned);
     };
-    const std::optional<State> before =
-        run.history.empty() ? std::nullopt : std::optional<State>(run.history.back().state);
     run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
                        hooks ? hooks(pass) : LoopHooks{});
     run.result.passes = pass + 1;
-    if (before && !run.history.empty()) {
-      constexpr int B = State::kPbc, L = State::kDim - B;
-      const Eigen::Matrix<double, L, 1> d =
-          run.history.back().state.template boxminus_block<B, L>(*before);
-      run.result.pass_change = d.dot(run.covariance.template block<L, L>(B, B).ldlt().solve(d));
-    }
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
     run.first_frame = first_frame;
     // The next pass starts the calibration parameters at this pass's estimate, with the prior's
@@ -259,7 +251,6 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       if (refined.history.empty() || refined.filter_counters.failures > 0) break;
       refined.first_frame = run.first_frame;
       refined.result.passes = free_passes;
-      refined.result.pass_change = run.result.pass_change;
       run = std::move(refined);
       imu_start_from<NK>(config, run, p0, data, start);
     }
