@@ -223,7 +223,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   // covariance holds information the data do not (random family: sigmas down to a third of the
   // linearised one's) and their estimate lies further from the truth than the data allow. How
   // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
-  if (!run.history.empty()) {
+  if (passes.refine && !run.history.empty()) {
     constexpr int B = State::kPbc;
     const typename SimRun<NK>::Filter::Covariance own = run.covariance;
     const int free_passes = run.result.passes;
@@ -248,7 +248,10 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       prior.q_n_b = from.q_n_b;
       SimRun<NK> refined =
           run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
-      if (refined.history.empty() || refined.filter_counters.failures > 0) break;
+      // A replay that did not see the same frames (a source that ran dry) refines nothing.
+      if (refined.history.size() != run.history.size() ||
+          track.history.size() != run.history.size() || refined.filter_counters.failures > 0)
+        break;
       refined.first_frame = run.first_frame;
       refined.result.passes = free_passes;
       run = std::move(refined);

@@ -124,7 +124,11 @@ constexpr double kImuStartMaxS = 2.0;
 struct Passes {
   int min = kDefaultPasses;  // passes always made
   int max = kMaxPasses;      // passes made at most, while the last gated too many
-  static Passes exactly(int n) { return {n, n}; }
+  // Whether the Gauss-Newton refinement passes follow (run_loop): they replay the data twice more,
+  // which a source that delivers its data once (a camera) cannot.
+  bool refine = true;
+  static Passes exactly(int n) { return {n, n, true}; }
+  static Passes once() { return {1, 1, false}; }
 };
 
 // Runs the loop on data from the initial estimate (x0, p0), passes.min times and then again while

@@ -400,7 +400,7 @@ int calibrate(mc::hal::PixelFormat format) {
   const auto t0 = std::chrono::steady_clock::now();
   const Run run =
       mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0, mc::app::loop_data(s, data), &truth,
-                           {}, hooks, mc::app::Passes::exactly(1));
+                           {}, hooks, mc::app::Passes::once());
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   // The prior's error against the final estimate's, over the calibration block.
