@@ -1,6 +1,7 @@
 #include "cli.hpp"
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -62,6 +63,24 @@ sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
   const std::string name = o.get("scenario", "paper");
   if (!sim::scenario_by_name(name, seed, s))
     fail("unknown scenario '" + name + "' (known: paper, random)");
+  // --timeshift S: the camera stamps its frames S seconds before the IMU's clock shows them.
+  if (o.flag("timeshift")) {
+    const std::string text = o.get("timeshift", "");
+    char* end = nullptr;
+    const double t_d = std::strtod(text.c_str(), &end);
+    if (end == text.c_str() || *end != '\0' || !(std::abs(t_d) <= kMaxSimulatedTimeshiftS))
+      fail("--timeshift: '" + text + "' is not a time offset in seconds within +-" +
+           std::to_string(kMaxSimulatedTimeshiftS).substr(0, 3) + " s");
+    s.truth.t_d = t_d;
+  }
+  // --distortion MODEL: the camera's lens (sim::lens_of: EuRoC cam0's radtan, or a fisheye).
+  if (o.flag("distortion")) {
+    const std::string name = o.get("distortion", "");
+    Distortion d = Distortion::kNone;
+    if (!distortion_from_string(name, d))
+      fail("--distortion: '" + name + "' is not a lens model (radtan, equidistant or none)");
+    sim::set_lens(s, d);
+  }
   return s;
 }
 

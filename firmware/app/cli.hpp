@@ -43,7 +43,10 @@ Options parse(int argc, char** argv, int first, const std::vector<std::string>& 
 std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
                           std::uint64_t min);
 
-// The scenario named by --scenario (default "paper"); the random family's draw for seed.
+// The scenario named by --scenario (default "paper"); the random family's draw for seed. With
+// --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
+// --distortion MODEL, the camera has that lens (sim::set_lens).
+constexpr double kMaxSimulatedTimeshiftS = 0.5;
 sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
 
 // Creates --out (or def) and returns it.

@@ -41,7 +41,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const auto& last = run.history.back();
   const Eigen::Vector3d angles = display_angles(r.q_b_c);
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
-  std::printf("\n%-8s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
+  std::printf("\n%-17s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
               "final +-1sigma", rec.has_truth ? "  error/sig (truth.yaml)" : "");
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
@@ -57,11 +57,14 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     } else if (j < 6 + 3 * std::size_t(kMarkers)) {
       value = double(last.state.markers(int(j) - 6)) * p.scale;
       value_first = double(first.state.markers(int(j) - 6)) * p.scale;
+    } else if (j == 6 + 3 * std::size_t(kMarkers)) {
+      value = double(last.state.t_d) * p.scale;
+      value_first = double(first.state.t_d) * p.scale;
     } else {
-      value = double(last.state.intrinsics(int(j) - 6 - 3 * kMarkers));
-      value_first = double(first.state.intrinsics(int(j) - 6 - 3 * kMarkers));
+      value = double(last.state.intrinsics(int(j) - 7 - 3 * kMarkers));
+      value_first = double(first.state.intrinsics(int(j) - 7 - 3 * kMarkers));
     }
-    std::printf("%-8s %-5s %12.4f +-%-6.3f %12.4f +-%-6.4f", p.name.c_str(), p.unit.c_str(),
+    std::printf("%-17s %-5s %12.4f +-%-6.3f %12.4f +-%-6.4f", p.name.c_str(), p.unit.c_str(),
                 value_first, first.sigma(int(j)) * p.scale, value, last.sigma(int(j)) * p.scale);
     if (rec.has_truth) std::printf(" %+10.2f", last.error(int(j)) / last.sigma(int(j)));
     std::printf("\n");

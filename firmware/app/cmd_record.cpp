@@ -107,6 +107,7 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   truth.q_b_c = s.truth.q_b_c;
   truth.features_c = s.truth.markers;
   truth.intrinsics = s.truth.intrinsics;
+  truth.t_d = s.truth.t_d;
   if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
     fail(err, 1);
@@ -121,7 +122,8 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
 }  // namespace
 
 int cmd_record(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario", "seed", "out", "config"};
+  std::vector<std::string> with_value = {"scenario", "seed",      "out",
+                                         "config",   "timeshift", "distortion"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   const Options o = parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage"});

@@ -212,6 +212,11 @@ int cmd_run(int argc, char** argv) {
     else
       refine(SimRun<0>{});
   }
+  // The camera's stamps against the IMU's clock (a V4L2 driver stamping the end of the frame, the
+  // bus's latency): what the calibration found.
+  const std::size_t t_row = 6 + 3 * std::size_t(kMarkers);
+  std::printf("time offset found: timeshift_cam_imu %.3f ms +- %.3f ms (t_imu = t_cam + it)\n",
+              1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
   if (const std::string w = convergence_warning(result); !w.empty())
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_camchain_imucam(s.out + "/camchain-imucam.yaml", result, error) ||

@@ -21,8 +21,9 @@
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario",    "seed",       "out",   "format",
-                                         "pixel-sigma", "spot-noise", "passes"},
+  std::vector<std::string> with_value = {"scenario", "seed",        "out",
+                                         "format",   "pixel-sigma", "spot-noise",
+                                         "passes",   "timeshift",   "distortion"},
                            flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
@@ -65,11 +66,11 @@ int cmd_sim(int argc, char** argv) {
     const auto truth = truth_display(s, std::decay_t<decltype(run)>::State::kIntrinsics);
     const auto& first = run.first_frame;
     const auto& last = run.history.back();
-    std::printf("\n%-8s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth",
+    std::printf("\n%-17s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth",
                 "after 1st frame +-1s", "final +-1sigma", "error/sig");
     for (std::size_t j = 0; j < params.size(); ++j) {
       const double sc = params[j].scale;
-      std::printf("%-8s %-5s %12.4f %12.4f +-%-6.3f %12.4f +-%-6.4f %+10.2f\n",
+      std::printf("%-17s %-5s %12.4f %12.4f +-%-6.3f %12.4f +-%-6.4f %+10.2f\n",
                   params[j].name.c_str(), params[j].unit.c_str(), truth[j],
                   truth[j] + first.error(int(j)) * sc, first.sigma(int(j)) * sc,
                   truth[j] + last.error(int(j)) * sc, last.sigma(int(j)) * sc,

@@ -17,7 +17,7 @@ struct ParamInfo {
   double scale;      // SI -> display
 };
 
-// The calibration block of the error state, [p_b_c, phi, markers, intrinsics], in order.
+// The calibration block of the error state, [p_b_c, phi, markers, t_d, intrinsics], in order.
 std::vector<ParamInfo> calibration_params(int markers, int intrinsics);
 
 template <class Filter>

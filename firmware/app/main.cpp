@@ -17,7 +17,11 @@ const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
-       "              [--scenario paper] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--scenario paper|random] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--timeshift S]  (the camera's stamps S seconds before the IMU's clock:\n"
+       "              t_imu = t_cam + S; default 0, the random family draws one in +-30 ms)\n"
+       "              [--distortion radtan|equidistant]  (the camera's lens: EuRoC cam0's\n"
+       "              radtan, or a fisheye; default none)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III;\n"
        "              --hold-skew: skew 0; --one-stage: everything at once from one minute)\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
@@ -30,14 +34,17 @@ const std::vector<Command>& commands() {
        cmd_sim},
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
-       "              --runs N [--jobs J] [--seed S] [--scenario paper] [--out DIR] [--no-plots]\n"
+       "              --runs N [--jobs J] [--seed S] [--scenario paper|random] [--out DIR]\n"
+       "              [--no-plots] [--timeshift S] [--distortion MODEL]  (as sim)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n"
        "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
        "              [--pixel-sigma PX]  (as sim)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
-       "              --out DIR [--scenario paper] [--seed N] [--intrinsics [--hold-skew]]\n"
+       "              --out DIR [--scenario paper|random] [--seed N] [--timeshift S]\n"
+       "              [--distortion MODEL]  (as sim)\n"
+       "              [--intrinsics [--hold-skew]]\n"
        "              [--two-stage [--hold-skew]]  (DIR/stage1 and DIR/stage2 of sim "
        "--intrinsics)\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"

@@ -19,6 +19,7 @@ std::vector<ParamInfo> calibration_params(int markers, int intrinsics) {
   for (int i = 0; i < markers; ++i)
     for (const char* a : {"x", "y", "z"})
       p.push_back({"f" + std::to_string(i + 1) + "_" + a, "cm", kCm});
+  p.push_back({"timeshift_cam_imu", "ms", 1e3});
   const char* k[5] = {"fu", "fv", "cu", "cv", "skew"};
   for (int j = 0; j < intrinsics; ++j) p.push_back({k[j], "px", 1.0});
   return p;
@@ -66,16 +67,32 @@ bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
   std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", r.intrinsics.fu, r.intrinsics.fv,
                r.intrinsics.cu, r.intrinsics.cv);
   std::fprintf(o, "  intrinsics_skew: %.6f\n", r.intrinsics.skew);
-  std::fprintf(o, "  distortion_model: radtan\n  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]\n");
+  const std::array<double, 4>& d = r.intrinsics.coeffs;
+  std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
+               to_string(r.intrinsics.distortion == Distortion::kNone ? Distortion::kRadtan
+                                                                      : r.intrinsics.distortion),
+               d[0], d[1], d[2], d[3]);
   std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
-  std::fprintf(o, "  timeshift_cam_imu: 0.0\n  T_cam_imu:\n");
+  std::fprintf(o, "  timeshift_cam_imu: %.9f\n  T_cam_imu:\n", r.t_d);
   write_matrix_rows(o, t_cam_imu(r), "  ");
   return finish(f, path, error);
 }
 
+namespace {
+
+// Markers offered to the filter in the last pass, and those it could not use.
+double markers_offered(const CalibrationResult& r) {
+  return double(r.markers_used + r.markers_gated + r.markers_invalid);
+}
+double markers_rejected(const CalibrationResult& r) {
+  return double(r.markers_gated + r.markers_invalid);
+}
+
+}  // namespace
+
 bool gated_too_many(const CalibrationResult& r) {
-  const double seen = double(r.markers_used + r.markers_gated);
-  return seen > 0.0 && double(r.markers_gated) > kSuspectGatedFraction * seen;
+  const double seen = markers_offered(r);
+  return seen > 0.0 && markers_rejected(r) > kSuspectGatedFraction * seen;
 }
 
 bool innovations_too_large(const CalibrationResult& r) {
@@ -93,8 +110,8 @@ bool path_gained_false_information(const CalibrationResult& r) {
 }
 
 std::string convergence_warning(const CalibrationResult& r) {
-  const double seen = double(r.markers_used + r.markers_gated);
-  if (seen == 0.0) return "no marker was used: nothing was calibrated beyond the priors";
+  const double seen = markers_offered(r);
+  if (seen == 0.0) return "no marker was seen: nothing was calibrated beyond the priors";
   char text[480];
   if (!gated_too_many(r) && !innovations_too_large(r)) {
     if (!path_gained_false_information(r)) return {};
@@ -118,11 +135,12 @@ std::string convergence_warning(const CalibrationResult& r) {
     return text;
   }
   std::snprintf(text, sizeof text,
-                "%.1f %% of the markers were rejected by the 99.9 %% gate in the last pass (of %d) "
-                "(a consistent calibration rejects about 0.1 %%): it has most likely "
-                "locked onto a wrong solution. Start from better guesses (or estimate the "
-                "intrinsics in a second stage, calibrate --from), and check the recording.",
-                100.0 * double(r.markers_gated) / seen, r.passes);
+                "%.1f %% of the markers were rejected by the 99.9 %% gate or could not be "
+                "predicted in the last pass (of %d) (a consistent calibration rejects about "
+                "0.1 %%): it has most likely locked onto a wrong solution. Start from better "
+                "guesses (or estimate the intrinsics in a second stage, calibrate --from), and "
+                "check the recording.",
+                100.0 * markers_rejected(r) / seen, r.passes);
   return text;
 }
 
@@ -145,14 +163,22 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "features_c:\n");
   for (const auto& m : r.markers)
     std::fprintf(o, "  - [%.17g, %.17g, %.17g]\n", m.x(), m.y(), m.z());
+  std::fprintf(o, "timeshift_cam_imu: %.17g  # s: t_imu = t_cam + timeshift_cam_imu\n", r.t_d);
   std::fprintf(o, "intrinsics: [%.6f, %.6f, %.6f, %.6f]\nskew: %.6f\n", r.intrinsics.fu,
                r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv, r.intrinsics.skew);
+  std::fprintf(o, "distortion_model: %s  # held as camchain.yaml gave it\n",
+               to_string(r.intrinsics.distortion));
+  std::fprintf(o, "distortion_coeffs: [%.17g, %.17g, %.17g, %.17g]\n", r.intrinsics.coeffs[0],
+               r.intrinsics.coeffs[1], r.intrinsics.coeffs[2], r.intrinsics.coeffs[3]);
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
-  std::fprintf(o, "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n",
+  std::fprintf(o,
+               "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
+               "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
                r.passes, static_cast<unsigned long long>(r.markers_used),
-               static_cast<unsigned long long>(r.markers_gated));
+               static_cast<unsigned long long>(r.markers_gated),
+               static_cast<unsigned long long>(r.markers_invalid));
   std::fprintf(o,
                "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
                "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n",
@@ -186,12 +212,14 @@ bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<F
   std::fprintf(o, "#time [s],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z");
   for (int i = 0; i < State::kMarkers; ++i)
     for (const char* a : {"x", "y", "z"}) std::fprintf(o, ",f%d_%s [m]", i + 1, a);
+  std::fprintf(o, ",timeshift_cam_imu [s]");
   const char* k[5] = {"fu [px]", "fv [px]", "cu [px]", "cv [px]", "skew [px]"};
   for (int j = 0; j < State::kIntrinsics; ++j) std::fprintf(o, ",%s", k[j]);
   for (const auto& p : params)
     std::fprintf(o, ",sigma_%s [%s]", p.name.c_str(),
                  p.unit == "cm"    ? "m"
                  : p.unit == "deg" ? "rad"
+                 : p.unit == "ms"  ? "s"
                                    : "px");
   std::fprintf(o, "\n");
   for (const auto& r : rows) {
@@ -200,6 +228,7 @@ bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<F
                  double(x.p_b_c.x()), double(x.p_b_c.y()), double(x.p_b_c.z()), double(x.q_b_c.w()),
                  double(x.q_b_c.x()), double(x.q_b_c.y()), double(x.q_b_c.z()));
     for (int j = 0; j < 3 * State::kMarkers; ++j) std::fprintf(o, ",%.9g", double(x.markers(j)));
+    std::fprintf(o, ",%.9g", double(x.t_d));
     for (int j = 0; j < State::kIntrinsics; ++j) std::fprintf(o, ",%.9g", double(x.intrinsics(j)));
     for (int j = 0; j < r.sigma.size(); ++j) std::fprintf(o, ",%.6g", r.sigma(j));
     std::fprintf(o, "\n");

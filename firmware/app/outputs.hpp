@@ -19,14 +19,17 @@ struct CalibrationResult {
   Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> markers;
+  double t_d = 0.0;  // timeshift_cam_imu (s)
   Pinhole<double> intrinsics{};
   int estimated_intrinsics = 0;  // 0, 4 (fu fv cu cv; skew held) or 5 (with skew)
   int width = 0, height = 0;
   std::vector<double> sigma;   // calibration block, in calibration_params() order (SI)
   Eigen::MatrixXd covariance;  // of the calibration block, same order
   std::vector<ParamInfo> params;
-  std::uint64_t markers_used = 0, markers_gated = 0;  // over the last pass
-  int passes = 1;                                     // passes over the data (sim_run.hpp)
+  // Over the last pass: markers used, gated, and those the model could not predict at the
+  // estimate (their mirror image not in front of the camera).
+  std::uint64_t markers_used = 0, markers_gated = 0, markers_invalid = 0;
+  int passes = 1;  // passes over the data (sim_run.hpp)
   // What the filter saw itself, for the self-check (no truth needed): the normalised innovation
   // squared per degree of freedom over the last pass once the gate was on.
   double nis_per_dof = 0.0;
@@ -45,7 +48,8 @@ struct CalibrationResult {
 // (sim_run.hpp, Passes), which brought all four back; a result that still gated too many is
 // flagged.
 constexpr double kSuspectGatedFraction = 0.005;
-// More than kSuspectGatedFraction of the markers offered to the filter were gated.
+// More than kSuspectGatedFraction of the markers offered to the filter were gated or could not be
+// predicted at all (an estimate that puts them behind the camera is as lost).
 bool gated_too_many(const CalibrationResult& r);
 // The markers the filter used fit worse than its covariance says: the last pass's normalised
 // innovation squared per degree of freedom above 1 + max(kSuspectNisExcess, 5 sqrt(2 / dof)) (a
@@ -76,8 +80,8 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.q_b_c = x.q_b_c.template cast<double>();
   for (int i = 0; i < State::kMarkers; ++i)
     r.markers.push_back(x.marker(i).template cast<double>());
-  const auto k = f.intrinsics();
-  r.intrinsics = {double(k.fu), double(k.fv), double(k.cu), double(k.cv), double(k.skew)};
+  r.t_d = double(x.t_d);
+  r.intrinsics = f.intrinsics().template cast<double>();
   r.estimated_intrinsics = State::kIntrinsics;
   r.width = width;
   r.height = height;
@@ -92,6 +96,7 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.nis_dof = f.counters().nis_dof;
   r.nis_per_dof = r.nis_dof > 0 ? f.counters().nis_sum / double(r.nis_dof) : 0.0;
   r.markers_gated = f.counters().markers_gated;
+  r.markers_invalid = f.counters().markers_invalid;
   return r;
 }
 

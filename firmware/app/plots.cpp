@@ -18,6 +18,7 @@ std::vector<Group> groups_of(const std::vector<ParamInfo>& params) {
   std::vector<Group> g = {{"error_p.png", "camera position in the IMU frame p_b_c", {}},
                           {"error_rot.png", "camera rotation error log(R_true^T R_est)", {}},
                           {"error_markers.png", "marker positions in the camera frame", {}},
+                          {"error_timeshift.png", "camera-IMU time offset timeshift_cam_imu", {}},
                           {"error_intrinsics.png", "camera intrinsics", {}}};
   for (std::size_t j = 0; j < params.size(); ++j) {
     const std::string& n = params[j].name;
@@ -25,7 +26,8 @@ std::vector<Group> groups_of(const std::vector<ParamInfo>& params) {
         n.rfind("p_", 0) == 0                                                           ? 0
         : n.rfind("rot_", 0) == 0                                                       ? 1
         : n[0] == 'f' && n.size() > 1 && std::isdigit(static_cast<unsigned char>(n[1])) ? 2
-                                                                                        : 3;
+        : n == "timeshift_cam_imu"                                                      ? 3
+                                                                                        : 4;
     g[k].params.push_back(j);
   }
   std::vector<Group> used;

@@ -43,6 +43,7 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
     truth.q_b_c = r.truth.q_b_c;
     for (int i = 0; i < kMarkers; ++i)
       truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
+    truth.t_d = r.truth.t_d;
     if constexpr (NK > 0) {
       const Pinhole<double>& k = r.truth.intrinsics;
       const double v[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};

@@ -11,6 +11,7 @@ std::vector<double> truth_display(const sim::Scenario& s, int intrinsics) {
   for (int i = 0; i < 3; ++i) t.push_back(angles(i));
   for (const auto& m : s.truth.markers)
     for (int i = 0; i < 3; ++i) t.push_back(100.0 * m(i));
+  t.push_back(1e3 * s.truth.t_d);
   const Pinhole<double>& k = s.truth.intrinsics;
   const double all[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
   for (int j = 0; j < intrinsics; ++j) t.push_back(all[j]);
@@ -45,6 +46,7 @@ const std::vector<PaperRow>& paper_tables() {
       {-8.01, 0.08},
       {6.00, 0.06},
       {0.99, 0.01},
+      {NAN, NAN},  // the time offset: the paper's camera and IMU share a clock
       // Table III; the paper's centred cu, cv shifted to our top-left origin (640 x 480).
       {833.93, 1.26},
       {833.94, 1.33},

@@ -12,7 +12,7 @@ namespace mirrorcal::app {
 std::vector<double> truth_display(const sim::Scenario& s, int intrinsics = 0);
 
 // The paper's Tables I, II and III, final value and sigma, in our row order (rotation columns read
-// as about x, y, z: see paper_scenario()).
+// as about x, y, z: see paper_scenario()); NaN for what the paper does not estimate.
 struct PaperRow {
   double final_value, sigma;
 };

@@ -42,6 +42,7 @@ State truth_state(const sim::Scenario& s) {
   t.q_b_c = s.truth.q_b_c;
   for (int i = 0; i < State::kMarkers; ++i)
     t.markers.template segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
+  t.t_d = s.truth.t_d;
   const Pinhole<double>& k = s.truth.intrinsics;
   const double all[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
   for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = all[j];
@@ -52,20 +53,35 @@ State truth_state(const sim::Scenario& s) {
 
 namespace {
 
+// The estimates a pass published at its frames, to linearise another pass along.
+template <int NK>
+struct Trajectory {
+  std::vector<typename SimRun<NK>::State> states;
+  std::vector<std::int64_t> stamps_ns;
+};
+
+// Every frame a pass's loop met, used or not: the same in every replay of the same data.
+template <int NK>
+std::uint64_t frames_met(const SimRun<NK>& run) {
+  const firmware::LoopCounters& c = run.loop_counters;
+  return c.frames + c.frames_before_filter + c.frames_after_imu;
+}
+
 // One pass of the loop over the data from (x0, p0).
 template <int NK>
 SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
                     const std::function<void(double)>& progress, const LoopHooks& input,
-                    const std::vector<typename SimRun<NK>::State>* along = nullptr) {
+                    const Trajectory<NK>* along = nullptr) {
   using Run = SimRun<NK>;
   using Filter = typename Run::Filter;
   Run run;
   if (truth != nullptr) run.truth = *truth;
   Filter filter(config);
   filter.reset(x0, p0);
-  if (along != nullptr) filter.linearise_along(along->data(), along->size());
+  if (along != nullptr)
+    filter.linearise_along(along->states.data(), along->stamps_ns.data(), along->states.size());
 
   sim::VectorImuSource imu(data.imu);
   sim::VectorMarkerSource<kMarkers> listed(data.frames);
@@ -203,6 +219,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       return true;
     };
     if (prior_negligible(State::kPbc, 3)) start.p_b_c = est.p_b_c;
+    if (prior_negligible(State::kTd, 1)) start.t_d = est.t_d;
     if (prior_negligible(State::kPhi, 3)) start.q_b_c = est.q_b_c;
     for (int m = 0; m < kMarkers; ++m)
       if (prior_negligible(State::kPi + 3 * m, 3))
@@ -238,8 +255,11 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       from.q_n_b = start.q_n_b;
       const SimRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run), data,
                                             nullptr, {}, next_hooks());
-      std::vector<State> trajectory;
-      for (const auto& row : track.history) trajectory.push_back(row.state);
+      Trajectory<NK> trajectory;
+      for (const auto& row : track.history) {
+        trajectory.states.push_back(row.state);
+        trajectory.stamps_ns.push_back(row.t_ns);
+      }
       // From the prior's guesses of the calibration (the data count once), and the IMU start the
       // trajectory has.
       State prior = x0;
@@ -248,9 +268,9 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       prior.q_n_b = from.q_n_b;
       SimRun<NK> refined =
           run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
-      // A replay that did not see the same frames (a source that ran dry) refines nothing.
-      if (refined.history.size() != run.history.size() ||
-          track.history.size() != run.history.size() || refined.filter_counters.failures > 0)
+      // A replay that did not meet the same frames (a source that ran dry) refines nothing.
+      if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
+          refined.filter_counters.failures > 0)
         break;
       refined.first_frame = run.first_frame;
       refined.result.passes = free_passes;
@@ -339,7 +359,9 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   s.p_b_c = earlier.p_b_c;
   s.q_b_c = earlier.q_b_c;
   s.features_c = earlier.markers;
-  const long n = 6 + 3 * static_cast<long>(earlier.markers.size());
+  s.has_t_d = true;
+  s.t_d = earlier.t_d;
+  const long n = 7 + 3 * static_cast<long>(earlier.markers.size());
   s.covariance = earlier.covariance.topLeftCorner(n, n);
   return s;
 }

@@ -158,19 +158,23 @@ extern template MIRRORCAL_RUN_LOOP(5);
 // from them (stage 2 from stage 1; `calibrate --from`).
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier);
 
-// Starts the camera pose and markers at an earlier calibration's estimate and covariance in place
-// of the prior's guesses; the IMU state and the intrinsics keep the prior's. The markers must be
-// as many as the state's.
+// Starts the camera pose, markers and time offset at an earlier calibration's estimate and
+// covariance in place of the prior's guesses; the IMU state and the intrinsics keep the prior's,
+// and so does the time offset if the earlier result has none. The markers must be as many as the
+// state's.
 template <class State, class Covariance>
 void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0) {
-  constexpr int B = State::kPbc, L = 6 + 3 * State::kMarkers;
+  static_assert(State::kTd == State::kPi + 3 * State::kMarkers, "the time offset follows markers");
+  constexpr int B = State::kPbc;
+  const int l = 6 + 3 * State::kMarkers + (earlier.has_t_d ? 1 : 0);
   x0.p_b_c = earlier.p_b_c;
   x0.q_b_c = earlier.q_b_c;
   for (int i = 0; i < State::kMarkers; ++i)
     x0.markers.template segment<3>(3 * i) = earlier.features_c[static_cast<std::size_t>(i)];
-  p0.template block<L, State::kDim>(B, 0).setZero();
-  p0.template block<State::kDim, L>(0, B).setZero();
-  p0.template block<L, L>(B, B) = earlier.covariance;
+  if (earlier.has_t_d) x0.t_d = earlier.t_d;
+  p0.block(B, 0, l, State::kDim).setZero();
+  p0.block(0, B, State::kDim, l).setZero();
+  p0.block(B, B, l, l) = earlier.covariance;
 }
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.

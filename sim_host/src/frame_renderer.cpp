@@ -16,14 +16,21 @@ constexpr std::uint64_t kSpotStream = 0x53504f54ull << 32;  // "SPOT", xor the f
 
 }  // namespace
 
+// Frames are exposed from camera_offset_s on, and both their exposures and their stamps lie
+// within the IMU's [0, duration_s] (the stamps are t_d earlier than the exposures).
 std::int64_t frame_time_ns(const Scenario& s, std::uint64_t j) {
-  return std::llround((s.camera_offset_s + static_cast<double>(j) / s.camera_rate_hz) * 1e9);
+  const double first = s.camera_offset_s + std::max(0.0, s.truth.t_d);
+  return std::llround((first + static_cast<double>(j) / s.camera_rate_hz) * 1e9);
+}
+
+std::int64_t frame_stamp_ns(const Scenario& s, std::uint64_t j) {
+  return frame_time_ns(s, j) - std::llround(s.truth.t_d * 1e9);
 }
 
 std::uint64_t frame_count(const Scenario& s) {
-  return static_cast<std::uint64_t>(
-             std::floor((s.duration_s - s.camera_offset_s) * s.camera_rate_hz)) +
-         1;
+  const double first = s.camera_offset_s + std::max(0.0, s.truth.t_d);
+  const double last = s.duration_s - std::max(0.0, -s.truth.t_d);
+  return static_cast<std::uint64_t>(std::floor((last - first) * s.camera_rate_hz)) + 1;
 }
 
 FrameRenderer::FrameRenderer(const Scenario& scenario, const RenderConfig& config,
@@ -170,15 +177,14 @@ RenderedFrameSource::RenderedFrameSource(const Scenario& scenario, const RenderC
 
 hal::SourceStatus RenderedFrameSource::poll(hal::FrameView& frame) {
   if (next_ >= frames_) return hal::SourceStatus::kEndOfStream;
-  const std::int64_t t_ns = frame_time_ns(scenario_, next_);
-  renderer_.render(t_ns, next_, image_.data(), truth_);
+  renderer_.render(frame_time_ns(scenario_, next_), next_, image_.data(), truth_);
   frame.format = renderer_.config().format;
   frame.width = renderer_.width();
   frame.height = renderer_.height();
   frame.bytes_per_line = renderer_.bytes_per_line();
   frame.data = image_.data();
   frame.bytes = image_.size();
-  frame.t_ns = t_ns;
+  frame.t_ns = frame_stamp_ns(scenario_, next_);
   frame.sequence = static_cast<std::uint32_t>(next_);
   frame.flags = 0;
   ++next_;

@@ -215,6 +215,11 @@ std::string wxyz(const Eigen::Quaterniond& q) {
   const double v[4] = {q.w(), q.x(), q.y(), q.z()};
   return list(v, 4);
 }
+// camchain.yaml's distortion_model: radtan (with zero coefficients) for no lens, which every
+// reader takes.
+const char* lens_name(Distortion d) {
+  return d == Distortion::kNone ? to_string(Distortion::kRadtan) : to_string(d);
+}
 std::array<double, 5> as_array(const Pinhole<double>& k) {
   return {k.fu, k.fv, k.cu, k.cv, k.skew};
 }
@@ -256,18 +261,34 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
                     "expected two positive integers [width, height]");
   out.width = static_cast<int>(res[0]);
   out.height = static_cast<int>(res[1]);
-  if (cam.has("distortion_coeffs")) {
-    // mirrorcal models no lens distortion: features must be undistorted, and the file must say so.
-    const YAML::Node d = cam.node("distortion_coeffs");
-    if (!d.IsSequence()) return cam.fail(d, "distortion_coeffs", "expected a list of numbers");
-    for (std::size_t i = 0; i < d.size(); ++i) {
-      double c = 0.0;
-      if (!d[i].IsScalar() || !text::parse(d[i].Scalar(), c) || c != 0.0)
-        return cam.fail(d, "distortion_coeffs",
-                        "must all be 0: mirrorcal models an undistorted pinhole (undistort the "
-                        "features first)");
-    }
+  // The lens: Kalibr's pinhole distortion models, the features being raw (distorted) pixels.
+  Distortion& d = out.intrinsics.distortion;
+  if (cam.has("distortion_model")) {
+    std::string name;
+    if (!cam.string("distortion_model", name)) return false;
+    if (!distortion_from_string(name, d))
+      return cam.fail(cam.node("distortion_model"), "distortion_model",
+                      text::quoted(name) + " is not supported (radtan, equidistant or none)");
+  } else {
+    d = Distortion::kNone;
+    cam.note_default("distortion_model", "none");
   }
+  double c[4] = {0.0, 0.0, 0.0, 0.0};
+  if (cam.has("distortion_coeffs")) {
+    const YAML::Node n = cam.node("distortion_coeffs");
+    // "none" with an empty or all-zero list, as some tools write it.
+    if (d == Distortion::kNone && n.IsSequence() && n.size() == 0) return true;
+    if (!cam.numbers("distortion_coeffs", 4, c)) return false;
+    if (d == Distortion::kNone && (c[0] != 0.0 || c[1] != 0.0 || c[2] != 0.0 || c[3] != 0.0))
+      return cam.fail(n, "distortion_coeffs",
+                      "given without a distortion_model (radtan or equidistant)");
+  } else if (d != Distortion::kNone) {
+    return cam.missing("distortion_coeffs");
+  }
+  out.intrinsics.coeffs = {c[0], c[1], c[2], c[3]};
+  // radtan with zero coefficients (how Kalibr and we write an undistorted camera) is no lens.
+  if (d == Distortion::kRadtan && c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0)
+    d = Distortion::kNone;
   return true;
 }
 
@@ -297,7 +318,9 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                   "estimate_intrinsics",
                   "hold_skew",
                   "intrinsics_guess",
-                  "sigma_intrinsics"});
+                  "sigma_intrinsics",
+                  "timeshift_cam_imu",
+                  "sigma_timeshift_cam_imu"});
   RecordingPriors r;
   if (!y.vec3("gravity_n", r.gravity_n) || !y.vec3("p_n_b", r.p_n_b) ||
       !y.sigma3("sigma_p_n_b", r.sigma_p_n_b) || !y.vec3("v_n_b", r.v_n_b) ||
@@ -326,6 +349,26 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
       !optional_vec3("sigma_b_g", r.sigma_b_g, Eigen::Vector3d::Constant(0.002), "0.002 rad/s",
                      true))
     return false;
+  // The time offset, in seconds (the loop believes at most 1 s: a value beyond it is in the
+  // wrong unit).
+  if (y.has("timeshift_cam_imu")) {
+    if (!y.number("timeshift_cam_imu", r.t_d)) return false;
+    if (!(std::abs(r.t_d) < 1.0))
+      return y.fail(y.node("timeshift_cam_imu"), "timeshift_cam_imu",
+                    "must lie within +-1 s (it is in seconds: t_imu = t_cam + timeshift_cam_imu)");
+  } else {
+    r.t_d = 0.0;
+    y.note_default("timeshift_cam_imu", "0 s");
+  }
+  if (y.has("sigma_timeshift_cam_imu")) {
+    if (!y.positive("sigma_timeshift_cam_imu", r.sigma_t_d)) return false;
+    if (!(r.sigma_t_d < 1.0))
+      return y.fail(y.node("sigma_timeshift_cam_imu"), "sigma_timeshift_cam_imu",
+                    "must be below 1 s (it is in seconds)");
+  } else {
+    r.sigma_t_d = 0.02;
+    y.note_default("sigma_timeshift_cam_imu", "0.02 s");
+  }
   if (y.has("pixel_sigma")) {
     if (!y.positive("pixel_sigma", r.pixel_sigma)) return false;
   } else {
@@ -370,7 +413,8 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   std::string cam = "# Kalibr camera description (pixels: origin at the top-left pixel's centre)\n";
   cam += "cam0:\n  camera_model: pinhole\n  intrinsics: " + list(k.data(), 4) + "\n";
   cam += "  intrinsics_skew: " + number(s.intrinsics.skew) + "\n";
-  cam += "  distortion_model: radtan\n  distortion_coeffs: [0, 0, 0, 0]\n";
+  cam += std::string("  distortion_model: ") + lens_name(s.intrinsics.distortion) + "\n";
+  cam += "  distortion_coeffs: " + list(s.intrinsics.coeffs.data(), 4) + "\n";
   cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
   cam += "  rostopic: /cam0/image_raw\n";
   return write_text(dir + "/imu.yaml", imu, error) &&
@@ -395,6 +439,8 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   for (const auto& f : r.features_c) t += "  - " + list(f) + "\n";
   t += "sigma_features_c:\n";
   for (const auto& f : r.sigma_features_c) t += "  - " + list(f) + "\n";
+  t += "timeshift_cam_imu: " + number(r.t_d) + "  # s: t_imu = t_cam + timeshift_cam_imu\n";
+  t += "sigma_timeshift_cam_imu: " + number(r.sigma_t_d) + "\n";
   t += std::string("estimate_intrinsics: ") + (r.estimate_intrinsics ? "true" : "false") + "\n";
   t += std::string("hold_skew: ") + (r.hold_skew ? "true" : "false") +
        "  # with estimate_intrinsics: skew stays at camchain.yaml's intrinsics_skew\n";
@@ -411,6 +457,7 @@ bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::stri
   for (const auto& f : t.features_c) y += "  - " + list(f) + "\n";
   const auto k = as_array(t.intrinsics);
   y += "intrinsics: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew\n";
+  y += "timeshift_cam_imu: " + number(t.t_d) + "  # s\n";
   return write_text(dir + "/truth.yaml", y, error);
 }
 
@@ -422,7 +469,8 @@ bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingT
       !y.vec3_list("features_c", out.features_c, false) || !y.numbers("intrinsics", 5, k))
     return false;
   out.intrinsics = {k[0], k[1], k[2], k[3], k[4]};
-  return true;
+  out.t_d = 0.0;
+  return !y.has("timeshift_cam_imu") || y.number("timeshift_cam_imu", out.t_d);
 }
 
 bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,
@@ -433,16 +481,20 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
     return false;
   // Results written before the covariance was added to the file lack it.
   if (!y.has("covariance")) return y.missing("covariance");
-  // The calibration block: p_b_c, rotation, markers, then the intrinsics it estimated (if any).
-  const std::size_t n = 6 + 3 * out.features_c.size();
+  // The calibration block: p_b_c, rotation, markers, the time offset (results written before it
+  // was estimated have none), then the intrinsics it estimated (if any).
+  out.has_t_d = y.has("timeshift_cam_imu");
+  if (out.has_t_d && !y.number("timeshift_cam_imu", out.t_d)) return false;
+  const std::size_t n = 6 + 3 * out.features_c.size() + (out.has_t_d ? 1 : 0);
   const YAML::Node rows = y.node("covariance");
   const std::size_t dim = rows.IsSequence() ? rows.size() : 0;
   if (dim != n && dim != n + 4 && dim != n + 5)
     return y.fail(rows, "covariance",
                   "expected " + std::to_string(n) + " rows (p_b_c, rotation, " +
                       std::to_string(out.features_c.size()) +
-                      (out.features_c.size() == 1 ? " marker), " : " markers), ") +
-                      std::to_string(n + 4) + " or " + std::to_string(n + 5) + " (and intrinsics)");
+                      (out.features_c.size() == 1 ? " marker" : " markers") +
+                      (out.has_t_d ? ", time offset), " : "), ") + std::to_string(n + 4) + " or " +
+                      std::to_string(n + 5) + " (and intrinsics)");
   // Every row the right length before anything is allocated (a damaged file could list many).
   for (std::size_t i = 0; i < dim; ++i)
     if (!rows[i].IsSequence() || rows[i].size() != dim)

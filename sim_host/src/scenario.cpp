@@ -218,7 +218,25 @@ Scenario random_scenario(std::uint64_t seed) {
   p.position = 0.10;
   p.attitude = 5.0 * deg;
   p.velocity = 0.2;
+  // Drawn last, so that the draws above are those of the family before it had a time offset.
+  r.t_d = d.uniform(-0.03, 0.03);
   return s;
+}
+
+void set_lens(Scenario& s, Distortion model) {
+  Pinhole<double>& k = s.truth.intrinsics;
+  k.distortion = model;
+  switch (model) {
+    case Distortion::kRadtan:
+      k.coeffs = {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05};  // EuRoC cam0
+      break;
+    case Distortion::kEquidistant:
+      k.coeffs = {0.00348238, 0.000715034, -0.00205323, 0.000202936};
+      break;
+    case Distortion::kNone:
+      k.coeffs = {0.0, 0.0, 0.0, 0.0};
+      break;
+  }
 }
 
 bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out) {

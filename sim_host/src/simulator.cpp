@@ -65,8 +65,8 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
   const int m = static_cast<int>(s.truth.markers.size());
   for (std::uint64_t j = 0; j < n_frames; ++j) {
     ObservedFrame f;
-    f.t_ns = frame_time_ns(s, j);
-    const Kinematics kin = kinematics(s.motion, static_cast<double>(f.t_ns) * 1e-9);
+    f.t_ns = frame_stamp_ns(s, j);
+    const Kinematics kin = kinematics(s.motion, static_cast<double>(frame_time_ns(s, j)) * 1e-9);
     for (int i = 0; i < m; ++i) {
       Eigen::Vector2d uv;
       const double du = n01(rng_cam), dv = n01(rng_cam);  // drawn always: streams stay aligned

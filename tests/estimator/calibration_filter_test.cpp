@@ -74,7 +74,8 @@ StartGuess make_start_guess(const Scenario& sc) {
       Eigen::Vector3d::Constant(0.5 * kDeg),        // theta
       Eigen::Vector3d::Constant(0.01),              // p_b_c (m)
       Eigen::Vector3d::Constant(2.0 * kDeg),        // phi
-      Eigen::Matrix<double, 9, 1>::Constant(0.10);  // markers (m)
+      Eigen::Matrix<double, 9, 1>::Constant(0.10),  // markers (m)
+      0.02;                                         // t_d (s)
   pr.p = sigma.cwiseAbs2().asDiagonal();
   return pr;
 }
@@ -269,15 +270,19 @@ TEST(CalibrationFilter, FloatAgreesWithDouble) {
 TEST(CalibrationFilter, LinearisedAlongItsOwnEstimatesRetracesTheRun) {
   const Scenario sc = make_scenario(3.0, 0.5, 4);
   StartGuess pr = make_start_guess(sc);
-  pr.p *= 1e-4;  // near convergence: no update is split into progressive steps
+  pr.p *= 1e-4;                      // near convergence: no update is split into progressive steps
+  std::vector<std::int64_t> stamps;  // of the frames, as the filter met them
   const auto run = [&](const std::vector<StateD>* along, std::vector<StateD>* before) {
     CalibrationFilter<double, 3, 0> f(wall_config());
     f.reset(pr.x, pr.p);
-    if (along != nullptr) f.linearise_along(along->data(), along->size());
+    if (along != nullptr) f.linearise_along(along->data(), stamps.data(), along->size());
     for (std::size_t k = 1; k < sc.imu.size(); ++k) {
       EXPECT_EQ(f.predict(sc.imu[k - 1], sc.imu[k]), FilterStatus::kOk);
       if (k % kImuPerFrame != 0) continue;
-      if (before != nullptr) before->push_back(f.state());
+      if (before != nullptr) {
+        before->push_back(f.state());
+        stamps.push_back(sc.frames[k / kImuPerFrame].t_ns);
+      }
       EXPECT_EQ(f.update(sc.frames[k / kImuPerFrame]).status, FilterStatus::kOk);
     }
     return std::make_pair(f.state(), CovD(f.covariance()));

@@ -113,7 +113,7 @@ FilterD::Covariance correlated_covariance(unsigned seed) {
   sigma << Eigen::Vector3d::Constant(0.05), Eigen::Vector3d::Constant(0.03),
       Eigen::Vector3d::Constant(0.002), Eigen::Vector3d::Constant(0.02),
       Eigen::Vector3d::Constant(1.0 * test::kDeg), Eigen::Vector3d::Constant(0.01),
-      Eigen::Vector3d::Constant(2.0 * test::kDeg), Eigen::Matrix<double, 9, 1>::Constant(0.1);
+      Eigen::Vector3d::Constant(2.0 * test::kDeg), Eigen::Matrix<double, 9, 1>::Constant(0.1), 0.02;
   FilterD::Covariance a;
   for (int i = 0; i < a.size(); ++i) a.data()[i] = n(rng);
   FilterD::Covariance corr = a * a.transpose() / double(FilterD::kDim) +

@@ -254,6 +254,41 @@ TEST(Projection, RejectsPointsNotInFront) {
                               Eigen::Vector3f(0.0f, 0.0f, -1.0f), uv_f));
 }
 
+// Closed forms of the lenses (OpenCV's own projections are compared in lens_vs_opencv.py).
+TEST(Lens, EquidistantWithoutCoefficientsMapsTheRayAngleToTheRadius) {
+  Pinhole<double> k{800.0, 800.0, 320.0, 240.0, 0.0, Distortion::kEquidistant, {0, 0, 0, 0}};
+  for (const double angle : {0.0, 1e-12, 0.1, 0.5, 1.0, 1.4}) {  // from the optical axis (rad)
+    const double azimuth = 0.7;
+    const Eigen::Vector3d p(std::sin(angle) * std::cos(azimuth),
+                            std::sin(angle) * std::sin(azimuth), std::cos(angle));
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(project<double>(k, p, uv));
+    const Eigen::Vector2d d = (uv - Eigen::Vector2d(320.0, 240.0)) / 800.0;
+    EXPECT_NEAR(d.norm(), angle, 1e-12) << angle;  // r_d = theta
+    if (angle > 1e-6) {  // nearer the axis the pixel's rounding hides the direction
+      EXPECT_NEAR(std::atan2(d.y(), d.x()), azimuth, 1e-9) << angle;
+    }
+  }
+}
+
+TEST(Lens, RadtanOnTheAxesIsTheOddPolynomialPlusTheTangentialTerms) {
+  const double k1 = -0.28, k2 = 0.07, p1 = 0.002, p2 = -0.001;
+  Pinhole<double> k{1.0, 1.0, 0.0, 0.0, 0.0, Distortion::kRadtan, {k1, k2, p1, p2}};
+  for (const double x : {-0.6, -0.1, 0.0, 0.3, 0.8}) {
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(project<double>(k, Eigen::Vector3d(x, 0.0, 1.0), uv));
+    // y = 0: x_d = x (1 + k1 x^2 + k2 x^4) + 3 p2 x^2, y_d = p1 x^2.
+    EXPECT_NEAR(uv.x(), x * (1 + k1 * x * x + k2 * x * x * x * x) + 3 * p2 * x * x, 1e-15);
+    EXPECT_NEAR(uv.y(), p1 * x * x, 1e-15);
+  }
+  // Without a lens the model is the pinhole's.
+  const Pinhole<double> plain{800.0, 790.0, 320.0, 240.0, 2.0};
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(project<double>(plain, Eigen::Vector3d(0.2, -0.1, 2.0), uv));
+  EXPECT_NEAR(uv.x(), 800.0 * 0.1 + 2.0 * -0.05 + 320.0, 1e-12);
+  EXPECT_NEAR(uv.y(), 790.0 * -0.05 + 240.0, 1e-12);
+}
+
 // ---------------------------------------------------------------------------------------------
 // MirrorState manifold
 

@@ -48,7 +48,12 @@ void expect_campaign_meets_bar(const std::string& options, int params, int runs 
     std::getline(ss, sd, ',');
     std::getline(ss, rms, ',');
     std::getline(ss, paper, ',');
-    EXPECT_LT(std::stod(rms), 2.0 * std::stod(paper)) << name << " [" << unit << "]";
+    if (paper == "nan") {  // not in the paper: the time offset, against the 0.1 ms
+      EXPECT_EQ(name, "timeshift_cam_imu");
+      EXPECT_LT(std::stod(rms), 0.1) << name << " [" << unit << "]";
+    } else {
+      EXPECT_LT(std::stod(rms), 2.0 * std::stod(paper)) << name << " [" << unit << "]";
+    }
     ++rows;
   }
   EXPECT_EQ(rows, params);
@@ -63,36 +68,39 @@ void expect_campaign_meets_bar(const std::string& options, int params, int runs 
 }
 
 TEST(Campaign, TenRunsOfThePaperScenarioMeetTheBar) {
-  expect_campaign_meets_bar("", 15);  // p, rotation, 3 markers
+  expect_campaign_meets_bar("", 16);  // p, rotation, 3 markers, time offset
 }
 
 // Stage 2 (Table III): the intrinsics too, from guesses 100 px off.
 TEST(Campaign, TenRunsOfStageTwoMeetTheBar) {
-  expect_campaign_meets_bar("--intrinsics", 20);
+  expect_campaign_meets_bar("--intrinsics", 21);
 }
 
 // Stage 2 holding skew at zero on a camera without skew: fu, fv, cu, cv only.
 TEST(Campaign, TenRunsOfStageTwoWithSkewHeldMeetTheBar) {
-  expect_campaign_meets_bar("--intrinsics --hold-skew", 19);
+  expect_campaign_meets_bar("--intrinsics --hold-skew", 20);
 }
 
 // The markers detected and identified in rendered frames (the paper's 1 px pixel noise drawn into
 // them): two runs, as rendering costs about 10 s of CPU per run.
 TEST(Campaign, TwoRunsFromRenderedFramesMeetTheBar) {
-  expect_campaign_meets_bar("--frames", 15, 2);
+  expect_campaign_meets_bar("--frames", 16, 2);
 }
 
 }  // namespace
 
 namespace {
 
-// The random family (20 rigs, a rig of its own per run, both mirrors, the priors a user has): not
-// yet consistent (docs/campaign/random), so the bounds hold today's figures (average NEES 23.7,
-// median 18.6, 2 runs beyond 4 sigma, both flagged) with room for sampling noise and fail on a
+// The random family (20 rigs, a rig of its own per run, both mirrors, the priors a user has, time
+// offsets in +-30 ms): not yet consistent (docs/campaign/random), so the bounds hold today's
+// figures (16 states: average NEES 23.9, median 18.1, 1 run beyond 4 sigma, flagged; the runs that
+// said consistent: true within 1.30, 1.13, 1.32 and 0.90 times what their data hold, RMS, for
+// p_b_c, rotation, markers and time offset) with room for sampling noise, and fail on a
 // regression: the transform that dropped every marker a sigma point put behind the mirror (markers
-// at their prior, RMS 10s of mm), the per-frame curvature shift of the prediction (median NEES
-// 21-36 over the same rigs), or the free passes' own estimate and covariance reported (average 33,
-// 2 of 3 runs beyond 4 sigma not flagged).
+// at their prior, 10s of times the limit), the per-frame curvature shift of the prediction (median
+// NEES 21-36 over the same rigs), or the free passes' own estimate and covariance reported
+// (average 33, 2 of 3 runs beyond 4 sigma not flagged). Runs that said consistent: false are
+// judged by being flagged, not by their errors (one of these rigs loses its markers altogether).
 TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("mirrorcal-random-" + std::to_string(getpid()));
@@ -116,17 +124,24 @@ TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
   const double mean = std::stod(cell[3]), med = std::stod(cell[4]);
   const int beyond = std::stoi(cell[5]);
   const int missed = std::stoi(cell[7]);
-  const double rms_markers_mm = std::stod(cell[10]), rms_rot_deg = std::stod(cell[9]);
+  // What the runs that said consistent: true hold against their data's limit, RMS: p_b_c,
+  // rotation, markers, time offset.
+  ASSERT_GE(cell.size(), 24u);
+  double over[4];
+  for (int k = 0; k < 4; ++k) over[k] = std::stod(cell[static_cast<std::size_t>(20 + k)]);
   std::printf(
-      "random: NEES average %.1f, median %.1f, %d runs beyond 4 sigma (%d not flagged), markers "
-      "%.2f mm, rotation %.4f deg RMS\n",
-      mean, med, beyond, missed, rms_markers_mm, rms_rot_deg);
+      "random: NEES average %.1f, median %.1f, %d runs beyond 4 sigma (%d not flagged); the "
+      "consistent runs' RMS over the limit: p %.2f, rotation %.2f, markers %.2f, time offset "
+      "%.2f\n",
+      mean, med, beyond, missed, over[0], over[1], over[2], over[3]);
   EXPECT_LT(med, 24.0);
   EXPECT_LT(mean, 50.0);
   EXPECT_LE(beyond, 6);
   EXPECT_LE(missed, 2);
-  EXPECT_LT(rms_markers_mm, 5.0);
-  EXPECT_LT(rms_rot_deg, 0.1);
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_GT(over[k], 0.0) << k;
+    EXPECT_LT(over[k], 2.0) << k;
+  }
   std::filesystem::remove_all(dir);
 }
 

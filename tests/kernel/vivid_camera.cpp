@@ -93,7 +93,7 @@ class KernelLoopbackFrames final : public mc::hal::FrameSource {
       if (!get_tag(frame.data, tag) || tag < next_) continue;  // a repeat, or vivid's own pattern
       skipped_ += tag - next_;
       next_ = tag + 1;
-      frame.t_ns = mc::sim::frame_time_ns(scenario_, tag);
+      frame.t_ns = mc::sim::frame_stamp_ns(scenario_, tag);
       frame.sequence = tag;
       return mc::hal::SourceStatus::kOk;
     }

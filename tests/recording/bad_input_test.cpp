@@ -349,12 +349,22 @@ TEST_F(BadInput, CameraModelThatIsNotPinhole) {
   expect_error({dir() + "/camchain.yaml:", "cam0.camera_model: 'omni' is not supported"});
 }
 
-TEST_F(BadInput, LensDistortionIsRefused) {
-  auto l = lines_of(dir() + "/camchain.yaml");
-  for (auto& s : l)
-    if (s.find("distortion_coeffs") != std::string::npos) s = "  distortion_coeffs: [0.1, 0, 0, 0]";
-  write_lines(dir() + "/camchain.yaml", l);
-  expect_error({dir() + "/camchain.yaml:", "distortion_coeffs: must all be 0"});
+// Kalibr's pinhole lenses are read (radtan, equidistant); anything else is refused with a reason.
+TEST_F(BadInput, UnknownLensesAndBadCoefficientsAreRefused) {
+  const auto with_lens = [&](const std::string& model, const std::string& coeffs) {
+    auto l = lines_of(dir() + "/camchain.yaml");
+    for (auto& s : l) {
+      if (s.find("distortion_model") != std::string::npos) s = "  distortion_model: " + model;
+      if (s.find("distortion_coeffs") != std::string::npos) s = "  distortion_coeffs: " + coeffs;
+    }
+    write_lines(dir() + "/camchain.yaml", l);
+  };
+  with_lens("fov", "[0.9, 0, 0, 0]");
+  expect_error({dir() + "/camchain.yaml:", "distortion_model: 'fov' is not supported"});
+  with_lens("radtan", "[0.1, 0]");
+  expect_error({dir() + "/camchain.yaml:", "distortion_coeffs: expected a list of 4 numbers"});
+  with_lens("none", "[0.1, 0, 0, 0]");
+  expect_error({dir() + "/camchain.yaml:", "given without a distortion_model"});
 }
 
 TEST_F(BadInput, TruthFileThatIsDamaged) {

@@ -194,6 +194,7 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   r.q_b_c = Eigen::Quaterniond(Eigen::AngleAxisd(1.0 / 7.0, Eigen::Vector3d(1, 2, 3).normalized()));
   r.markers = {Eigen::Vector3d(0.02, -1.0 / 30.0, -0.03), Eigen::Vector3d(0.05, 0.04, -0.03),
                Eigen::Vector3d(-0.08, 0.06, std::nextafter(0.01, 1.0))};
+  r.t_d = std::nextafter(0.0123, 1.0);
   r.params = mc::app::calibration_params(3, 5);
   const int n = static_cast<int>(r.params.size());
   Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n);
@@ -209,9 +210,12 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   EXPECT_TRUE(start.q_b_c.coeffs() == r.q_b_c.coeffs());
   ASSERT_EQ(start.features_c.size(), 3u);
   for (int i = 0; i < 3; ++i) expect_same(start.features_c[i], r.markers[i], "marker");
-  // The block of the camera pose and markers; the intrinsics' rows are not part of a start.
-  ASSERT_EQ(start.covariance.rows(), 15);
-  EXPECT_TRUE(start.covariance == r.covariance.topLeftCorner(15, 15));
+  // The block of the camera pose, markers and time offset; the intrinsics' rows are not part of a
+  // start.
+  EXPECT_TRUE(start.has_t_d);
+  EXPECT_EQ(start.t_d, r.t_d);
+  ASSERT_EQ(start.covariance.rows(), 16);
+  EXPECT_TRUE(start.covariance == r.covariance.topLeftCorner(16, 16));
 }
 
 TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {

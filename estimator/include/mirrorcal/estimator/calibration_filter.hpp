@@ -51,17 +51,26 @@ class CalibrationFilter {
       : config_(config),
         filter_(config.sigma_points),
         gravity_(config.gravity_n.cast<S>()),
-        fixed_{S(config.intrinsics.fu), S(config.intrinsics.fv), S(config.intrinsics.cu),
-               S(config.intrinsics.cv), S(config.intrinsics.skew)} {}
+        fixed_(config.intrinsics.template cast<S>()) {}
 
+  // A new estimate for the filter's present time (which reset leaves as it is).
   void reset(const State& x, const Covariance& p) { filter_.reset(x, p); }
-  // Linearise the k-th update's measurement at states[k] instead of at the estimate (nullptr: at
-  // the estimate): the filter becomes the Kalman filter of the measurements linearised along that
-  // trajectory, whose final estimate of the constant calibration is the batch solution of the
-  // linearised problem and whose covariance is what the data hold along the trajectory, whatever
-  // estimates it passed through (a Gauss-Newton step over the whole recording; sim_run.hpp).
-  void linearise_along(const State* states, std::size_t count) {
+  // The IMU signal at the time the estimate holds for: the loop's first sample, then every
+  // predict's end. Until it is known, frames are taken at t_cam + t_d with the rig at rest
+  // (Exposure is then the velocity alone).
+  void start_at(const ImuSample& s) {
+    now_ = s;
+    timed_ = true;
+  }
+  // Linearise the measurement of the frame stamped stamps_ns[k] at states[k] instead of at the
+  // estimate (stamps increasing; frames not listed, and all with nullptr, at the estimate): the
+  // filter becomes the Kalman filter of the measurements linearised along that trajectory, whose
+  // final estimate of the constant calibration is the batch solution of the linearised problem
+  // and whose covariance is what the data hold along the trajectory, whatever estimates it passed
+  // through (a Gauss-Newton step over the whole recording; sim_run.hpp).
+  void linearise_along(const State* states, const std::int64_t* stamps_ns, std::size_t count) {
     along_ = states;
+    along_stamps_ = stamps_ns;
     along_count_ = count;
     along_next_ = 0;
   }
@@ -73,6 +82,8 @@ class CalibrationFilter {
   UpdateResult update(const MarkerFrame<M>& frame);
 
   const State& state() const { return filter_.mean(); }
+  // A frame stamped t_cam_ns against the filter's time and the IMU signal there.
+  Exposure<S> exposure(std::int64_t t_cam_ns) const;
   const Covariance& covariance() const { return filter_.covariance(); }
   const CalibrationConfig& config() const { return config_; }
   const FilterCounters& counters() const { return counters_; }
@@ -96,9 +107,40 @@ class CalibrationFilter {
   Vec3<S> gravity_;
   Pinhole<S> fixed_;
   FilterCounters counters_{};
+  // The state to linearise the frame stamped t_ns at (linearise_along), or nullptr.
+  const State* linearisation_point(std::int64_t t_ns);
+
   const State* along_ = nullptr;
+  const std::int64_t* along_stamps_ = nullptr;
   std::size_t along_count_ = 0, along_next_ = 0;
+  ImuSample now_{};  // the IMU signal at the filter's time, if timed_
+  bool timed_ = false;
 };
+
+template <typename S, int M, int NK>
+const typename CalibrationFilter<S, M, NK>::State* CalibrationFilter<S, M, NK>::linearisation_point(
+    std::int64_t t_ns) {
+  if (along_ == nullptr) return nullptr;
+  while (along_next_ < along_count_ && along_stamps_[along_next_] < t_ns) ++along_next_;
+  if (along_next_ == along_count_ || along_stamps_[along_next_] != t_ns) return nullptr;
+  return &along_[along_next_++];
+}
+
+template <typename S, int M, int NK>
+Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
+  Exposure<S> e;
+  e.gravity_n = gravity_;
+  if (!timed_) {  // at t_cam + t_d, at rest
+    e.stamp_minus_filter_s = -filter_.mean().t_d;
+    e.accel = -(filter_.mean().q_n_b.conjugate() * gravity_) + filter_.mean().b_a;
+    e.gyro = filter_.mean().b_g;
+    return e;
+  }
+  e.stamp_minus_filter_s = S(static_cast<double>(t_cam_ns - now_.t_ns) * 1e-9);
+  e.gyro = now_.gyro.template cast<S>();
+  e.accel = now_.accel.template cast<S>();
+  return e;
+}
 
 // Only the IMU block [0, 15) moves: the 6 + 3M (+ NK) calibration states are constants. The mean
 // moves by propagate_imu (Runge-Kutta on the parabola through three samples when `before` is
@@ -140,6 +182,7 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
     return FilterStatus::kNonFinite;
   }
   filter_.reset(x, next);
+  start_at(s1);
   return FilterStatus::kOk;
 }
 
@@ -151,15 +194,15 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
   const Eigen::Matrix<S, 2 * M, 1> r =
       Eigen::Matrix<S, 2 * M, 1>::Constant(S(config_.pixel_sigma * config_.pixel_sigma));
   const Pinhole<S> fixed = fixed_;
+  const Exposure<S> exposed = exposure(frame.t_ns);
   const bool gate_on = counters_.updates >= config_.gate_after_frames;
   const UpdateResult res =
       filter_.template update<State::kMeasuredBegin, State::kMeasuredDim, 2, M>(
           [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
-            predict_markers(x, fixed, zp, ok);
+            predict_markers(x, fixed, exposed, zp, ok);
           },
           z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY),
-          along_ != nullptr && along_next_ < along_count_ ? &along_[along_next_] : nullptr);
-  if (along_ != nullptr) ++along_next_;
+          linearisation_point(frame.t_ns));
   if (gate_on && res.status == FilterStatus::kOk) {
     counters_.nis_sum += res.nis;
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);

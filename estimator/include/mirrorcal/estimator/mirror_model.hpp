@@ -4,7 +4,9 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <string>
 
 #include "mirrorcal/estimator/so3.hpp"
 
@@ -32,11 +34,71 @@ struct ImuNoise {
   double accel_random_walk = 3.0e-3;
 };
 
-// Pinhole intrinsics, in the state's order: u = fu x/z + skew y/z + cu, v = fv y/z + cv.
+// Lens distortion of the normalised image point (x, y) = (X/Z, Y/Z), as Kalibr and OpenCV define
+// it: radtan, the Brown-Conrady model of cv::projectPoints (k1, k2, p1, p2), or equidistant, the
+// fisheye model of cv::fisheye::projectPoints (k1..k4).
+enum class Distortion : std::uint8_t { kNone, kRadtan, kEquidistant };
+
+// Kalibr's name of a distortion model (camchain.yaml's distortion_model), and back. Files say
+// "radtan" with zero coefficients for kNone: the same camera, in a form every reader knows.
+inline const char* to_string(Distortion d) {
+  return d == Distortion::kRadtan        ? "radtan"
+         : d == Distortion::kEquidistant ? "equidistant"
+                                         : "none";
+}
+inline bool distortion_from_string(const std::string& name, Distortion& d) {
+  for (const Distortion c : {Distortion::kNone, Distortion::kRadtan, Distortion::kEquidistant})
+    if (name == to_string(c)) {
+      d = c;
+      return true;
+    }
+  return false;
+}
+
+// A camera: pinhole intrinsics, in the state's order, after the lens's distortion of the
+// normalised point: u = fu x_d + skew y_d + cu, v = fv y_d + cv. The distortion is known (from
+// camchain.yaml), not estimated.
 template <typename S>
 struct Pinhole {
   S fu, fv, cu, cv, skew;
+  Distortion distortion = Distortion::kNone;
+  std::array<S, 4> coeffs{};  // radtan: k1 k2 p1 p2; equidistant: k1 k2 k3 k4
+
+  template <typename T>
+  Pinhole<T> cast() const {
+    return {T(fu),
+            T(fv),
+            T(cu),
+            T(cv),
+            T(skew),
+            distortion,
+            {T(coeffs[0]), T(coeffs[1]), T(coeffs[2]), T(coeffs[3])}};
+  }
 };
+
+// The distorted normalised point of (x, y).
+template <typename S>
+Vec2<S> distort(const Pinhole<S>& k, S x, S y) {
+  const std::array<S, 4>& c = k.coeffs;
+  switch (k.distortion) {
+    case Distortion::kRadtan: {
+      const S r2 = x * x + y * y;
+      const S radial = S(1) + r2 * (c[0] + r2 * c[1]);
+      return Vec2<S>(x * radial + S(2) * c[2] * x * y + c[3] * (r2 + S(2) * x * x),
+                     y * radial + c[2] * (r2 + S(2) * y * y) + S(2) * c[3] * x * y);
+    }
+    case Distortion::kEquidistant: {
+      const S r = std::sqrt(x * x + y * y);
+      if (r < S(1e-9)) return Vec2<S>(x, y);  // theta_d / r -> 1 on the axis
+      const S theta = std::atan(r), t2 = theta * theta;
+      const S theta_d = theta * (S(1) + t2 * (c[0] + t2 * (c[1] + t2 * (c[2] + t2 * c[3]))));
+      return Vec2<S>(x, y) * (theta_d / r);
+    }
+    case Distortion::kNone:
+      break;
+  }
+  return Vec2<S>(x, y);
+}
 
 // The mirror images of the M markers seen in one frame (any subset).
 template <int M>
@@ -50,14 +112,14 @@ struct MarkerFrame {
 template <typename S>
 constexpr S kMinDepth = S(1e-3);
 
-// Pinhole projection; false when the point is not in front of the camera.
+// Projection through the lens; false when the point is not in front of the camera.
 template <typename S>
 bool project(const Pinhole<S>& k, const Vec3<S>& p_c, Vec2<S>& uv) {
   if (!(p_c.z() > kMinDepth<S>)) return false;
   const S inv_z = S(1) / p_c.z();
-  const S x = p_c.x() * inv_z, y = p_c.y() * inv_z;
-  uv.x() = k.fu * x + k.skew * y + k.cu;
-  uv.y() = k.fv * y + k.cv;
+  const Vec2<S> d = distort(k, p_c.x() * inv_z, p_c.y() * inv_z);
+  uv.x() = k.fu * d.x() + k.skew * d.y() + k.cu;
+  uv.y() = k.fv * d.y() + k.cv;
   return true;
 }
 
@@ -69,14 +131,14 @@ Vec3<S> mirror_image(const Mat3<S>& r_n_c, const Vec3<S>& p_n_c, const Vec3<S>& 
   return pi_c - (S(2) * height) * r_n_c.row(2).transpose();
 }
 
-// Calibration state: stage 1 has NK = 0 (21 + 3M error states); stage 2 adds the intrinsics
+// Calibration state: stage 1 has NK = 0 (22 + 3M error states); stage 2 adds the intrinsics
 // (NK = 5: fu, fv, cu, cv, skew; NK = 4 holds skew at the configured value).
 //
 // The error state is ordered so that the two structured operations touch contiguous blocks:
 // IMU propagation changes [v, b_a, b_g, p, theta] = [0, 15), the camera reads
-// [p, theta, p_b_c, phi, markers, intrinsics] = [9, kDim). Rotations are perturbed on the right
-// (body side): R_n_b = R^_n_b Exp(theta), R_b_c = R^_b_c Exp(phi), so phi is the rotation error
-// log(R_b_c,true^T R_b_c,est) up to sign, the figure the paper's tables report.
+// [p, theta, p_b_c, phi, markers, t_d, intrinsics] = [9, kDim). Rotations are perturbed on the
+// right (body side): R_n_b = R^_n_b Exp(theta), R_b_c = R^_b_c Exp(phi), so phi is the rotation
+// error log(R_b_c,true^T R_b_c,est) up to sign, the figure the paper's tables report.
 template <typename S, int M, int NK>
 struct MirrorState {
   static_assert(M >= 1, "at least one marker");
@@ -85,7 +147,7 @@ struct MirrorState {
   static constexpr int kMarkers = M;
   static constexpr int kIntrinsics = NK;
   static constexpr int kV = 0, kBa = 3, kBg = 6, kP = 9, kTheta = 12, kPbc = 15, kPhi = 18,
-                       kPi = 21, kK = 21 + 3 * M, kDim = 21 + 3 * M + NK;
+                       kPi = 21, kTd = 21 + 3 * M, kK = 22 + 3 * M, kDim = 22 + 3 * M + NK;
   static constexpr int kDynamicBegin = 0, kDynamicDim = 15;
   static constexpr int kMeasuredBegin = kP, kMeasuredDim = kDim - kP;
 
@@ -97,7 +159,10 @@ struct MirrorState {
   Vec3<S> p_b_c = Vec3<S>::Zero();  // camera position in b (m)
   Quat<S> q_b_c = Quat<S>::Identity();
   Eigen::Matrix<S, 3 * M, 1> markers = Eigen::Matrix<S, 3 * M, 1>::Zero();  // pi_i^c (m)
-  Eigen::Matrix<S, NK, 1> intrinsics = Eigen::Matrix<S, NK, 1>::Zero();     // fu fv cu cv [skew]
+  // The camera-IMU time offset (s), Kalibr's timeshift_cam_imu: a frame stamped t_cam shows the
+  // rig as it was at IMU time t_cam + t_d.
+  S t_d = S(0);
+  Eigen::Matrix<S, NK, 1> intrinsics = Eigen::Matrix<S, NK, 1>::Zero();  // fu fv cu cv [skew]
 
   Vec3<S> marker(int i) const { return markers.template segment<3>(3 * i); }
 
@@ -113,6 +178,7 @@ struct MirrorState {
     if constexpr (covers<B, L, kPhi, 3>())
       q_b_c = so3::boxplus<S>(q_b_c, d.template segment<3>(kPhi - B));
     add<B, L, kPi>(markers, d);
+    if constexpr (covers<B, L, kTd, 1>()) t_d += d(kTd - B);
     if constexpr (NK > 0) add<B, L, kK>(intrinsics, d);
   }
 
@@ -129,6 +195,7 @@ struct MirrorState {
     if constexpr (covers<B, L, kPhi, 3>())
       d.template segment<3>(kPhi - B) = so3::boxminus<S>(q_b_c, ref.q_b_c);
     sub<B, L, kPi>(markers, ref.markers, d);
+    if constexpr (covers<B, L, kTd, 1>()) d(kTd - B) = t_d - ref.t_d;
     if constexpr (NK > 0) sub<B, L, kK>(intrinsics, ref.intrinsics, d);
     return d;
   }
@@ -255,13 +322,44 @@ Eigen::Matrix<S, 15, 15> imu_process_noise(const ImuNoise& n, double dt) {
   return q;
 }
 
-// Camera pose in n from the IMU pose and the camera pose in b.
+// A frame's exposure against the filter's time: the frame is stamped stamp_minus_filter_s after
+// the filter's time t_f (seconds, either sign), and gyro and accel are the IMU signal at t_f. The
+// frame shows the rig at IMU time t_cam + t_d, shift = stamp_minus_filter_s + t_d after t_f. The
+// loop brings the filter to t_cam + t_d at the estimate (CalibrationLoop::step), so the shift is
+// zero at the mean and, in a sigma point, the time offset's deviation: short enough that the pose
+// there is the filter's moved on by the rates at t_f (Li & Mourikis 2014, as OpenVINS does).
+template <typename S>
+struct Exposure {
+  S stamp_minus_filter_s = S(0);
+  Vec3<S> gyro = Vec3<S>::Zero();   // rad/s, raw (the state's bias is removed here)
+  Vec3<S> accel = Vec3<S>::Zero();  // m/s^2, raw
+  Vec3<S> gravity_n = Vec3<S>::Zero();
+};
+
+// The IMU pose at the exposure: rotation by the bias-corrected rate over the shift, position by
+// the velocity and the navigation-frame acceleration (second order). A state's velocity and biases
+// are the filter's mean in every sigma point (the update samples [p, kDim)); the shift is zero at
+// the mean, so they enter h only at second order, and the mean is all they need.
 template <class State>
-void camera_pose(const State& x, Mat3<typename State::Scalar>& r_n_c,
-                 Vec3<typename State::Scalar>& p_n_c) {
-  const Mat3<typename State::Scalar> r_n_b = x.q_n_b.toRotationMatrix();
+void imu_pose_at_exposure(const State& x, const Exposure<typename State::Scalar>& e,
+                          Mat3<typename State::Scalar>& r_n_b, Vec3<typename State::Scalar>& p) {
+  using S = typename State::Scalar;
+  const S dt = e.stamp_minus_filter_s + x.t_d;
+  const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
+  r_n_b = (x.q_n_b * so3::exp<S>((e.gyro - x.b_g) * dt)).toRotationMatrix();
+  const Vec3<S> a_n = r0 * (e.accel - x.b_a) + e.gravity_n;
+  p = x.p + dt * x.v + (S(0.5) * dt * dt) * a_n;
+}
+
+// Camera pose in n at a frame's exposure, from the IMU pose there and the camera pose in b.
+template <class State>
+void camera_pose(const State& x, const Exposure<typename State::Scalar>& e,
+                 Mat3<typename State::Scalar>& r_n_c, Vec3<typename State::Scalar>& p_n_c) {
+  Mat3<typename State::Scalar> r_n_b;
+  Vec3<typename State::Scalar> p;
+  imu_pose_at_exposure(x, e, r_n_b, p);
   r_n_c = r_n_b * x.q_b_c.toRotationMatrix();
-  p_n_c = x.p + r_n_b * x.p_b_c;
+  p_n_c = p + r_n_b * x.p_b_c;
 }
 
 // The intrinsics a state implies: its own for stage 2, the configured ones otherwise.
@@ -278,17 +376,18 @@ Pinhole<S> intrinsics_of(const MirrorState<S, M, NK>& x, const Pinhole<S>& fixed
   return k;
 }
 
-// The predicted pixel of every marker flagged in ok; clears ok[i] for a marker whose mirror image
-// is not in front of the camera.
+// The predicted pixel of every marker flagged in ok, in a frame exposed at e; clears ok[i] for a
+// marker whose mirror image is not in front of the camera.
 template <class State>
 void predict_markers(const State& x, const Pinhole<typename State::Scalar>& fixed,
+                     const Exposure<typename State::Scalar>& e,
                      Eigen::Matrix<typename State::Scalar, 2 * State::kMarkers, 1>& z,
                      std::array<bool, State::kMarkers>& ok) {
   using S = typename State::Scalar;
   constexpr int M = State::kMarkers;
   Mat3<S> r_n_c;
   Vec3<S> p_n_c;
-  camera_pose(x, r_n_c, p_n_c);
+  camera_pose(x, e, r_n_c, p_n_c);
   const Pinhole<S> k = intrinsics_of(x, fixed);
   for (int i = 0; i < M; ++i) {
     if (!ok[i]) continue;

@@ -17,6 +17,7 @@ struct Prior {
   Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::array<Eigen::Vector3d, M> markers{};
+  double t_d = 0.0;  // camera-IMU time offset, timeshift_cam_imu (s)
   Pinhole<double> intrinsics{};
   // 1-sigma per axis (SI units; rotations in rad about the perturbation's axes).
   Eigen::Vector3d sigma_p = Eigen::Vector3d::Constant(0.02);
@@ -27,6 +28,7 @@ struct Prior {
   Eigen::Vector3d sigma_p_b_c = Eigen::Vector3d::Constant(0.01);
   Eigen::Vector3d sigma_rot_b_c = Eigen::Vector3d::Constant(0.035);
   std::array<Eigen::Vector3d, M> sigma_markers{};
+  double sigma_t_d = 0.02;  // a camera stamping its frames somewhere in the exposure and readout
   std::array<double, 5> sigma_intrinsics{100, 100, 100, 100, 100};  // fu fv cu cv skew (px)
 };
 
@@ -56,6 +58,8 @@ void initialise(const Prior<M>& pr, MirrorState<S, M, NK>& x,
     sigma.template segment<3>(X::kPi + 3 * i) =
         pr.sigma_markers[static_cast<std::size_t>(i)].template cast<S>();
   }
+  x.t_d = S(pr.t_d);
+  sigma(X::kTd) = S(pr.sigma_t_d);
   if constexpr (NK > 0) {
     const double k[5] = {pr.intrinsics.fu, pr.intrinsics.fv, pr.intrinsics.cu, pr.intrinsics.cv,
                          pr.intrinsics.skew};
@@ -85,6 +89,7 @@ void extend_with_intrinsics(
   x2.p_b_c = x1.p_b_c;
   x2.q_b_c = x1.q_b_c;
   x2.markers = x1.markers;
+  x2.t_d = x1.t_d;
   const double k[5] = {guess.fu, guess.fv, guess.cu, guess.cv, guess.skew};
   p2.setZero();
   p2.template topLeftCorner<N1, N1>() = p1;

@@ -28,9 +28,11 @@ struct LoopCounters {
   std::uint64_t imu_gaps = 0;
   std::uint64_t frames = 0;  // frames used in an update attempt
   std::uint64_t frames_without_markers = 0;
-  std::uint64_t frames_before_filter = 0;  // frames older than the filter's time: skipped
-  std::uint64_t frames_after_imu = 0;      // frames still pending when the IMU stream ended
-  std::uint64_t filter_failures = 0;       // predicts or updates refused with a numerical status
+  // frames exposed before the first IMU sample, or more than kMaxBackwardPeriods IMU periods
+  // before the filter's time: skipped
+  std::uint64_t frames_before_filter = 0;
+  std::uint64_t frames_after_imu = 0;  // frames still pending when the IMU stream ended
+  std::uint64_t filter_failures = 0;   // predicts or updates refused with a numerical status
 };
 
 enum class LoopEnd : std::uint8_t { kEndOfStream, kImuError, kMarkerError };
@@ -69,6 +71,13 @@ class CalibrationLoop {
   std::int64_t time_ns() const { return last_.t_ns; }
 
  private:
+  // How far back of the filter's time a frame's exposure may lie and still be used (IMU periods),
+  // and the largest time offset the loop believes (s).
+  static constexpr std::int64_t kMaxBackwardPeriods = 2;
+  static constexpr double kMaxTimeOffsetS = 1.0;
+
+  // The time offset's estimate, the frame's exposure minus its stamp (ns).
+  std::int64_t time_offset_ns() const;
   void propagate_to(const ImuSample& next);
   void apply_frame(const MarkerFrame<M>& frame);
   hal::SourceStatus poll_markers();
@@ -86,6 +95,7 @@ class CalibrationLoop {
   LoopEnd end_ = LoopEnd::kEndOfStream;
   bool started_ = false;
   bool markers_ended_ = false;
+  std::int64_t start_ns_ = 0;  // the first IMU sample's time, where the filter's prior holds
   ImuSample last_{};  // the IMU sample at the filter's current time (possibly interpolated)
   // The IMU signal between measured samples is the parabola through the last three (estimator's
   // imu_signal_at): measured_ is the newest measured sample at or before last_, before_ the one

@@ -1,6 +1,9 @@
 // Definitions of CalibrationLoop; included only where a configuration is instantiated.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/firmware/marker_prediction.hpp"
 
@@ -82,6 +85,8 @@ bool CalibrationLoop<S, M, NK>::step() {
   if (!started_) {  // the filter's prior holds at the first sample's time
     started_ = true;
     last_ = measured_ = sample;
+    start_ns_ = sample.t_ns;
+    filter_.start_at(sample);
     return true;
   }
   if (sample.t_ns <= last_.t_ns) {
@@ -108,16 +113,24 @@ bool CalibrationLoop<S, M, NK>::step() {
       if (ms != hal::SourceStatus::kOk) break;
       pending_valid_ = true;
     }
-    if (pending_.t_ns > sample.t_ns) break;  // the IMU has not reached it yet
+    // The frame shows the rig at IMU time t_cam + t_d: the filter goes to that time at the time
+    // offset's estimate, and the update's Exposure covers the rest.
+    const std::int64_t exposed_ns = pending_.t_ns + time_offset_ns();
+    if (exposed_ns > sample.t_ns) break;  // the IMU has not reached it yet
     pending_valid_ = false;
     if (config_.profiler != nullptr) config_.profiler->begin_frame();
-    if (pending_.t_ns < last_.t_ns) {
+    // Before the filter's time by a little (the offset's estimate moved back past it): the
+    // Exposure extrapolates back; by more, the frame is out of order or older than the first IMU
+    // sample.
+    if (exposed_ns < start_ns_ ||
+        exposed_ns < last_.t_ns - kMaxBackwardPeriods * config_.imu_period_ns) {
       ++counters_.frames_before_filter;
       if (config_.profiler != nullptr) config_.profiler->end_frame();
       continue;
     }
-    propagate_to(imu_signal_at(has_before_ ? &before_ : nullptr, measured_, sample, pending_.t_ns));
-    if (identifier_ != nullptr && predict_marker_pixels(filter_, prediction_))
+    propagate_to(imu_signal_at(has_before_ ? &before_ : nullptr, measured_, sample,
+                               std::max(exposed_ns, last_.t_ns)));
+    if (identifier_ != nullptr && predict_marker_pixels(filter_, pending_.t_ns, prediction_))
       identifier_->relabel(prediction_, pending_);
     apply_frame(pending_);
   }
@@ -126,6 +139,13 @@ bool CalibrationLoop<S, M, NK>::step() {
   measured_ = sample;
   has_before_ = !gap;
   return true;
+}
+
+template <typename S, int M, int NK>
+std::int64_t CalibrationLoop<S, M, NK>::time_offset_ns() const {
+  const double t_d = static_cast<double>(filter_.state().t_d);
+  if (!(std::abs(t_d) < kMaxTimeOffsetS)) return 0;  // NaN or beyond any camera: not trusted
+  return std::llround(t_d * 1e9);
 }
 
 template <typename S, int M, int NK>

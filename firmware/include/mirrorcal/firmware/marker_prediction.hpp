@@ -13,9 +13,10 @@
 
 namespace mirrorcal::firmware {
 
-// False if the covariance of the measured block cannot be factored (then no prediction).
+// For a frame stamped t_cam_ns. False if the covariance of the measured block cannot be factored
+// (then no prediction).
 template <class Filter>
-bool predict_marker_pixels(const Filter& filter,
+bool predict_marker_pixels(const Filter& filter, std::int64_t t_cam_ns,
                            hal::MarkerPrediction<Filter::State::kMarkers>& out) {
   using State = typename Filter::State;
   using S = typename State::Scalar;
@@ -23,13 +24,13 @@ bool predict_marker_pixels(const Filter& filter,
   constexpr int B = State::kMeasuredBegin, L = State::kMeasuredDim;
   using Pixels = Eigen::Matrix<S, 2 * M, 1>;
 
-  const Pinhole<double>& k = filter.config().intrinsics;
-  const Pinhole<S> fixed{S(k.fu), S(k.fv), S(k.cu), S(k.cv), S(k.skew)};
+  const Pinhole<S> fixed = filter.config().intrinsics.template cast<S>();
   const State& mean = filter.state();
+  const Exposure<S> exposed = filter.exposure(t_cam_ns);
   std::array<bool, M> ok;
   ok.fill(true);
   Pixels z0 = Pixels::Zero();
-  predict_markers(mean, fixed, z0, ok);
+  predict_markers(mean, fixed, exposed, z0, ok);
 
   const Eigen::Matrix<S, L, L> p_block = filter.covariance().template block<L, L>(B, B);
   const Eigen::LLT<Eigen::Matrix<S, L, L>> llt(p_block);
@@ -44,8 +45,8 @@ bool predict_marker_pixels(const Filter& filter,
     plus.template boxplus_block<B, L>(d);
     minus.template boxplus_block<B, L>(Eigen::Matrix<S, L, 1>(-d));
     Pixels zp = Pixels::Zero(), zm = Pixels::Zero();
-    predict_markers(plus, fixed, zp, ok);
-    predict_markers(minus, fixed, zm, ok);
+    predict_markers(plus, fixed, exposed, zp, ok);
+    predict_markers(minus, fixed, exposed, zm, ok);
     for (int i = 0; i < M; ++i) {
       const Eigen::Matrix<S, 2, 1> a =
           S(0.5) * (zp.template segment<2>(2 * i) - zm.template segment<2>(2 * i));

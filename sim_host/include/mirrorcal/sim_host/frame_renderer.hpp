@@ -102,8 +102,11 @@ class RenderedFrameSource final : public hal::FrameSource {
   hal::FrameCounters counters_{};
 };
 
-// Frame j's timestamp in a scenario (the same times simulate() gives its marker frames).
+// When frame j of a scenario was exposed, in the IMU's clock.
 std::int64_t frame_time_ns(const Scenario& s, std::uint64_t j);
+// The timestamp the camera gives frame j (the one simulate() gives its marker frames): its
+// exposure less the rig's time offset (t_imu = t_cam + t_d).
+std::int64_t frame_stamp_ns(const Scenario& s, std::uint64_t j);
 // How many frames a scenario's run has.
 std::uint64_t frame_count(const Scenario& s);
 

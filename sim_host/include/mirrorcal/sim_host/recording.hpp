@@ -47,6 +47,7 @@ struct RecordingPriors {
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   Eigen::Vector3d sigma_rot_b_c = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3d> features_c, sigma_features_c;
+  double t_d = 0.0, sigma_t_d = 0.02;  // timeshift_cam_imu and its 1-sigma (s)
   bool estimate_intrinsics = false;
   bool hold_skew = false;  // estimate fu fv cu cv only; skew stays at camchain.yaml's (0 if absent)
   Pinhole<double> intrinsics_guess{};        // default: camchain.yaml's
@@ -59,6 +60,7 @@ struct RecordingTruth {
   Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> features_c;
+  double t_d = 0.0;  // timeshift_cam_imu (s); 0 in files written before it was simulated
   Pinhole<double> intrinsics{};
 };
 
@@ -108,12 +110,15 @@ bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingT
 
 // Where a calibration's camera pose and markers start instead of mirrorcal.yaml's guesses
 // (`calibrate --from`): an earlier calibration's estimate, with the covariance of that block, as
-// its mirrorcal-result.yaml holds them (SI units; rows p_b_c, rotation error, markers).
+// its mirrorcal-result.yaml holds them (SI units; rows p_b_c, rotation error, markers, and the
+// time offset in results that have one).
 struct CalibrationStart {
   Eigen::Vector3d p_b_c = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> features_c;
-  Eigen::MatrixXd covariance;  // (6 + 3M) square, symmetric positive definite
+  bool has_t_d = false;        // results written before the time offset was estimated have none
+  double t_d = 0.0;            // timeshift_cam_imu (s)
+  Eigen::MatrixXd covariance;  // (6 + 3M, + 1 with the time offset) square, positive definite
 };
 
 // Reads a mirrorcal-result.yaml (path, or a folder holding one) as a start for a calibration with
@@ -152,6 +157,8 @@ bool to_prior(const RecordingPriors& r, Prior<M>& p, std::string& error) {
     p.markers[i] = r.features_c[i];
     p.sigma_markers[i] = r.sigma_features_c[i];
   }
+  p.t_d = r.t_d;
+  p.sigma_t_d = r.sigma_t_d;
   p.intrinsics = r.intrinsics_guess;
   p.sigma_intrinsics = r.sigma_intrinsics;
   return true;
@@ -179,6 +186,8 @@ RecordingPriors from_prior(const Prior<M>& p, const Eigen::Vector3d& gravity_n, 
   r.sigma_rot_b_c = p.sigma_rot_b_c;
   r.features_c.assign(p.markers.begin(), p.markers.end());
   r.sigma_features_c.assign(p.sigma_markers.begin(), p.sigma_markers.end());
+  r.t_d = p.t_d;
+  r.sigma_t_d = p.sigma_t_d;
   r.estimate_intrinsics = estimate_intrinsics;
   r.hold_skew = hold_skew;
   r.intrinsics_guess = p.intrinsics;

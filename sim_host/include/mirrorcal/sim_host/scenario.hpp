@@ -19,6 +19,9 @@ struct Rig {
   Eigen::Quaterniond q_b_c = Eigen::Quaterniond::Identity();
   std::vector<Eigen::Vector3d> markers;  // pi_i^c (m)
   Pinhole<double> intrinsics{};
+  // The camera-IMU time offset (s), Kalibr's timeshift_cam_imu: a frame stamped t_cam shows the
+  // rig as it was at IMU time t_cam + t_d.
+  double t_d = 0.0;
   // The image: u in [0, width), v in [0, height), origin at the top-left pixel's centre
   // (DESIGN.md).
   int width = 640, height = 480;
@@ -29,6 +32,7 @@ struct Priors {
   double p_b_c = 0.01;
   double rot_b_c = 2.0 * M_PI / 180.0;  // per axis of the rotation error vector
   double marker = 0.10;
+  double time_offset = 0.02;                                            // s
   std::array<double, 5> intrinsics{100.0, 100.0, 100.0, 100.0, 100.0};  // fu fv cu cv skew (px)
   double position = 0.02;                                               // IMU position in n (m)
   double velocity = 0.05;                                               // m/s
@@ -88,6 +92,10 @@ Scenario paper_scenario();
 // pace, with the priors such a user has: every draw of the family the README's "The `random`
 // family" describes. Deterministic in seed.
 Scenario random_scenario(std::uint64_t seed);
+
+// Gives the scenario's camera a lens: radtan with EuRoC cam0's coefficients (k1 = -0.283, barrel),
+// equidistant with a fisheye's (the issue tracker's), or none.
+void set_lens(Scenario& s, Distortion model);
 
 // Scenario by name: "paper" (seed ignored) or "random" (drawn from seed); false if unknown.
 bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out);

@@ -77,6 +77,9 @@ Prior<M> draw_prior(const Scenario& s, const SimData& data, std::uint64_t seed) 
   pr.sigma_p_b_c.setConstant(ps.p_b_c);
   pr.sigma_rot_b_c.setConstant(ps.rot_b_c);
   pr.sigma_intrinsics = ps.intrinsics;
+  pr.t_d =
+      s.truth.t_d + ps.time_offset * n01(rng);  // drawn last: the draws above stay as they were
+  pr.sigma_t_d = ps.time_offset;
   (void)data;
   return pr;
 }
