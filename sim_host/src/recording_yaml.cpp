@@ -349,26 +349,23 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
       !optional_vec3("sigma_b_g", r.sigma_b_g, Eigen::Vector3d::Constant(0.002), "0.002 rad/s",
                      true))
     return false;
-  // The time offset, in seconds (the loop believes at most 1 s: a value beyond it is in the
-  // wrong unit).
-  if (y.has("timeshift_cam_imu")) {
-    if (!y.number("timeshift_cam_imu", r.t_d)) return false;
-    if (!(std::abs(r.t_d) < 1.0))
-      return y.fail(y.node("timeshift_cam_imu"), "timeshift_cam_imu",
-                    "must lie within +-1 s (it is in seconds: t_imu = t_cam + timeshift_cam_imu)");
-  } else {
-    r.t_d = 0.0;
-    y.note_default("timeshift_cam_imu", "0 s");
-  }
-  if (y.has("sigma_timeshift_cam_imu")) {
-    if (!y.positive("sigma_timeshift_cam_imu", r.sigma_t_d)) return false;
-    if (!(r.sigma_t_d < 1.0))
-      return y.fail(y.node("sigma_timeshift_cam_imu"), "sigma_timeshift_cam_imu",
-                    "must be below 1 s (it is in seconds)");
-  } else {
-    r.sigma_t_d = 0.02;
-    y.note_default("sigma_timeshift_cam_imu", "0.02 s");
-  }
+  // The time offset and its 1-sigma, in seconds: beyond 1 s (more than the loop believes) a value
+  // is in the wrong unit.
+  const auto optional_seconds = [&](const char* key, double& v, double def, const char* shown,
+                                    bool sigma) {
+    if (!y.has(key)) {
+      v = def;
+      y.note_default(key, shown);
+      return true;
+    }
+    if (!(sigma ? y.positive(key, v) : y.number(key, v))) return false;
+    return std::abs(v) < 1.0 ||
+           y.fail(y.node(key), key,
+                  "must lie within +-1 s (seconds: t_imu = t_cam + timeshift_cam_imu)");
+  };
+  if (!optional_seconds("timeshift_cam_imu", r.t_d, 0.0, "0 s", false) ||
+      !optional_seconds("sigma_timeshift_cam_imu", r.sigma_t_d, 0.02, "0.02 s", true))
+    return false;
   if (y.has("pixel_sigma")) {
     if (!y.positive("pixel_sigma", r.pixel_sigma)) return false;
   } else {

@@ -349,6 +349,15 @@ TEST_F(BadInput, CameraModelThatIsNotPinhole) {
   expect_error({dir() + "/camchain.yaml:", "cam0.camera_model: 'omni' is not supported"});
 }
 
+// A time offset in milliseconds where seconds are meant, or a non-positive sigma, is refused.
+TEST_F(BadInput, TimeOffsetsInTheWrongUnitAreRefused) {
+  set_key(priors(), "timeshift_cam_imu", "timeshift_cam_imu: 12");
+  expect_error({priors() + ":", "timeshift_cam_imu: must lie within +-1 s"});
+  set_key(priors(), "timeshift_cam_imu", "timeshift_cam_imu: 0.012");
+  set_key(priors(), "sigma_timeshift_cam_imu", "sigma_timeshift_cam_imu: 0");
+  expect_error({priors() + ":", "sigma_timeshift_cam_imu: must be > 0"});
+}
+
 // Kalibr's pinhole lenses are read (radtan, equidistant); anything else is refused with a reason.
 TEST_F(BadInput, UnknownLensesAndBadCoefficientsAreRefused) {
   const auto with_lens = [&](const std::string& model, const std::string& coeffs) {
