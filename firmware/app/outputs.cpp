@@ -102,7 +102,7 @@ bool innovations_too_large(const CalibrationResult& r) {
 }
 
 bool suspect(const CalibrationResult& r) {
-  return gated_too_many(r) || innovations_too_large(r);
+  return gated_too_many(r) || innovations_too_large(r) || r.filter_failures > 0;
 }
 
 bool path_gained_false_information(const CalibrationResult& r) {
@@ -113,6 +113,14 @@ std::string convergence_warning(const CalibrationResult& r) {
   const double seen = markers_offered(r);
   if (seen == 0.0) return "no marker was seen: nothing was calibrated beyond the priors";
   char text[480];
+  if (r.filter_failures > 0 && !gated_too_many(r)) {
+    std::snprintf(text, sizeof text,
+                  "the filter refused %llu predicts or updates in the last pass (of %d) as "
+                  "numerically broken (a covariance no longer positive definite): the result is "
+                  "not a calibration. Start from better guesses and check the recording.",
+                  static_cast<unsigned long long>(r.filter_failures), r.passes);
+    return text;
+  }
   if (!gated_too_many(r) && !innovations_too_large(r)) {
     if (!path_gained_false_information(r)) return {};
     std::snprintf(text, sizeof text,

@@ -29,7 +29,8 @@ struct CalibrationResult {
   // Over the last pass: markers used, gated, and those the model could not predict at the
   // estimate (their mirror image not in front of the camera).
   std::uint64_t markers_used = 0, markers_gated = 0, markers_invalid = 0;
-  int passes = 1;  // passes over the data (sim_run.hpp)
+  std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
+  int passes = 1;                     // passes over the data (sim_run.hpp)
   // What the filter saw itself, for the self-check (no truth needed): the normalised innovation
   // squared per degree of freedom over the last pass once the gate was on.
   double nis_per_dof = 0.0;
@@ -59,7 +60,8 @@ bool gated_too_many(const CalibrationResult& r);
 // the 8 runs worse than 10 sigma), not merely over-confident ones, which fit as well as good runs.
 constexpr double kSuspectNisExcess = 0.05;
 bool innovations_too_large(const CalibrationResult& r);
-// Either: the result should not be trusted, and another pass is worth making.
+// Any of the above, or a filter that refused predicts or updates as numerically broken (none does
+// in a good run): the result should not be trusted, and another pass is worth making.
 bool suspect(const CalibrationResult& r);
 // The filter's own covariance was well below the one linearised along its final estimate: its
 // path through early estimates gathered information the data do not hold, and its estimate is
@@ -97,6 +99,7 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.nis_per_dof = r.nis_dof > 0 ? f.counters().nis_sum / double(r.nis_dof) : 0.0;
   r.markers_gated = f.counters().markers_gated;
   r.markers_invalid = f.counters().markers_invalid;
+  r.filter_failures = f.counters().failures;
   return r;
 }
 

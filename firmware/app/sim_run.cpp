@@ -272,6 +272,9 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
           refined.filter_counters.failures > 0)
         break;
+      // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
+      // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
+      if (suspect(refined.result) && !suspect(run.result)) break;
       refined.first_frame = run.first_frame;
       refined.result.passes = free_passes;
       run = std::move(refined);
