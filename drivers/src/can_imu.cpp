@@ -100,6 +100,9 @@ bool Assembler::add(const Part& part, std::int64_t t_ns, ImuSample& sample) {
     dropped_counter_ = c;
     have_ = 0;
   };
+  // A stream joined between a sample's first and last frame: its rest is not a loss.
+  if (!synced_ && m != 0) return false;
+  synced_ = true;
   if (m == 0) {
     if (have_ > 0) drop(pending_counter_);
     have_ = 1;

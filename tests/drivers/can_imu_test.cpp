@@ -152,6 +152,29 @@ TEST(Mm710, LostFramesAreCountedPerMessageAndTheirSamplesDropped) {
   EXPECT_EQ(n.incomplete_samples, 3u);
 }
 
+// A receiver that starts listening after a sample's first frame went by (the sensor was already
+// sending) has lost nothing: the rest of that sample is skipped, the next one delivered.
+TEST(Mm710, AStreamJoinedInsideASampleLosesNothing) {
+  for (int joined_at = 1; joined_at < 3; ++joined_at) {
+    Feed feed;
+    mm710::Frame f[3];
+    mm710::encode(sample_of(0.1, 0.2, 0.3, 1, 2, 3), 7, f);
+    for (int m = joined_at; m < 3; ++m) {
+      mm710::Part p;
+      mm710::decode(f[m], p);
+      ImuSample s;
+      EXPECT_FALSE(feed.a.add(p, 0, s));
+    }
+    for (std::uint8_t c = 8; c < 12; ++c) feed.sample(c);
+    feed.sample(12, 1);  // a real loss after that is still counted (by the next TX2's counter)
+    feed.sample(13);
+    EXPECT_EQ(feed.delivered, 5);
+    EXPECT_EQ(feed.a.counters().incomplete_samples, 1u) << "joined at TX" << joined_at + 1;
+    EXPECT_EQ(feed.a.counters().lost_frames[1], 1u);
+    EXPECT_EQ(feed.a.counters().lost_frames[0], 0u);
+  }
+}
+
 TEST(Mm710, AWholeLostSampleShowsInEveryMessagesCounter) {
   Feed feed;
   feed.sample(0);
