@@ -29,4 +29,9 @@ void sleep_until_ns(std::int64_t t_ns) {
   }
 }
 
+Timebase& monotonic_timebase() {
+  static MonotonicClock clock;
+  return clock;
+}
+
 }  // namespace mirrorcal::drivers

@@ -45,8 +45,12 @@ const Scale& covering(const Scale (&scales)[N], double wanted, const std::string
 
 }  // namespace
 
-RegisterImu::RegisterImu(std::unique_ptr<RegisterBus> bus, hal::DataReadyLine* drdy, bool pace)
-    : bus_(std::move(bus)), drdy_(drdy), pace_(pace) {}
+RegisterImu::RegisterImu(std::unique_ptr<RegisterBus> bus, hal::DataReadyLine* drdy,
+                         const RegisterImuConfig& config)
+    : time_(config.timebase != nullptr ? *config.timebase : monotonic_timebase()),
+      bus_(std::move(bus)),
+      drdy_(drdy),
+      pace_(config.pace) {}
 
 void RegisterImu::expect_who_am_i(std::uint8_t reg, std::uint8_t expected, const char* part) {
   std::uint8_t id = 0;
@@ -111,9 +115,9 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
   wait_ns_ = 0;
   if (drdy_ != nullptr) {
     const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
-    const std::int64_t wait_start = monotonic_ns();
+    const std::int64_t wait_start = time_.now_ns();
     const hal::SourceStatus s = drdy_->wait_rising(timeout_ns, t_ns);
-    wait_ns_ = monotonic_ns() - wait_start;
+    wait_ns_ = time_.now_ns() - wait_start;
     if (s == hal::SourceStatus::kNotReady) {
       error_.set("%s: stops answering: no data-ready edge for %lld ms", bus_->device().c_str(),
                  static_cast<long long>(timeout_ns / 1'000'000));
@@ -129,9 +133,9 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
     // No sample is read twice (a part whose clock runs slower than the host's), and each is timed
     // within an eighth of a period of its arrival.
     const std::int64_t poll_ns = std::max<std::int64_t>(period_ns_ / 8, 50'000);
-    const std::int64_t start = monotonic_ns();
+    const std::int64_t start = time_.now_ns();
     if (next_due_ns_ < start - period_ns_) next_due_ns_ = start;  // the first, or fell behind
-    sleep_until_ns(next_due_ns_);
+    time_.sleep_until_ns(next_due_ns_);
     const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
     for (;;) {
       std::uint8_t status = 0;
@@ -140,7 +144,7 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
                    bus_->device().c_str(), status_register_, std::strerror(errno));
         return hal::SourceStatus::kError;
       }
-      t_ns = monotonic_ns();
+      t_ns = time_.now_ns();
       if ((status & status_ready_mask_) != 0) break;
       if (t_ns - start > timeout_ns) {
         error_.set("%s: stops answering: no new sample for %lld ms (status 0x%02x at 0x%02x)",
@@ -148,12 +152,12 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
                    status_register_);
         return hal::SourceStatus::kError;
       }
-      sleep_until_ns(t_ns + poll_ns);
+      time_.sleep_until_ns(t_ns + poll_ns);
     }
     wait_ns_ = t_ns - start;
     next_due_ns_ = t_ns + period_ns_ - 2 * poll_ns;
   } else {
-    t_ns = monotonic_ns();
+    t_ns = time_.now_ns();
   }
   // The part counts on: samples further apart than a period are samples nobody read.
   if (drdy_ != nullptr || pace_) {
@@ -206,7 +210,7 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
 
 Mpu6050::Mpu6050(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& config,
                  hal::DataReadyLine* drdy)
-    : RegisterImu(std::move(bus), drdy, config.pace) {
+    : RegisterImu(std::move(bus), drdy, config) {
   using namespace mpu6050;
   const std::string& device = this->bus().device();
   // Register map sections 4.4 and 4.5: FS_SEL / AFS_SEL codes and sensitivities.
@@ -241,7 +245,7 @@ Mpu6050::Mpu6050(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& conf
 
 Icm42688::Icm42688(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& config,
                    hal::DataReadyLine* drdy)
-    : RegisterImu(std::move(bus), drdy, config.pace) {
+    : RegisterImu(std::move(bus), drdy, config) {
   using namespace icm42688;
   const std::string& device = this->bus().device();
   // Data sheet sections 3.1, 3.2 and 14 (GYRO_CONFIG0, ACCEL_CONFIG0).
@@ -269,14 +273,14 @@ Icm42688::Icm42688(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& co
   write_checked(kBankSel, 0);  // the part may have been left in another bank
   expect_who_am_i(kWhoAmI, kWhoAmIValue, "ICM-42688-P");
   write_checked(kDeviceConfig, 0x01);  // soft reset; registers usable after 1 ms
-  sleep_until_ns(monotonic_ns() + 1'000'000);
+  time_.sleep_until_ns(time_.now_ns() + 1'000'000);
   write_verified(kGyroConfig0, static_cast<std::uint8_t>(g.code << 5 | odr->code));
   write_verified(kAccelConfig0, static_cast<std::uint8_t>(a.code << 5 | odr->code));
-  write_checked(kIntConfig, 0x03);              // INT1 push-pull, active high, pulsed
-  write_checked(kIntConfig1, 0x00);             // INT_ASYNC_RESET cleared, as the data sheet asks
-  write_checked(kIntSource0, 0x08);             // UI_DRDY_INT1_EN
-  write_checked(kPwrMgmt0, 0x0F);               // gyro and accelerometer in low-noise mode
-  sleep_until_ns(monotonic_ns() + 45'000'000);  // gyro start-up (no access for 200 us either)
+  write_checked(kIntConfig, 0x03);   // INT1 push-pull, active high, pulsed
+  write_checked(kIntConfig1, 0x00);  // INT_ASYNC_RESET cleared, as the data sheet asks
+  write_checked(kIntSource0, 0x08);  // UI_DRDY_INT1_EN
+  write_checked(kPwrMgmt0, 0x0F);    // gyro and accelerometer in low-noise mode
+  time_.sleep_until_ns(time_.now_ns() + 45'000'000);  // gyro start-up (no access for 200 us either)
   std::uint8_t power = 0;
   if (!read_register(kPwrMgmt0, power) || power != 0x0F)
     throw DriverError(Fault::kWrongKind, device + ": PWR_MGMT0 reads " + hex(power) +

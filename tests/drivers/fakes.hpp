@@ -21,6 +21,27 @@ namespace mirrorcal::drivers::test {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kG = 9.80665;
 
+// The time of the drivers under test and of the fake parts alike: it moves only when a driver
+// sleeps or a bus transfer takes its time, so pacing, timeouts and late loops give the same
+// results on any machine, however loaded (the drivers take it as their RegisterImuConfig's
+// timebase).
+class FakeTimebase final : public Timebase {
+ public:
+  std::int64_t now_ns() override { return now_ns_; }
+  void sleep_until_ns(std::int64_t t_ns) override { now_ns_ = t_ns > now_ns_ ? t_ns : now_ns_; }
+  void advance(std::int64_t ns) { now_ns_ += ns; }
+
+ private:
+  std::int64_t now_ns_ = 1'000'000'000;
+};
+inline FakeTimebase& test_time() {
+  static FakeTimebase time;
+  return time;
+}
+// What one register transfer lasts on the fake buses: a few bytes at 400 kHz I2C, or SPI with
+// its chip-select set-up.
+constexpr std::int64_t kTransferNs = 50'000;
+
 inline void put_be16(std::uint8_t* p, double counts) {
   const long v = std::lround(std::fmax(-32768.0, std::fmin(32767.0, counts)));
   const auto u = static_cast<std::uint16_t>(static_cast<std::int16_t>(v));
@@ -41,7 +62,7 @@ class FakeMpu6050 final : public RegisterBus {
   // the last read (INT_RD_CLEAR: any read clears it); last_data_sample is the sample the last
   // read of the data registers got, so tests can tell samples apart.
   double clock_scale = 1.0;
-  std::int64_t start_ns = monotonic_ns();
+  std::int64_t start_ns = test_time().now_ns();
   std::int64_t last_data_sample = -1;
   std::int64_t frozen_sample = -1;  // >= 0: the part stopped sampling at this sample
   double gyro_dps[3] = {0, 0, 0};
@@ -59,6 +80,7 @@ class FakeMpu6050 final : public RegisterBus {
   }
   bool read(std::uint8_t first, std::uint8_t* out, std::size_t n) override {
     if (dead) return fail();
+    test_time().advance(kTransferNs);
     ++reads;
     largest_read = n > largest_read ? n : largest_read;
     refresh();
@@ -73,7 +95,8 @@ class FakeMpu6050 final : public RegisterBus {
   std::int64_t sample_number() const {
     if (frozen_sample >= 0) return frozen_sample;
     const double period_ns = 1e6 * (1 + regs_[0x19]) / clock_scale;
-    return static_cast<std::int64_t>(static_cast<double>(monotonic_ns() - start_ns) / period_ns);
+    return static_cast<std::int64_t>(static_cast<double>(test_time().now_ns() - start_ns) /
+                                     period_ns);
   }
   const std::string& device() const override { return name_; }
 
@@ -112,6 +135,7 @@ class FakeIcm42688 final : public SpiTransport {
   std::uint8_t bank = 0;
 
   bool transfer(const std::uint8_t* tx, std::uint8_t* rx, std::size_t n) override {
+    test_time().advance(kTransferNs);
     ++transfers;
     first_bytes.push_back(tx[0]);
     rx[0] = 0xff;
@@ -170,7 +194,8 @@ class FakeIcm42688 final : public SpiTransport {
       default:
         break;
     }
-    return static_cast<std::int64_t>(static_cast<double>(monotonic_ns() - start_ns_) * hz * 1e-9);
+    return static_cast<std::int64_t>(static_cast<double>(test_time().now_ns() - start_ns_) * hz *
+                                     1e-9);
   }
   std::uint8_t reg(int a) const {
     if (a == 0x2D && bank == 0) return sample_number() != read_sample_ ? 0x08 : 0x00;
@@ -210,12 +235,12 @@ class FakeIcm42688 final : public SpiTransport {
       put_be16(&bank0[static_cast<std::size_t>(0x25 + 2 * i)], gyro_on ? gyro_dps[i] * gl : -32768);
     }
   }
-  std::int64_t start_ns_ = monotonic_ns(), read_sample_ = -1;
+  std::int64_t start_ns_ = test_time().now_ns(), read_sample_ = -1;
   std::string name_ = "fake-icm42688";
 };
 
 // A data-ready line whose rising edges are scripted: times popped in order; none left -> timeout;
-// broken -> the line itself fails (its chip went away). Each wait sleeps for delay_ns first, as a
+// broken -> the line itself fails (its chip went away). Each wait lasts delay_ns first, as for a
 // part whose next sample is that far away.
 class FakeDataReady final : public hal::DataReadyLine {
  public:
@@ -227,7 +252,7 @@ class FakeDataReady final : public hal::DataReadyLine {
   hal::SourceStatus wait_rising(std::int64_t timeout_ns, std::int64_t& t_ns) override {
     last_timeout_ns = timeout_ns;
     if (broken) return hal::SourceStatus::kError;
-    if (delay_ns > 0) sleep_until_ns(monotonic_ns() + delay_ns);
+    test_time().advance(delay_ns);
     if (edges.empty()) return hal::SourceStatus::kNotReady;
     t_ns = edges.front();
     edges.pop_front();

@@ -74,6 +74,7 @@ TEST(DriversNoHeap, CanImuReadPath) {
 TEST(DriversNoHeap, RegisterImuReadPaths) {
   RegisterImuConfig config;
   config.pace = false;
+  config.timebase = &test::test_time();
   auto i2c = std::make_unique<test::FakeMpu6050>();
   test::FakeMpu6050& mpu_part = *i2c;
   Mpu6050 mpu(std::move(i2c), config);

@@ -25,6 +25,7 @@ RegisterImuConfig unpaced(double rate_hz = 200, double gyro_dps = 500, double ac
   c.gyro_range_dps = gyro_dps;
   c.accel_range_g = accel_g;
   c.pace = false;
+  c.timebase = &test::test_time();
   return c;
 }
 
@@ -164,9 +165,9 @@ TEST(Mpu6050, TheWaitForTheDataReadyEdgeIsReportedApartFromTheRead) {
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   EXPECT_LT(imu.wait_ns(), 50'000'000) << "the edge was there at once";
   drdy.delay_ns = 50'000'000;  // the next edge is 50 ms away
-  const std::int64_t t0 = monotonic_ns();
+  const std::int64_t t0 = test::test_time().now_ns();
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
-  const std::int64_t elapsed = monotonic_ns() - t0;
+  const std::int64_t elapsed = test::test_time().now_ns() - t0;
   EXPECT_GE(imu.wait_ns(), drdy.delay_ns);
   EXPECT_LE(imu.wait_ns(), elapsed);
 }
@@ -310,7 +311,7 @@ TEST(Mpu6050, PacedWithoutDataReadyCountsTheSamplesALateLoopMissed) {
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   const std::int64_t before = part.last_data_sample;
-  sleep_until_ns(monotonic_ns() + 62'000'000);  // the loop is busy for 3.1 periods
+  test::test_time().advance(62'000'000);  // the loop is busy for 3.1 periods
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   const std::int64_t skipped = part.last_data_sample - before - 1;
   EXPECT_EQ(skipped, 2);
@@ -324,14 +325,14 @@ TEST(Mpu6050, PacedWithoutDataReadyAPartThatStopsSamplingIsNamed) {
   ImuSample s;
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   part.frozen_sample = part.sample_number();  // no new sample: data-ready never set again
-  std::int64_t t0 = monotonic_ns();
+  std::int64_t t0 = test::test_time().now_ns();
   hal::SourceStatus st = imu.next(s);
   if (st == hal::SourceStatus::kOk) {  // the one that came since the last read
-    t0 = monotonic_ns();
+    t0 = test::test_time().now_ns();
     st = imu.next(s);
   }
   EXPECT_EQ(st, hal::SourceStatus::kError);
-  EXPECT_GE(monotonic_ns() - t0, 200'000'000);
+  EXPECT_GE(test::test_time().now_ns() - t0, 200'000'000);
   EXPECT_NE(
       std::string(imu.error()).find("fake-mpu6050: stops answering: no new sample for 200 ms"),
       std::string::npos)
@@ -345,17 +346,17 @@ TEST(Icm42688, PacedByTheClockWithoutDataReady) {
   // The samples are due at absolute times from the first call on (a late one is caught up, not
   // the schedule shifted), so measure from before that call: a loaded machine may wake the first
   // read late, but no sample comes before its time.
-  const std::int64_t start = monotonic_ns();
+  const std::int64_t start = test::test_time().now_ns();
   ASSERT_EQ(imu.next(first), hal::SourceStatus::kOk);
   for (int i = 0; i < 20; ++i) ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   // 20 new samples of the part's 1 kHz: never faster than its rate (the first may have been in
   // its registers already, the 20th came at least 19 periods later).
   EXPECT_GE(s.t_ns - start, 19 * 1'000'000);
   // The poll for the part's status is the wait, and a read lasts no longer than its wait and more.
-  const std::int64_t t0 = monotonic_ns();
+  const std::int64_t t0 = test::test_time().now_ns();
   ASSERT_EQ(imu.next(s), hal::SourceStatus::kOk);
   EXPECT_GT(imu.wait_ns(), 0);
-  EXPECT_LE(imu.wait_ns(), monotonic_ns() - t0);
+  EXPECT_LE(imu.wait_ns(), test::test_time().now_ns() - t0);
 }
 
 }  // namespace

@@ -12,9 +12,21 @@ std::int64_t realtime_ns();
 // Sleeps until CLOCK_MONOTONIC reaches t_ns (at once if it has).
 void sleep_until_ns(std::int64_t t_ns);
 
-class MonotonicClock final : public hal::Clock {
+// What a driver paces and times out by: CLOCK_MONOTONIC on the board; tests give a fake one, so
+// that pacing, timeouts and late loops are tested without depending on the machine's scheduling.
+class Timebase : public hal::Clock {
+ public:
+  // Returns once now_ns() has reached t_ns (at once if it has).
+  virtual void sleep_until_ns(std::int64_t t_ns) = 0;
+};
+
+class MonotonicClock final : public Timebase {
  public:
   std::int64_t now_ns() override { return monotonic_ns(); }
+  void sleep_until_ns(std::int64_t t_ns) override { drivers::sleep_until_ns(t_ns); }
 };
+
+// The board's CLOCK_MONOTONIC, shared (it has no state).
+Timebase& monotonic_timebase();
 
 }  // namespace mirrorcal::drivers

@@ -15,6 +15,7 @@
 #include <memory>
 
 #include "mirrorcal/drivers/driver_error.hpp"
+#include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/register_bus.hpp"
 #include "mirrorcal/hal/lines.hpp"
 #include "mirrorcal/hal/sources.hpp"
@@ -28,6 +29,7 @@ struct RegisterImuConfig {
   double gyro_range_dps = 500;  // the smallest full scale covering this is chosen
   double accel_range_g = 4;     // likewise
   bool pace = true;  // without a data-ready line: poll the part's data-ready status each period
+  Timebase* timebase = nullptr;  // what it paces and times out by; nullptr: CLOCK_MONOTONIC
 };
 
 struct RegisterImuCounters {
@@ -50,7 +52,8 @@ class RegisterImu : public hal::ImuSource {
   const RegisterBus& bus() const { return *bus_; }
 
  protected:
-  RegisterImu(std::unique_ptr<RegisterBus> bus, hal::DataReadyLine* drdy, bool pace);
+  RegisterImu(std::unique_ptr<RegisterBus> bus, hal::DataReadyLine* drdy,
+              const RegisterImuConfig& config);
 
   // Reads WHO_AM_I; throws kNotAnswering for a silent bus, kWrongKind for another part.
   void expect_who_am_i(std::uint8_t reg, std::uint8_t expected, const char* part);
@@ -73,6 +76,7 @@ class RegisterImu : public hal::ImuSource {
   // The value a part reads on every axis when it has no data (sensors off), if it has one.
   bool no_data_value_valid_ = false;
   std::int16_t no_data_value_ = 0;
+  Timebase& time_;  // what it paces and times out by
 
  private:
   bool read_with_retry(std::uint8_t first, std::uint8_t* out, std::size_t n);
