@@ -58,6 +58,23 @@ std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_
   return v;
 }
 
+namespace {
+
+// A rolling shutter's line delay: seconds per row, the whole frame read within
+// kMaxSimulatedReadoutS.
+double line_delay_option(const Options& o, const std::string& key, const sim::Scenario& s) {
+  const std::string text = o.get(key, "");
+  char* end = nullptr;
+  const double line_delay = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0' || !(line_delay >= 0.0) ||
+      !(line_delay * s.truth.height <= kMaxSimulatedReadoutS))
+    fail("--" + key + ": '" + text + "' is not seconds per row (a " +
+         std::to_string(s.truth.height) + "-row readout within 0.1 s; 30 us is 3e-5)");
+  return line_delay;
+}
+
+}  // namespace
+
 sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
   sim::Scenario s;
   const std::string name = o.get("scenario", "paper");
@@ -73,6 +90,11 @@ sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
            std::to_string(kMaxSimulatedTimeshiftS).substr(0, 3) + " s");
     s.truth.t_d = t_d;
   }
+  // --line-delay S: a rolling shutter that reads each row S seconds after the one above;
+  // --filter-line-delay S: the line delay the filter is told, if not the true one.
+  if (o.flag("line-delay")) s.truth.intrinsics.line_delay_s = line_delay_option(o, "line-delay", s);
+  if (o.flag("filter-line-delay"))
+    s.told_line_delay_s = line_delay_option(o, "filter-line-delay", s);
   // --distortion MODEL: the camera's lens (sim::lens_of: EuRoC cam0's radtan, or a fisheye).
   if (o.flag("distortion")) {
     const std::string name = o.get("distortion", "");

@@ -45,8 +45,11 @@ std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_
 
 // The scenario named by --scenario (default "paper"); the random family's draw for seed. With
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
-// --distortion MODEL, the camera has that lens (sim::set_lens).
+// --distortion MODEL, the camera has that lens (sim::set_lens); with --line-delay S, a rolling
+// shutter reading each row S seconds after the one above (a whole frame within
+// kMaxSimulatedReadoutS).
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
+constexpr double kMaxSimulatedReadoutS = 0.1;
 sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
 
 // Creates --out (or def) and returns it.

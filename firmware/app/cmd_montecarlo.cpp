@@ -189,10 +189,11 @@ void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_
 }  // namespace
 
 int cmd_montecarlo(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2,
-                          {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma",
-                           "spot-noise", "passes", "timeshift", "distortion"},
-                          {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames"});
+  const Options o =
+      parse(argc, argv, 2,
+            {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
+             "passes", "timeshift", "distortion", "line-delay", "filter-line-delay"},
+            {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames"});
   const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew"),
              one_stage = o.flag("one-stage");
   if ((hold_skew || one_stage) && !intrinsics)

@@ -122,8 +122,8 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
 }  // namespace
 
 int cmd_record(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario", "seed",      "out",
-                                         "config",   "timeshift", "distortion"};
+  std::vector<std::string> with_value = {"scenario",  "seed",       "out",       "config",
+                                         "timeshift", "distortion", "line-delay"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   const Options o = parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage"});

@@ -21,10 +21,11 @@
 namespace mirrorcal::app {
 
 int cmd_sim(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario", "seed",        "out",
-                                         "format",   "pixel-sigma", "spot-noise",
-                                         "passes",   "timeshift",   "distortion"},
-                           flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage"};
+  std::vector<std::string>
+      with_value = {"scenario",         "seed",   "out",       "format",     "pixel-sigma",
+                    "spot-noise",       "passes", "timeshift", "distortion", "line-delay",
+                    "filter-line-delay"},
+      flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   const Options o = parse(argc, argv, 2, with_value, flags);

@@ -22,6 +22,8 @@ const std::vector<Command>& commands() {
        "              t_imu = t_cam + S; default 0, the random family draws one in +-30 ms)\n"
        "              [--distortion radtan|equidistant]  (the camera's lens: EuRoC cam0's\n"
        "              radtan, or a fisheye; default none)\n"
+       "              [--line-delay S]  (a rolling shutter reading each row S seconds after the\n"
+       "              one above, camchain.yaml's line_delay; default 0: a global shutter)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III;\n"
        "              --hold-skew: skew 0; --one-stage: everything at once from one minute)\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
@@ -35,7 +37,9 @@ const std::vector<Command>& commands() {
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper|random] [--out DIR]\n"
-       "              [--no-plots] [--timeshift S] [--distortion MODEL]  (as sim)\n"
+       "              [--no-plots] [--timeshift S] [--distortion MODEL] [--line-delay S]\n"
+       "              (as sim) [--filter-line-delay S]  (the line delay the filter is told;\n"
+       "              default the true one: what an unmodelled rolling shutter does)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n"
        "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
        "              [--pixel-sigma PX]  (as sim)\n",
@@ -43,7 +47,7 @@ const std::vector<Command>& commands() {
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
        "              --out DIR [--scenario paper|random] [--seed N] [--timeshift S]\n"
-       "              [--distortion MODEL]  (as sim)\n"
+       "              [--distortion MODEL] [--line-delay S]  (as sim)\n"
        "              [--intrinsics [--hold-skew]]\n"
        "              [--two-stage [--hold-skew]]  (DIR/stage1 and DIR/stage2 of sim "
        "--intrinsics)\n"

@@ -73,6 +73,8 @@ bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
                                                                       : r.intrinsics.distortion),
                d[0], d[1], d[2], d[3]);
   std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
+  std::fprintf(o, "  line_delay: %.9g  # s per row (rolling shutter); 0: global shutter\n",
+               r.intrinsics.line_delay_s);
   std::fprintf(o, "  timeshift_cam_imu: %.9f\n  T_cam_imu:\n", r.t_d);
   write_matrix_rows(o, t_cam_imu(r), "  ");
   return finish(f, path, error);
@@ -178,6 +180,8 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
                to_string(r.intrinsics.distortion));
   std::fprintf(o, "distortion_coeffs: [%.17g, %.17g, %.17g, %.17g]\n", r.intrinsics.coeffs[0],
                r.intrinsics.coeffs[1], r.intrinsics.coeffs[2], r.intrinsics.coeffs[3]);
+  std::fprintf(o, "line_delay: %.17g  # s per row, held as camchain.yaml gave it\n",
+               r.intrinsics.line_delay_s);
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);

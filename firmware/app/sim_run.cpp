@@ -15,6 +15,7 @@ CalibrationConfig scenario_config(const sim::Scenario& s) {
   c.imu = s.imu;
   c.pixel_sigma = s.pixel_sigma;
   c.intrinsics = s.truth.intrinsics;
+  if (s.told_line_delay_s) c.intrinsics.line_delay_s = *s.told_line_delay_s;
   return c;
 }
 

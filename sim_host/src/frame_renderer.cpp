@@ -16,8 +16,8 @@ constexpr std::uint64_t kSpotStream = 0x53504f54ull << 32;  // "SPOT", xor the f
 
 }  // namespace
 
-// Frames are exposed from camera_offset_s on, and both their exposures and their stamps lie
-// within the IMU's [0, duration_s] (the stamps are t_d earlier than the exposures).
+// Frames are exposed from camera_offset_s on, and both their exposures (every row's) and their
+// stamps lie within the IMU's [0, duration_s] (the stamps are t_d earlier than the exposures).
 std::int64_t frame_time_ns(const Scenario& s, std::uint64_t j) {
   const double first = s.camera_offset_s + std::max(0.0, s.truth.t_d);
   return std::llround((first + static_cast<double>(j) / s.camera_rate_hz) * 1e9);
@@ -29,7 +29,8 @@ std::int64_t frame_stamp_ns(const Scenario& s, std::uint64_t j) {
 
 std::uint64_t frame_count(const Scenario& s) {
   const double first = s.camera_offset_s + std::max(0.0, s.truth.t_d);
-  const double last = s.duration_s - std::max(0.0, -s.truth.t_d);
+  const double readout = s.truth.intrinsics.line_delay_s * s.truth.height;  // rolling shutter
+  const double last = s.duration_s - std::max(0.0, -s.truth.t_d) - readout;
   return static_cast<std::uint64_t>(std::floor((last - first) * s.camera_rate_hz)) + 1;
 }
 
@@ -119,7 +120,6 @@ void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::ui
 
 void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
   drawn_.clear();
-  const Kinematics kin = kinematics(scenario_.motion, static_cast<double>(t_ns) * 1e-9);
   const auto m = scenario_.truth.markers.size();
   truth.t_ns = t_ns;
   truth.visible.assign(m, false);
@@ -131,7 +131,7 @@ void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
   for (std::size_t i = 0; i < m; ++i) {
     const double du = n01(rng), dv = n01(rng);
     Eigen::Vector2d uv;
-    if (!true_pixel(scenario_, kin.p, kin.q_n_b, static_cast<int>(i), uv)) continue;
+    if (!true_pixel(scenario_, t_ns, static_cast<int>(i), uv)) continue;
     uv += config_.spot_noise_px * Eigen::Vector2d(du, dv);
     truth.visible[i] = true;
     truth.uv[i] = uv;

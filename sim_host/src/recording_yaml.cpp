@@ -236,6 +236,22 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
          y.positive("update_rate", out.imu_rate_hz);
 }
 
+// A rolling shutter's line_delay (s per row, default 0: a global shutter). Real sensors read a
+// row in 5-100 us; a whole frame's readout beyond 0.1 s is no camera (or microseconds given as
+// seconds).
+bool parse_line_delay(const YamlMap& cam, SensorInfo& out) {
+  double& line_delay = out.intrinsics.line_delay_s;
+  line_delay = 0.0;
+  if (!cam.has("line_delay")) return true;
+  if (!cam.number("line_delay", line_delay)) return false;
+  if (!(line_delay >= 0.0 && line_delay * out.height <= 0.1))
+    return cam.fail(cam.node("line_delay"), "line_delay",
+                    "must be seconds per row, from 0 (global shutter) to a readout of 0.1 s over "
+                    "the image's " +
+                        std::to_string(out.height) + " rows");
+  return true;
+}
+
 bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
                          std::vector<std::string>& notes, std::string& error) {
   YamlMap top(file, error, &notes), cam(file, error, &notes);
@@ -289,7 +305,7 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
   // radtan with zero coefficients (how Kalibr and we write an undistorted camera) is no lens.
   if (d == Distortion::kRadtan && c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0)
     d = Distortion::kNone;
-  return true;
+  return parse_line_delay(cam, out);
 }
 
 bool parse_priors_yaml(std::string_view text, const std::string& file,
@@ -413,6 +429,8 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   cam += std::string("  distortion_model: ") + lens_name(s.intrinsics.distortion) + "\n";
   cam += "  distortion_coeffs: " + list(s.intrinsics.coeffs.data(), 4) + "\n";
   cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
+  cam +=
+      "  line_delay: " + number(s.intrinsics.line_delay_s) + "  # s per row; 0: global shutter\n";
   cam += "  rostopic: /cam0/image_raw\n";
   return write_text(dir + "/imu.yaml", imu, error) &&
          write_text(dir + "/camchain.yaml", cam, error);

@@ -13,8 +13,12 @@ std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream) {
   return z ^ (z >> 31);
 }
 
-bool true_pixel(const Scenario& s, const Eigen::Vector3d& p_n_b, const Eigen::Quaterniond& q_n_b,
-                int marker, Eigen::Vector2d& uv) {
+namespace {
+
+// The true pixel of marker i with the IMU at (p_n_b, q_n_b), wherever it falls; false if the
+// mirror shows nothing there.
+bool project_marker(const Scenario& s, const Eigen::Vector3d& p_n_b,
+                    const Eigen::Quaterniond& q_n_b, int marker, Eigen::Vector2d& uv) {
   const Rig& rig = s.truth;
   const Eigen::Matrix3d r_n_b = q_n_b.toRotationMatrix();
   const Eigen::Matrix3d r_n_c = r_n_b * rig.q_b_c.toRotationMatrix();
@@ -22,8 +26,24 @@ bool true_pixel(const Scenario& s, const Eigen::Vector3d& p_n_b, const Eigen::Qu
   const Eigen::Vector3d& pi = rig.markers[static_cast<std::size_t>(marker)];
   // The marker itself must be on the reflective side, else the mirror shows nothing.
   if ((r_n_c * pi + p_n_c).z() <= 0.0 || p_n_c.z() <= 0.0) return false;
-  if (!project<double>(rig.intrinsics, mirror_image<double>(r_n_c, p_n_c, pi), uv)) return false;
-  return uv.x() >= 0.0 && uv.x() < rig.width && uv.y() >= 0.0 && uv.y() < rig.height;
+  return project<double>(rig.intrinsics, mirror_image<double>(r_n_c, p_n_c, pi), uv);
+}
+
+}  // namespace
+
+bool true_pixel(const Scenario& s, std::int64_t exposure_ns, int marker, Eigen::Vector2d& uv) {
+  const double t0 = static_cast<double>(exposure_ns) * 1e-9;
+  const double line_delay = s.truth.intrinsics.line_delay_s;
+  Kinematics kin = kinematics(s.motion, t0);
+  if (!project_marker(s, kin.p, kin.q_n_b, marker, uv)) return false;
+  // A rolling shutter reads the row the marker lands on line_delay * row later: the row where the
+  // rig's motion by then puts it, a fixed point that three steps find to far below a
+  // micropixel (the row moves a fraction line_delay * |dv/dt| < 0.1 of its error per step).
+  for (int step = 0; step < 3 && line_delay != 0.0; ++step) {
+    kin = kinematics(s.motion, t0 + line_delay * uv.y());
+    if (!project_marker(s, kin.p, kin.q_n_b, marker, uv)) return false;
+  }
+  return uv.x() >= 0.0 && uv.x() < s.truth.width && uv.y() >= 0.0 && uv.y() < s.truth.height;
 }
 
 SimData simulate(const Scenario& s, std::uint64_t seed) {
@@ -66,11 +86,10 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
   for (std::uint64_t j = 0; j < n_frames; ++j) {
     ObservedFrame f;
     f.t_ns = frame_stamp_ns(s, j);
-    const Kinematics kin = kinematics(s.motion, static_cast<double>(frame_time_ns(s, j)) * 1e-9);
     for (int i = 0; i < m; ++i) {
       Eigen::Vector2d uv;
       const double du = n01(rng_cam), dv = n01(rng_cam);  // drawn always: streams stay aligned
-      if (!true_pixel(s, kin.p, kin.q_n_b, i, uv)) {
+      if (!true_pixel(s, frame_time_ns(s, j), i, uv)) {
         ++d.markers_out_of_image;
         continue;
       }

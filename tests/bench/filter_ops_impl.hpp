@@ -43,7 +43,7 @@ class FilterOpsOf final : public FilterOps {
     std::array<bool, M> ok;
     ok.fill(true);
     predict_markers(x, Pinhole<S>{S(833.33), S(833.33), S(322), S(248), S(0)},
-                    prepared_.exposure(frame_.t_ns), z, ok);
+                    prepared_.exposure(frame_.t_ns), std::array<S, M>{}, z, ok);
     for (int i = 0; i < M; ++i) {
       frame_.seen[i] = ok[i];
       frame_.uv[i] = z.template segment<2>(2 * i).template cast<double>() + Eigen::Vector2d(1, -1);

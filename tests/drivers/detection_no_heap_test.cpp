@@ -86,7 +86,7 @@ TEST(DetectionNoHeap, PollPredictAndRelabelDoNotAllocate) {
     mc::test::AllocCounter armed;
     int frames_done = 0, predicted = 0;
     while (source.poll(frame) == mc::hal::SourceStatus::kOk) {
-      if (mc::firmware::predict_marker_pixels(filter, frame.t_ns, prediction)) {
+      if (mc::firmware::predict_marker_pixels(filter, frame, prediction)) {
         ++predicted;
         source.relabel(prediction, frame);
       }

@@ -71,6 +71,11 @@ TEST(Campaign, TenRunsOfThePaperScenarioMeetTheBar) {
   expect_campaign_meets_bar("", 16);  // p, rotation, 3 markers, time offset
 }
 
+// A rolling shutter reading a row every 30 us (14 ms a frame), known from camchain.yaml.
+TEST(Campaign, TenRunsThroughARollingShutterMeetTheBar) {
+  expect_campaign_meets_bar("--line-delay 3e-5", 16);
+}
+
 // Stage 2 (Table III): the intrinsics too, from guesses 100 px off.
 TEST(Campaign, TenRunsOfStageTwoMeetTheBar) {
   expect_campaign_meets_bar("--intrinsics", 21);

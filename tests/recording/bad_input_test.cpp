@@ -376,6 +376,26 @@ TEST_F(BadInput, UnknownLensesAndBadCoefficientsAreRefused) {
   expect_error({dir() + "/camchain.yaml:", "given without a distortion_model"});
 }
 
+// A rolling shutter's line_delay is seconds per row: microseconds given as seconds, or a negative
+// delay, are refused; a real one is read.
+TEST_F(BadInput, LineDelaysInTheWrongUnitAreRefused) {
+  const auto with_line_delay = [&](const std::string& value) {
+    auto l = lines_of(dir() + "/camchain.yaml");
+    for (auto& s : l)
+      if (s.find("line_delay") != std::string::npos) s = "  line_delay: " + value;
+    write_lines(dir() + "/camchain.yaml", l);
+  };
+  with_line_delay("30");
+  expect_error({dir() + "/camchain.yaml:", "cam0.line_delay: must be seconds per row"});
+  with_line_delay("-3e-5");
+  expect_error({dir() + "/camchain.yaml:", "cam0.line_delay: must be seconds per row"});
+  with_line_delay("3e-5");
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  EXPECT_EQ(r.sensors.intrinsics.line_delay_s, 3e-5);
+}
+
 TEST_F(BadInput, TruthFileThatIsDamaged) {
   spit(dir() + "/truth.yaml", "p_b_c: [0.01, 0.02]\n");
   expect_error({dir() + "/truth.yaml:1:", "p_b_c: expected a list of 3 numbers"});

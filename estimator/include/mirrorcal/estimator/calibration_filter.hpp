@@ -60,6 +60,7 @@ class CalibrationFilter {
   // (Exposure is then the velocity alone).
   void start_at(const ImuSample& s) {
     now_ = s;
+    gyro_rate_.setZero();
     timed_ = true;
   }
   // Linearise the measurement of the frame stamped stamps_ns[k] at states[k] instead of at the
@@ -114,6 +115,9 @@ class CalibrationFilter {
   const std::int64_t* along_stamps_ = nullptr;
   std::size_t along_count_ = 0, along_next_ = 0;
   ImuSample now_{};  // the IMU signal at the filter's time, if timed_
+  // The gyro signal's derivative there: over the last predict's interval, whose end the signal's
+  // parabola gave (imu_signal_at), so a short interval does not amplify the noise.
+  Vec3<S> gyro_rate_ = Vec3<S>::Zero();
   bool timed_ = false;
 };
 
@@ -138,6 +142,7 @@ Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
   }
   e.stamp_minus_filter_s = S(static_cast<double>(t_cam_ns - now_.t_ns) * 1e-9);
   e.gyro = now_.gyro.template cast<S>();
+  e.gyro_rate = gyro_rate_;
   e.accel = now_.accel.template cast<S>();
   return e;
 }
@@ -182,7 +187,9 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
     return FilterStatus::kNonFinite;
   }
   filter_.reset(x, next);
-  start_at(s1);
+  now_ = s1;
+  timed_ = true;
+  if (dt > 0.0) gyro_rate_ = ((s1.gyro - s0.gyro) / dt).template cast<S>();
   return FilterStatus::kOk;
 }
 
@@ -195,11 +202,12 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
       Eigen::Matrix<S, 2 * M, 1>::Constant(S(config_.pixel_sigma * config_.pixel_sigma));
   const Pinhole<S> fixed = fixed_;
   const Exposure<S> exposed = exposure(frame.t_ns);
+  const std::array<S, M> readout = marker_readout_s(fixed, frame);
   const bool gate_on = counters_.updates >= config_.gate_after_frames;
   const UpdateResult res =
       filter_.template update<State::kMeasuredBegin, State::kMeasuredDim, 2, M>(
           [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
-            predict_markers(x, fixed, exposed, zp, ok);
+            predict_markers(x, fixed, exposed, readout, zp, ok);
           },
           z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY),
           linearisation_point(frame.t_ns));

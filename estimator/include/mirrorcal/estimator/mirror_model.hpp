@@ -55,14 +55,18 @@ inline bool distortion_from_string(const std::string& name, Distortion& d) {
   return false;
 }
 
-// A camera: pinhole intrinsics, in the state's order, after the lens's distortion of the
-// normalised point: u = fu x_d + skew y_d + cu, v = fv y_d + cv. The distortion is known (from
-// camchain.yaml), not estimated.
+// A camera as Kalibr models one: projection, lens and shutter. Pinhole intrinsics, in the state's
+// order, after the lens's distortion of the normalised point: u = fu x_d + skew y_d + cu,
+// v = fv y_d + cv. The distortion and the shutter are known (from camchain.yaml), not estimated.
 template <typename S>
 struct Pinhole {
   S fu, fv, cu, cv, skew;
   Distortion distortion = Distortion::kNone;
   std::array<S, 4> coeffs{};  // radtan: k1 k2 p1 p2; equidistant: k1 k2 k3 k4
+  // A rolling shutter reads row v line_delay_s * v after row 0, which the frame's stamp is for
+  // (Kalibr's RollingShutter: the temporal offset of a keypoint is line delay times its row).
+  // 0: a global shutter.
+  S line_delay_s = S(0);
 
   template <typename T>
   Pinhole<T> cast() const {
@@ -72,7 +76,8 @@ struct Pinhole {
             T(cv),
             T(skew),
             distortion,
-            {T(coeffs[0]), T(coeffs[1]), T(coeffs[2]), T(coeffs[3])}};
+            {T(coeffs[0]), T(coeffs[1]), T(coeffs[2]), T(coeffs[3])},
+            T(line_delay_s)};
   }
 };
 
@@ -328,25 +333,31 @@ Eigen::Matrix<S, 15, 15> imu_process_noise(const ImuNoise& n, double dt) {
 // loop brings the filter to t_cam + t_d at the estimate (CalibrationLoop::step), so the shift is
 // zero at the mean and, in a sigma point, the time offset's deviation: short enough that the pose
 // there is the filter's moved on by the rates at t_f (Li & Mourikis 2014, as OpenVINS does).
+// A rolling shutter reads each marker's row later (predict_markers): milliseconds from the filter's
+// time even at the mean, over which the rate's change matters on a rig tilting at 2 Hz (0.17 px
+// at 30 us per row without it), so the gyro's rate of change comes along.
 template <typename S>
 struct Exposure {
   S stamp_minus_filter_s = S(0);
-  Vec3<S> gyro = Vec3<S>::Zero();   // rad/s, raw (the state's bias is removed here)
-  Vec3<S> accel = Vec3<S>::Zero();  // m/s^2, raw
+  Vec3<S> gyro = Vec3<S>::Zero();       // rad/s, raw (the state's bias is removed here)
+  Vec3<S> gyro_rate = Vec3<S>::Zero();  // rad/s^2, the gyro signal's derivative
+  Vec3<S> accel = Vec3<S>::Zero();      // m/s^2, raw
   Vec3<S> gravity_n = Vec3<S>::Zero();
 };
 
-// The IMU pose at the exposure: rotation by the bias-corrected rate over the shift, position by
-// the velocity and the navigation-frame acceleration (second order). A state's velocity and biases
-// are the filter's mean in every sigma point (the update samples [p, kDim)); the shift is zero at
-// the mean, so they enter h only at second order, and the mean is all they need.
+// The IMU pose at the exposure: rotation by the bias-corrected rate, moved on by its derivative,
+// over the shift; position by the velocity and the navigation-frame acceleration (second order).
+// A state's velocity and biases are the filter's mean in every sigma point (the update samples
+// [p, kDim)); the shift is milliseconds at most, so their errors enter h only at second order,
+// and the mean is all they need.
 template <class State>
 void imu_pose_at_exposure(const State& x, const Exposure<typename State::Scalar>& e,
                           Mat3<typename State::Scalar>& r_n_b, Vec3<typename State::Scalar>& p) {
   using S = typename State::Scalar;
   const S dt = e.stamp_minus_filter_s + x.t_d;
   const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
-  r_n_b = (x.q_n_b * so3::exp<S>((e.gyro - x.b_g) * dt)).toRotationMatrix();
+  r_n_b = (x.q_n_b * so3::exp<S>((e.gyro - x.b_g + (S(0.5) * dt) * e.gyro_rate) * dt))
+              .toRotationMatrix();
   const Vec3<S> a_n = r0 * (e.accel - x.b_a) + e.gravity_n;
   p = x.p + dt * x.v + (S(0.5) * dt * dt) * a_n;
 }
@@ -376,21 +387,57 @@ Pinhole<S> intrinsics_of(const MirrorState<S, M, NK>& x, const Pinhole<S>& fixed
   return k;
 }
 
-// The predicted pixel of every marker flagged in ok, in a frame exposed at e; clears ok[i] for a
-// marker whose mirror image is not in front of the camera.
+// The row the loop takes a frame at under a rolling shutter: the mean row of its markers (0 when
+// it has none), so that the model's extrapolation from the filter's time to each marker's row
+// (Exposure) is as short as it can be.
+template <int M>
+double readout_anchor_row(const MarkerFrame<M>& frame) {
+  double sum = 0.0;
+  int n = 0;
+  for (int i = 0; i < M; ++i)
+    if (frame.seen[i]) {
+      sum += frame.uv[i].y();
+      ++n;
+    }
+  return n > 0 ? sum / n : 0.0;
+}
+
+// When each marker of a frame was read out after the frame's stamp (s): a rolling shutter reads
+// row v line_delay_s * v after row 0 (all zero for a global shutter).
+template <typename S, int M>
+std::array<S, M> marker_readout_s(const Pinhole<S>& k, const MarkerFrame<M>& frame) {
+  std::array<S, M> t{};
+  if (k.line_delay_s == S(0)) return t;
+  for (int i = 0; i < M; ++i)
+    if (frame.seen[i]) t[i] = k.line_delay_s * S(frame.uv[i].y());
+  return t;
+}
+
+// The predicted pixel of every marker flagged in ok, in a frame exposed at e, marker i read out
+// readout_s[i] later (a rolling shutter; all zero for a global one); clears ok[i] for a marker
+// whose mirror image is not in front of the camera.
 template <class State>
 void predict_markers(const State& x, const Pinhole<typename State::Scalar>& fixed,
                      const Exposure<typename State::Scalar>& e,
+                     const std::array<typename State::Scalar, State::kMarkers>& readout_s,
                      Eigen::Matrix<typename State::Scalar, 2 * State::kMarkers, 1>& z,
                      std::array<bool, State::kMarkers>& ok) {
   using S = typename State::Scalar;
   constexpr int M = State::kMarkers;
   Mat3<S> r_n_c;
   Vec3<S> p_n_c;
-  camera_pose(x, e, r_n_c, p_n_c);
+  bool posed = false;
+  S posed_at = S(0);
   const Pinhole<S> k = intrinsics_of(x, fixed);
   for (int i = 0; i < M; ++i) {
     if (!ok[i]) continue;
+    if (!posed || readout_s[i] != posed_at) {  // a global shutter poses the camera once
+      Exposure<S> row = e;
+      row.stamp_minus_filter_s += readout_s[i];
+      camera_pose(x, row, r_n_c, p_n_c);
+      posed = true;
+      posed_at = readout_s[i];
+    }
     Vec2<S> uv;
     if (project<S>(k, mirror_image<S>(r_n_c, p_n_c, x.marker(i)), uv))
       z.template segment<2>(2 * i) = uv;

@@ -78,6 +78,8 @@ class CalibrationLoop {
 
   // The time offset's estimate, the frame's exposure minus its stamp (ns).
   std::int64_t time_offset_ns() const;
+  // A rolling shutter's readout of the frame's mean marker row after its stamp (ns; 0 global).
+  std::int64_t readout_ns(const MarkerFrame<M>& frame) const;
   void propagate_to(const ImuSample& next);
   void apply_frame(const MarkerFrame<M>& frame);
   hal::SourceStatus poll_markers();

@@ -113,9 +113,10 @@ bool CalibrationLoop<S, M, NK>::step() {
       if (ms != hal::SourceStatus::kOk) break;
       pending_valid_ = true;
     }
-    // The frame shows the rig at IMU time t_cam + t_d: the filter goes to that time at the time
-    // offset's estimate, and the update's Exposure covers the rest.
-    const std::int64_t exposed_ns = pending_.t_ns + time_offset_ns();
+    // The frame shows the rig at IMU time t_cam + t_d (a rolling shutter's rows later by their
+    // line delays): the filter goes to that time at the time offset's estimate and the mean row
+    // of the frame's markers, and the update's Exposure covers the rest.
+    const std::int64_t exposed_ns = pending_.t_ns + time_offset_ns() + readout_ns(pending_);
     if (exposed_ns > sample.t_ns) break;  // the IMU has not reached it yet
     pending_valid_ = false;
     if (config_.profiler != nullptr) config_.profiler->begin_frame();
@@ -130,7 +131,7 @@ bool CalibrationLoop<S, M, NK>::step() {
     }
     propagate_to(imu_signal_at(has_before_ ? &before_ : nullptr, measured_, sample,
                                std::max(exposed_ns, last_.t_ns)));
-    if (identifier_ != nullptr && predict_marker_pixels(filter_, pending_.t_ns, prediction_))
+    if (identifier_ != nullptr && predict_marker_pixels(filter_, pending_, prediction_))
       identifier_->relabel(prediction_, pending_);
     apply_frame(pending_);
   }
@@ -146,6 +147,13 @@ std::int64_t CalibrationLoop<S, M, NK>::time_offset_ns() const {
   const double t_d = static_cast<double>(filter_.state().t_d);
   if (!(std::abs(t_d) < kMaxTimeOffsetS)) return 0;  // NaN or beyond any camera: not trusted
   return std::llround(t_d * 1e9);
+}
+
+template <typename S, int M, int NK>
+std::int64_t CalibrationLoop<S, M, NK>::readout_ns(const MarkerFrame<M>& frame) const {
+  const double line_delay_s = filter_.config().intrinsics.line_delay_s;
+  if (line_delay_s == 0.0) return 0;
+  return std::llround(line_delay_s * readout_anchor_row(frame) * 1e9);
 }
 
 template <typename S, int M, int NK>

@@ -13,10 +13,11 @@
 
 namespace mirrorcal::firmware {
 
-// For a frame stamped t_cam_ns. False if the covariance of the measured block cannot be factored
-// (then no prediction).
+// For a frame of unlabelled spots (frame.seen and frame.uv as detected): every marker at the time
+// the loop took the frame at, the mean row of its spots under a rolling shutter. False if the
+// covariance of the measured block cannot be factored (then no prediction).
 template <class Filter>
-bool predict_marker_pixels(const Filter& filter, std::int64_t t_cam_ns,
+bool predict_marker_pixels(const Filter& filter, const MarkerFrame<Filter::State::kMarkers>& frame,
                            hal::MarkerPrediction<Filter::State::kMarkers>& out) {
   using State = typename Filter::State;
   using S = typename State::Scalar;
@@ -26,11 +27,13 @@ bool predict_marker_pixels(const Filter& filter, std::int64_t t_cam_ns,
 
   const Pinhole<S> fixed = filter.config().intrinsics.template cast<S>();
   const State& mean = filter.state();
-  const Exposure<S> exposed = filter.exposure(t_cam_ns);
+  const Exposure<S> exposed = filter.exposure(frame.t_ns);
+  std::array<S, M> readout;
+  readout.fill(fixed.line_delay_s * S(readout_anchor_row(frame)));
   std::array<bool, M> ok;
   ok.fill(true);
   Pixels z0 = Pixels::Zero();
-  predict_markers(mean, fixed, exposed, z0, ok);
+  predict_markers(mean, fixed, exposed, readout, z0, ok);
 
   const Eigen::Matrix<S, L, L> p_block = filter.covariance().template block<L, L>(B, B);
   const Eigen::LLT<Eigen::Matrix<S, L, L>> llt(p_block);
@@ -45,8 +48,8 @@ bool predict_marker_pixels(const Filter& filter, std::int64_t t_cam_ns,
     plus.template boxplus_block<B, L>(d);
     minus.template boxplus_block<B, L>(Eigen::Matrix<S, L, 1>(-d));
     Pixels zp = Pixels::Zero(), zm = Pixels::Zero();
-    predict_markers(plus, fixed, exposed, zp, ok);
-    predict_markers(minus, fixed, exposed, zm, ok);
+    predict_markers(plus, fixed, exposed, readout, zp, ok);
+    predict_markers(minus, fixed, exposed, readout, zm, ok);
     for (int i = 0; i < M; ++i) {
       const Eigen::Matrix<S, 2, 1> a =
           S(0.5) * (zp.template segment<2>(2 * i) - zm.template segment<2>(2 * i));

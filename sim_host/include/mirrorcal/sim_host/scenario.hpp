@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -76,6 +77,9 @@ struct Scenario {
   double duration_s = 60.0;
   double pixel_sigma = 1.0;
   Rig truth;
+  // The rolling shutter's line delay the filter is told (camchain.yaml's), when not the true one:
+  // what an unmodelled or mis-measured shutter does to a calibration.
+  std::optional<double> told_line_delay_s;
   Priors priors;
   Motion motion;
 };

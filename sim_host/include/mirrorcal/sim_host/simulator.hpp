@@ -33,9 +33,9 @@ struct SimData {
 // dropped when out of the image or not in front of the camera). Deterministic in seed.
 SimData simulate(const Scenario& s, std::uint64_t seed);
 
-// The true pixel of marker i at the given true IMU pose; false if not visible in the image.
-bool true_pixel(const Scenario& s, const Eigen::Vector3d& p_n_b, const Eigen::Quaterniond& q_n_b,
-                int marker, Eigen::Vector2d& uv);
+// The true pixel of marker i in the frame whose row 0 was exposed at IMU time exposure_ns (a
+// rolling shutter reads the marker's row later); false if not visible in the image.
+bool true_pixel(const Scenario& s, std::int64_t exposure_ns, int marker, Eigen::Vector2d& uv);
 
 // Independent streams for the parts of a run, derived from one seed (SplitMix64).
 std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream);
