@@ -34,7 +34,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
           rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::fprintf(stderr, "\rcalibrating done   \n");
+  end_progress("calibrating done");
 
   const CalibrationResult& r = run.result;
   const auto& first = run.first_frame;

@@ -60,7 +60,7 @@ int cmd_sim(int argc, char** argv) {
   const auto report = [&](const auto& run) {
     const double wall =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    std::fprintf(stderr, "\rcalibrating done   \n");
+    end_progress("calibrating done");
 
     const auto& params = run.result.params;
     const auto truth = truth_display(s, std::decay_t<decltype(run)>::State::kIntrinsics);

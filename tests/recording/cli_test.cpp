@@ -337,3 +337,41 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
 }
+
+// --help (or -h), anywhere among a command's arguments, prints that command's usage and exits 0.
+TEST(Cli, EveryCommandPrintsItsUsageOnHelp) {
+  TempDir dir("cli-help");
+  for (const std::string command : {"sim", "montecarlo", "record", "calibrate", "run"}) {
+    for (const std::string args : {" --help", " -h", " somewhere --bogus --help"}) {
+      SCOPED_TRACE(command + args);
+      const Result r = run_mirrorcal(command + args, dir.path);
+      EXPECT_EQ(r.code, 0) << r.output;
+      EXPECT_EQ(r.output.rfind("usage: mirrorcal " + command + " [options]\n  " + command, 0), 0u)
+          << r.output;
+      // Only this command's usage: no other command's line.
+      const std::string other = command == "sim" ? "\n  calibrate " : "\n  sim ";
+      EXPECT_EQ(r.output.find(other), std::string::npos) << r.output;
+    }
+  }
+  const Result top = run_mirrorcal("--help", dir.path);
+  EXPECT_EQ(top.code, 0);
+  EXPECT_NE(top.output.find("\n  calibrate "), std::string::npos) << top.output;
+}
+
+// Progress into a log (stderr not a terminal): a line at every tenth, no carriage returns.
+TEST(Cli, ProgressInALogIsAFewLines) {
+  TempDir dir("cli-progress");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 3 --out " + d + "/rec", d).code, 0);
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find('\r'), std::string::npos);
+  std::size_t lines = 0;
+  for (std::size_t at = r.output.find("\ncalibrating "); at != std::string::npos;
+       at = r.output.find("\ncalibrating ", at + 1))
+    ++lines;
+  EXPECT_GE(lines, 5u) << r.output;
+  EXPECT_LE(lines, 12u) << r.output;
+  EXPECT_NE(r.output.find("\ncalibrating  50 %\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\ncalibrating done\n"), std::string::npos) << r.output;
+}
