@@ -93,7 +93,7 @@ int cmd_sim(int argc, char** argv) {
     if (frames.enabled) print_detection(run.detection, frames.format);
 
     std::string err;
-    if (const std::string w = convergence_warning(run.result); !w.empty())
+    for (const std::string& w : result_warnings(run.result))
       std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
     if (!write_run_outputs(dir, run, err)) fail(err, 1);
     std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n",

@@ -47,6 +47,14 @@ void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* inden
                  t(i, 3));
 }
 
+// The camera's pose in the IMU frame: maps camera coordinates into the IMU's.
+Eigen::Matrix4d t_imu_cam(const CalibrationResult& r) {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = r.q_b_c.toRotationMatrix();
+  t.topRightCorner<3, 1>() = r.p_b_c;
+  return t;
+}
+
 Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
   const Eigen::Matrix3d r_c_b = r.q_b_c.toRotationMatrix().transpose();
   Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
@@ -55,26 +63,51 @@ Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
   return t;
 }
 
+// First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
+// refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
+void write_yaml_header(std::FILE* o, const char* what) {
+  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n", what);
+}
+
+// Skew is where a tool has no slot for it: said in a comment rather than silently dropped.
+void write_skew_note(std::FILE* o, const Pinhole<double>& k, const char* indent,
+                     const char* tools) {
+  std::fprintf(o, "%s# skew %.6f px (u = fu x + skew y + cu): %s\n", indent, k.skew, tools);
+}
+
+// cam0 of Kalibr's camchain-imucam.yaml, with the transform under the key OpenVINS prefers
+// (T_imu_cam) or Kalibr's (T_cam_imu). Nested keys are indented deeper than their key, as OpenCV
+// requires; comments stand on lines of their own (OpenCV keeps a trailing one in a string).
+void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_cam) {
+  const Pinhole<double>& k = r.intrinsics;
+  std::fprintf(o, "cam0:\n  camera_model: pinhole\n");
+  std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", k.fu, k.fv, k.cu, k.cv);
+  write_skew_note(o, k, "  ", "Kalibr and OpenVINS have no skew and drop it");
+  std::fprintf(o, "  # (intrinsics_skew: mirrorcal's own key, which it reads back)\n");
+  std::fprintf(o, "  intrinsics_skew: %.6f\n", k.skew);
+  std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
+               sim::kalibr_lens_name(k.distortion), k.coeffs[0], k.coeffs[1], k.coeffs[2],
+               k.coeffs[3]);
+  std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
+  std::fprintf(o, "  rostopic: %s\n  cam_overlaps: []\n", r.rostopic.c_str());
+  std::fprintf(o, "  # s: t_imu = t_cam + timeshift_cam_imu\n  timeshift_cam_imu: %.9f\n", r.t_d);
+  if (imu_from_cam) {
+    std::fprintf(o, "  # the camera's pose in the IMU frame (R_CtoI, p_CinI)\n  T_imu_cam:\n");
+    write_matrix_rows(o, t_imu_cam(r), "    ");
+  } else {
+    std::fprintf(o, "  # maps IMU coordinates into the camera's\n  T_cam_imu:\n");
+    write_matrix_rows(o, t_cam_imu(r), "    ");
+  }
+}
+
 }  // namespace
 
 bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
                            std::string& error) {
   File f = open_for_writing(path, error);
   if (!f) return false;
-  std::FILE* o = f.get();
-  std::fprintf(o, "# mirrorcal calibration, Kalibr camchain-imucam format\ncam0:\n");
-  std::fprintf(o, "  camera_model: pinhole\n");
-  std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", r.intrinsics.fu, r.intrinsics.fv,
-               r.intrinsics.cu, r.intrinsics.cv);
-  std::fprintf(o, "  intrinsics_skew: %.6f\n", r.intrinsics.skew);
-  const std::array<double, 4>& d = r.intrinsics.coeffs;
-  std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
-               to_string(r.intrinsics.distortion == Distortion::kNone ? Distortion::kRadtan
-                                                                      : r.intrinsics.distortion),
-               d[0], d[1], d[2], d[3]);
-  std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
-  std::fprintf(o, "  timeshift_cam_imu: %.9f\n  T_cam_imu:\n", r.t_d);
-  write_matrix_rows(o, t_cam_imu(r), "  ");
+  write_yaml_header(f.get(), "mirrorcal calibration, Kalibr camchain-imucam format");
+  write_imucam_chain(f.get(), r, false);
   return finish(f, path, error);
 }
 
@@ -152,6 +185,29 @@ std::string convergence_warning(const CalibrationResult& r) {
   return text;
 }
 
+std::string skew_warning(const CalibrationResult& r) {
+  if (r.estimated_intrinsics != 5) return {};
+  double sigma = 0.0;
+  for (std::size_t j = 0; j < r.params.size(); ++j)
+    if (r.params[j].name == "skew") sigma = r.sigma[j];
+  if (!(std::abs(r.intrinsics.skew) > kSignificantSkewSigmas * sigma)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the estimated skew, %.3f px +- %.3f px, is significant (beyond %.0f sigma from "
+                "0): Kalibr, OpenVINS and VINS-Fusion have no skew and will use the camera "
+                "without it (camchain-imucam.yaml states it in a comment). If the camera has "
+                "none, calibrate with --hold-skew.",
+                r.intrinsics.skew, sigma, kSignificantSkewSigmas);
+  return text;
+}
+
+std::vector<std::string> result_warnings(const CalibrationResult& r) {
+  std::vector<std::string> w;
+  for (std::string s : {convergence_warning(r), skew_warning(r)})
+    if (!s.empty()) w.push_back(std::move(s));
+  return w;
+}
+
 bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error) {
   File f = open_for_writing(path, error);
   if (!f) return false;
@@ -181,6 +237,7 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
+  std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
   std::fprintf(o,
                "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
                "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",

@@ -215,11 +215,6 @@ std::string wxyz(const Eigen::Quaterniond& q) {
   const double v[4] = {q.w(), q.x(), q.y(), q.z()};
   return list(v, 4);
 }
-// camchain.yaml's distortion_model: radtan (with zero coefficients) for no lens, which every
-// reader takes.
-const char* lens_name(Distortion d) {
-  return d == Distortion::kNone ? to_string(Distortion::kRadtan) : to_string(d);
-}
 std::array<double, 5> as_array(const Pinhole<double>& k) {
   return {k.fu, k.fv, k.cu, k.cv, k.skew};
 }
@@ -236,22 +231,18 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
          y.positive("update_rate", out.imu_rate_hz);
 }
 
-bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
-                         std::vector<std::string>& notes, std::string& error) {
-  YamlMap top(file, error, &notes), cam(file, error, &notes);
-  if (!top.load(text) || !cam.sub(top, "cam0")) return false;
-  std::string model;
-  if (!cam.string("camera_model", model)) return false;
-  if (model != "pinhole")
-    return cam.fail(cam.node("camera_model"), "camera_model",
-                    text::quoted(model) + " is not supported (mirrorcal models a pinhole)");
+namespace {
+
+// The camera keys camchain.yaml's cam0 and mirrorcal-result.yaml share: intrinsics, skew (under
+// skew_key, 0 if absent), resolution, the lens and the topic.
+bool read_camera(const YamlMap& cam, const char* skew_key, CameraInfo& out) {
   double k[4];
   if (!cam.numbers("intrinsics", 4, k)) return false;
   out.intrinsics = {k[0], k[1], k[2], k[3], 0.0};
-  if (cam.has("intrinsics_skew")) {
-    if (!cam.number("intrinsics_skew", out.intrinsics.skew)) return false;
+  if (cam.has(skew_key)) {
+    if (!cam.number(skew_key, out.intrinsics.skew)) return false;
   } else {
-    cam.note_default("intrinsics_skew", "0 px");
+    cam.note_default(skew_key, "0 px");
   }
   double res[2];
   if (!cam.numbers("resolution", 2, res)) return false;
@@ -261,6 +252,8 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
                     "expected two positive integers [width, height]");
   out.width = static_cast<int>(res[0]);
   out.height = static_cast<int>(res[1]);
+  out.rostopic = kDefaultCameraTopic;
+  if (cam.has("rostopic") && !cam.string("rostopic", out.rostopic)) return false;
   // The lens: Kalibr's pinhole distortion models, the features being raw (distorted) pixels.
   Distortion& d = out.intrinsics.distortion;
   if (cam.has("distortion_model")) {
@@ -290,6 +283,20 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
   if (d == Distortion::kRadtan && c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0)
     d = Distortion::kNone;
   return true;
+}
+
+}  // namespace
+
+bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
+                         std::vector<std::string>& notes, std::string& error) {
+  YamlMap top(file, error, &notes), cam(file, error, &notes);
+  if (!top.load(text) || !cam.sub(top, "cam0")) return false;
+  std::string model;
+  if (!cam.string("camera_model", model)) return false;
+  if (model != "pinhole")
+    return cam.fail(cam.node("camera_model"), "camera_model",
+                    text::quoted(model) + " is not supported (mirrorcal models a pinhole)");
+  return read_camera(cam, "intrinsics_skew", out);
 }
 
 bool parse_priors_yaml(std::string_view text, const std::string& file,
@@ -410,10 +417,10 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   std::string cam = "# Kalibr camera description (pixels: origin at the top-left pixel's centre)\n";
   cam += "cam0:\n  camera_model: pinhole\n  intrinsics: " + list(k.data(), 4) + "\n";
   cam += "  intrinsics_skew: " + number(s.intrinsics.skew) + "\n";
-  cam += std::string("  distortion_model: ") + lens_name(s.intrinsics.distortion) + "\n";
+  cam += std::string("  distortion_model: ") + kalibr_lens_name(s.intrinsics.distortion) + "\n";
   cam += "  distortion_coeffs: " + list(s.intrinsics.coeffs.data(), 4) + "\n";
   cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
-  cam += "  rostopic: /cam0/image_raw\n";
+  cam += "  rostopic: " + s.rostopic + "\n";
   return write_text(dir + "/imu.yaml", imu, error) &&
          write_text(dir + "/camchain.yaml", cam, error);
 }
@@ -509,7 +516,8 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
     return y.fail(rows, "covariance", "is not symmetric");
   if (out.covariance.llt().info() != Eigen::Success)
     return y.fail(rows, "covariance", "is not positive definite");
-  return true;
+  out.has_camera = y.has("intrinsics");
+  return !out.has_camera || read_camera(y, "skew", out.camera);
 }
 
 }  // namespace mirrorcal::sim

@@ -375,3 +375,17 @@ TEST(Cli, ProgressInALogIsAFewLines) {
   EXPECT_NE(r.output.find("\ncalibrating  50 %\n"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("\ncalibrating done\n"), std::string::npos) << r.output;
 }
+
+// A significant skew (the paper camera's 3 px, estimated to +-0.1 px) is warned of, since Kalibr,
+// OpenVINS and VINS-Fusion drop it; the files state it in a comment. Held skew is not warned of.
+TEST(Cli, ASignificantSkewIsWarnedOfAndStatedInTheFiles) {
+  TempDir dir("cli-skew");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal("sim --intrinsics --seed 5 --no-plots --out " + d + "/five", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("WARNING: the estimated skew"), std::string::npos) << r.output;
+  EXPECT_NE(slurp(d + "/five/camchain-imucam.yaml").find("# skew 2.9"), std::string::npos);
+  r = run_mirrorcal("sim --intrinsics --hold-skew --seed 5 --no-plots --out " + d + "/four", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("estimated skew"), std::string::npos) << r.output;
+}
