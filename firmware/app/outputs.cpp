@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
@@ -262,6 +263,122 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
     for (long j = 0; j < r.covariance.cols(); ++j)
       std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
     std::fprintf(o, "]\n");
+  }
+  return finish(f, path, error);
+}
+
+namespace {
+
+// VINS-Fusion's camera file (camodocal's PINHOLE, or KANNALA_BRANDT for an equidistant lens).
+void write_vins_camera(std::FILE* o, const CalibrationResult& r) {
+  const Pinhole<double>& k = r.intrinsics;
+  const std::array<double, 4>& d = k.coeffs;
+  write_yaml_header(o, "mirrorcal calibration: VINS-Fusion camera file (camodocal)");
+  write_skew_note(o, k, "", "VINS-Fusion's camera models have no skew and drop it");
+  const bool fisheye = k.distortion == Distortion::kEquidistant;
+  std::fprintf(o, "model_type: %s\ncamera_name: camera\nimage_width: %d\nimage_height: %d\n",
+               fisheye ? "KANNALA_BRANDT" : "PINHOLE", r.width, r.height);
+  if (fisheye) {
+    // Kannala-Brandt's theta + k2 theta^3 + ... + k5 theta^9 is Kalibr's equidistant k1..k4.
+    std::fprintf(o, "projection_parameters:\n   k2: %.12g\n   k3: %.12g\n   k4: %.12g\n", d[0],
+                 d[1], d[2]);
+    std::fprintf(o, "   k5: %.12g\n   mu: %.6f\n   mv: %.6f\n   u0: %.6f\n   v0: %.6f\n", d[3],
+                 k.fu, k.fv, k.cu, k.cv);
+    return;
+  }
+  std::fprintf(o,
+               "distortion_parameters:\n   k1: %.12g\n   k2: %.12g\n   p1: %.12g\n"
+               "   p2: %.12g\n",
+               d[0], d[1], d[2], d[3]);
+  std::fprintf(o, "projection_parameters:\n   fx: %.6f\n   fy: %.6f\n   cx: %.6f\n   cy: %.6f\n",
+               k.fu, k.fv, k.cu, k.cv);
+}
+
+// The camera-IMU keys of a VINS-Fusion config; camera_file as cam0_calib names it (beside it).
+void write_vins_config(std::FILE* o, const CalibrationResult& r, const std::string& camera_file) {
+  write_yaml_header(o, "mirrorcal calibration: the camera-IMU keys of a VINS-Fusion config");
+  std::fprintf(o,
+               "# (add the IMU noise and feature tracker keys of a VINS-Fusion example config)\n");
+  std::fprintf(o, "imu: 1\nnum_of_cam: 1\nimage0_topic: \"%s\"\ncam0_calib: \"%s\"\n",
+               r.rostopic.c_str(), camera_file.c_str());
+  std::fprintf(o, "image_width: %d\nimage_height: %d\n", r.width, r.height);
+  std::fprintf(o,
+               "# the camera's pose in the IMU (body) frame: p_imu = body_T_cam0 p_cam\n"
+               "estimate_extrinsic: 0\nbody_T_cam0: !!opencv-matrix\n   rows: 4\n   cols: 4\n"
+               "   dt: d\n   data: [");
+  const Eigen::Matrix4d t = t_imu_cam(r);
+  for (int i = 0; i < 16; ++i)
+    std::fprintf(o, "%s%.12f", i == 0 ? "" : i % 4 == 0 ? ",\n           " : ", ", t(i / 4, i % 4));
+  std::fprintf(o, "]\n# s: t_imu = t_cam + td (Kalibr's timeshift_cam_imu)\n");
+  std::fprintf(o, "estimate_td: 0\ntd: %.9f\n", r.t_d);
+}
+
+void write_ros_matrix(std::FILE* o, const char* key, int rows, int cols, const double* v) {
+  std::fprintf(o, "%s:\n  rows: %d\n  cols: %d\n  data: [", key, rows, cols);
+  for (int i = 0; i < rows * cols; ++i) std::fprintf(o, "%s%.12g", i == 0 ? "" : ", ", v[i]);
+  std::fprintf(o, "]\n");
+}
+
+// ROS's camera_info as camera_calibration_parsers reads it; K holds the skew.
+void write_ros_camera_info(std::FILE* o, const CalibrationResult& r) {
+  const Pinhole<double>& k = r.intrinsics;
+  std::fprintf(o, "# mirrorcal calibration: ROS camera_info (camera_calibration_parsers)\n");
+  std::fprintf(o, "image_width: %d\nimage_height: %d\ncamera_name: cam0\n", r.width, r.height);
+  const double kk[9] = {k.fu, k.skew, k.cu, 0.0, k.fv, k.cv, 0.0, 0.0, 1.0};
+  write_ros_matrix(o, "camera_matrix", 3, 3, kk);
+  // plumb_bob is k1 k2 p1 p2 k3 (radtan with k3 = 0); equidistant is k1..k4.
+  const bool fisheye = k.distortion == Distortion::kEquidistant;
+  std::fprintf(o, "distortion_model: %s\n", fisheye ? "equidistant" : "plumb_bob");
+  const double d[5] = {k.coeffs[0], k.coeffs[1], k.coeffs[2], k.coeffs[3], 0.0};
+  write_ros_matrix(o, "distortion_coefficients", 1, fisheye ? 4 : 5, d);
+  const double identity[9] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  write_ros_matrix(o, "rectification_matrix", 3, 3, identity);
+  const double p[12] = {k.fu, k.skew, k.cu, 0.0, 0.0, k.fv, k.cv, 0.0, 0.0, 0.0, 1.0, 0.0};
+  write_ros_matrix(o, "projection_matrix", 3, 4, p);
+}
+
+}  // namespace
+
+bool export_format_from_string(const std::string& name, ExportFormat& format) {
+  if (name == "openvins")
+    format = ExportFormat::kOpenVins;
+  else if (name == "vins-fusion")
+    format = ExportFormat::kVinsFusion;
+  else if (name == "ros-camera-info")
+    format = ExportFormat::kRosCameraInfo;
+  else
+    return false;
+  return true;
+}
+
+std::string vins_camera_file(const std::string& config_path) {
+  const std::filesystem::path p(config_path);
+  return (p.parent_path() / (p.stem().string() + "_cam0.yaml")).string();
+}
+
+bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
+                  std::string& error) {
+  if (format == ExportFormat::kVinsFusion) {
+    const std::string camera_path = vins_camera_file(path);
+    File camera = open_for_writing(camera_path, error);
+    if (!camera) return false;
+    write_vins_camera(camera.get(), r);
+    if (!finish(camera, camera_path, error)) return false;
+  }
+  File f = open_for_writing(path, error);
+  if (!f) return false;
+  switch (format) {
+    case ExportFormat::kOpenVins:
+      write_yaml_header(f.get(), "mirrorcal calibration: OpenVINS kalibr_imucam_chain.yaml");
+      write_imucam_chain(f.get(), r, true);
+      break;
+    case ExportFormat::kVinsFusion:
+      write_vins_config(f.get(), r,
+                        std::filesystem::path(vins_camera_file(path)).filename().string());
+      break;
+    case ExportFormat::kRosCameraInfo:
+      write_ros_camera_info(f.get(), r);
+      break;
   }
   return finish(f, path, error);
 }

@@ -115,6 +115,17 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
 // by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike.
 bool write_camchain_imucam(const std::string& path, const CalibrationResult& r, std::string& error);
 
+// What `mirrorcal export` writes for other tools to read directly.
+enum class ExportFormat {
+  kOpenVins,       // kalibr_imucam_chain.yaml with OpenVINS's T_imu_cam
+  kVinsFusion,     // the camera-IMU keys of a VINS-Fusion config, and its camera file
+  kRosCameraInfo,  // a ROS camera_info YAML (camera_calibration_parsers)
+};
+bool export_format_from_string(const std::string& name, ExportFormat& format);
+// VINS-Fusion's camera file, written beside its config at config_path: "<stem>_cam0.yaml".
+std::string vins_camera_file(const std::string& config_path);
+bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
+                  std::string& error);
 // Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
 // and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
 bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error);

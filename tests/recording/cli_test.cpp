@@ -341,7 +341,7 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
 // --help (or -h), anywhere among a command's arguments, prints that command's usage and exits 0.
 TEST(Cli, EveryCommandPrintsItsUsageOnHelp) {
   TempDir dir("cli-help");
-  for (const std::string command : {"sim", "montecarlo", "record", "calibrate", "run"}) {
+  for (const std::string command : {"sim", "montecarlo", "record", "calibrate", "run", "export"}) {
     for (const std::string args : {" --help", " -h", " somewhere --bogus --help"}) {
       SCOPED_TRACE(command + args);
       const Result r = run_mirrorcal(command + args, dir.path);
@@ -355,7 +355,7 @@ TEST(Cli, EveryCommandPrintsItsUsageOnHelp) {
   }
   const Result top = run_mirrorcal("--help", dir.path);
   EXPECT_EQ(top.code, 0);
-  EXPECT_NE(top.output.find("\n  calibrate "), std::string::npos) << top.output;
+  EXPECT_NE(top.output.find("\n  export "), std::string::npos) << top.output;
 }
 
 // Progress into a log (stderr not a terminal): a line at every tenth, no carriage returns.
@@ -388,4 +388,27 @@ TEST(Cli, ASignificantSkewIsWarnedOfAndStatedInTheFiles) {
   r = run_mirrorcal("sim --intrinsics --hold-skew --seed 5 --no-plots --out " + d + "/four", d);
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output.find("estimated skew"), std::string::npos) << r.output;
+}
+
+TEST(Cli, ExportRefusesWhatItCannotWrite) {
+  TempDir dir("cli-export");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 5 --no-plots --out " + d, d).code, 0);
+  Result r = run_mirrorcal("export --format kalibr " + d + " " + d + "/x.yaml", d);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("--format: 'kalibr' is not a format"), std::string::npos) << r.output;
+  r = run_mirrorcal("export --format openvins " + d, d);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("usage: mirrorcal export"), std::string::npos) << r.output;
+  // A result without its camera (written by hand, or by an older mirrorcal) has nothing to export.
+  std::string text = slurp(d + "/mirrorcal-result.yaml");
+  text.erase(text.find("intrinsics: ["), text.find("skew: ") - text.find("intrinsics: ["));
+  spit(d + "/old.yaml", text);
+  r = run_mirrorcal("export --format ros-camera-info " + d + "/old.yaml " + d + "/x.yaml", d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(d + "/old.yaml: holds no camera"), std::string::npos) << r.output;
+  r = run_mirrorcal("export --format ros-camera-info " + d + " " + d + "/no/such/dir/x.yaml", d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot write " + d + "/no/such/dir/x.yaml"), std::string::npos)
+      << r.output;
 }

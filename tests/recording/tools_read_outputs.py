@@ -1,9 +1,12 @@
 #!/usr/bin/python3
 """The files mirrorcal writes for other tools, read by the parsers those tools use (Debian's
-python3-yaml and python3-opencv) the way each tool reads them: camchain-imucam.yaml as Kalibr's
-ConfigReader (CameraChainParameters, PyYAML) and as OpenVINS's YamlParser (OpenCV's FileStorage,
-T_imu_cam or else T_cam_imu inverted). Each transform, camera and time offset read is checked
-against mirrorcal-result.yaml. Exit 0 when all agree. Usage: tools_read_outputs.py MIRRORCAL"""
+python3-yaml and python3-opencv) the way each tool reads them:
+  - camchain-imucam.yaml as Kalibr's ConfigReader (CameraChainParameters, PyYAML) and as OpenVINS's
+    YamlParser (OpenCV's FileStorage, T_imu_cam or else T_cam_imu inverted);
+  - `export --format openvins` as OpenVINS, `vins-fusion` as VINS-Fusion and camodocal (FileStorage,
+    body_T_cam0 an opencv-matrix), `ros-camera-info` as a ROS camera_info YAML (PyYAML).
+Each transform, camera and time offset read is checked against mirrorcal-result.yaml. Exit 0 when
+all agree. Usage: tools_read_outputs.py MIRRORCAL"""
 import os
 import subprocess
 import sys
@@ -120,9 +123,79 @@ def read_like_openvins(path, result):
     check(cam.getNode("rostopic").string() == result.rostopic, f"{path}: OpenVINS's rostopic")
 
 
-def check_files(folder, result):
+def read_like_vins_fusion(path, result):
+    """VINS-Fusion's readParameters and camodocal's camera readers, through cv::FileStorage."""
+    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    check(fs.isOpened(), f"{path}: OpenCV cannot open it")
+    close(fs.getNode("body_T_cam0").mat(), result.t_imu_cam, 1e-9, f"{path}: body_T_cam0")
+    close(fs.getNode("td").real(), result.timeshift, 1e-9, f"{path}: td")
+    check(int(fs.getNode("num_of_cam").real()) == 1, f"{path}: num_of_cam")
+    check(fs.getNode("image0_topic").string() == result.rostopic, f"{path}: image0_topic")
+    check([int(fs.getNode("image_width").real()), int(fs.getNode("image_height").real())]
+          == result.resolution, f"{path}: image_width, image_height")
+    # VINS-Fusion reads cam0_calib relative to the config's folder.
+    camera_path = os.path.join(os.path.dirname(path), fs.getNode("cam0_calib").string())
+    cam = cv2.FileStorage(camera_path, cv2.FILE_STORAGE_READ)
+    check(cam.isOpened(), f"{camera_path}: OpenCV cannot open it")
+    model = cam.getNode("model_type").string()
+    fu, fv, cu, cv_ = result.intrinsics
+    if result.lens == "equidistant":
+        check(model == "KANNALA_BRANDT", f"{camera_path}: model_type {model}")
+        p = cam.getNode("projection_parameters")
+        close([p.getNode(k).real() for k in ["mu", "mv", "u0", "v0"]], [fu, fv, cu, cv_], 1e-6,
+              f"{camera_path}: projection_parameters")
+        close([p.getNode(k).real() for k in ["k2", "k3", "k4", "k5"]], result.coeffs, 1e-9,
+              f"{camera_path}: Kannala-Brandt k2..k5")
+    else:
+        check(model == "PINHOLE", f"{camera_path}: model_type {model}")
+        p = cam.getNode("projection_parameters")
+        close([p.getNode(k).real() for k in ["fx", "fy", "cx", "cy"]], [fu, fv, cu, cv_], 1e-6,
+              f"{camera_path}: projection_parameters")
+        d = cam.getNode("distortion_parameters")
+        close([d.getNode(k).real() for k in ["k1", "k2", "p1", "p2"]], result.coeffs, 1e-9,
+              f"{camera_path}: distortion_parameters")
+    check([int(cam.getNode("image_width").real()), int(cam.getNode("image_height").real())]
+          == result.resolution, f"{camera_path}: image size")
+
+
+def read_like_ros(path, result):
+    """A ROS camera_info YAML (camera_calibration_parsers' keys), read with PyYAML."""
+    with open(path) as f:
+        y = yaml.safe_load(f)
+
+    def matrix(key, rows, cols):
+        m = y[key]
+        check(m["rows"] == rows and m["cols"] == cols and len(m["data"]) == rows * cols,
+              f"{path}: {key} is not {rows}x{cols}")
+        return np.array(m["data"], dtype=float).reshape(rows, cols)
+
+    fu, fv, cu, cv_ = result.intrinsics
+    k = np.array([[fu, result.skew, cu], [0, fv, cv_], [0, 0, 1]])
+    check([y["image_width"], y["image_height"]] == result.resolution, f"{path}: image size")
+    check(isinstance(y["camera_name"], str), f"{path}: camera_name")
+    close(matrix("camera_matrix", 3, 3), k, 1e-6, f"{path}: camera_matrix")
+    close(matrix("rectification_matrix", 3, 3), np.eye(3), 0, f"{path}: rectification_matrix")
+    close(matrix("projection_matrix", 3, 4), np.hstack([k, np.zeros((3, 1))]), 1e-6,
+          f"{path}: projection_matrix")
+    if result.lens == "equidistant":
+        check(y["distortion_model"] == "equidistant", f"{path}: distortion_model")
+        close(matrix("distortion_coefficients", 1, 4)[0], result.coeffs, 1e-9, f"{path}: D")
+    else:
+        check(y["distortion_model"] == "plumb_bob", f"{path}: distortion_model")
+        close(matrix("distortion_coefficients", 1, 5)[0], result.coeffs + [0.0], 1e-9,
+              f"{path}: D (k1 k2 p1 p2 k3)")
+
+
+def check_exports(folder, result):
     read_like_kalibr(os.path.join(folder, "camchain-imucam.yaml"), result)
     read_like_openvins(os.path.join(folder, "camchain-imucam.yaml"), result)
+    out = os.path.join(folder, "exports")
+    os.makedirs(out)
+    for fmt, reader in [("openvins", read_like_openvins), ("vins-fusion", read_like_vins_fusion),
+                        ("ros-camera-info", read_like_ros)]:
+        path = os.path.join(out, fmt + ".yaml")
+        mirrorcal("export", "--format", fmt, folder, path)
+        reader(path, result)
 
 
 def check_the_parsers_are_strict(d):
@@ -164,7 +237,7 @@ def main():
         mirrorcal("calibrate", rec, "--out", cal)
         result = Result(cal)
         check(result.rostopic == "/rig/front/image_raw", f"result's rostopic {result.rostopic}")
-        check_files(cal, result)
+        check_exports(cal, result)
         # A fisheye, estimating the intrinsics (skew too), with the default topic.
         fish = os.path.join(d, "fish")
         mirrorcal("sim", "--seed", "7", "--distortion", "equidistant", "--intrinsics",
@@ -172,7 +245,7 @@ def main():
         result = Result(fish)
         check(result.rostopic == "/cam0/image_raw", f"default rostopic {result.rostopic}")
         check(result.lens == "equidistant", f"fisheye lens {result.lens}")
-        check_files(fish, result)
+        check_exports(fish, result)
     print("every file read as its tool reads it, and agreed with mirrorcal-result.yaml"
           if not failures else f"{len(failures)} failures")
     sys.exit(1 if failures else 0)
