@@ -6,12 +6,20 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include <unistd.h>
+
 namespace mirrorcal::app {
 
 std::string usage() {
   std::string u = "usage: mirrorcal <command> [options]\n";
   for (const auto& c : commands()) u += c.usage;
   return u;
+}
+
+std::string usage(const std::string& command) {
+  for (const auto& c : commands())
+    if (command == c.name) return "usage: mirrorcal " + command + " [options]\n" + c.usage;
+  return usage();
 }
 
 void fail(const std::string& msg, int code) {
@@ -24,6 +32,11 @@ void fail(const std::string& msg, int code) {
 
 Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
               const std::vector<std::string>& flags, std::size_t max_positional) {
+  for (int i = first; i < argc; ++i)
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::fputs(usage(argv[1]).c_str(), stdout);
+      std::exit(0);
+    }
   Options o;
   for (int i = first; i < argc; ++i) {
     const std::string a = argv[i];
@@ -114,9 +127,35 @@ std::string make_out_dir(const Options& o, const std::string& def) {
   return dir;
 }
 
+namespace {
+
+bool stderr_is_terminal() {
+  static const bool terminal = isatty(STDERR_FILENO) == 1;
+  return terminal;
+}
+
+}  // namespace
+
 void print_progress(const char* what, double fraction) {
-  std::fprintf(stderr, "\r%s %3.0f %%", what, 100.0 * fraction);
-  std::fflush(stderr);
+  if (stderr_is_terminal()) {
+    std::fprintf(stderr, "\r%s %3.0f %%", what, 100.0 * fraction);
+    std::fflush(stderr);
+    return;
+  }
+  // A line when the tenth changes (backwards too: a new stage starts again from 0).
+  static int last_tenth = -1;
+  const int tenth = static_cast<int>(std::floor(10.0 * fraction));
+  if (tenth == last_tenth) return;
+  last_tenth = tenth;
+  std::fprintf(stderr, "%s %3d %%\n", what, 10 * tenth);
+}
+
+void end_progress(const char* done_text) {
+  // On a terminal, blanks cover what is left of the last "\r<what> NN %".
+  if (stderr_is_terminal())
+    std::fprintf(stderr, "\r%-24s\n", done_text);
+  else
+    std::fprintf(stderr, "%s\n", done_text);
 }
 
 }  // namespace mirrorcal::app

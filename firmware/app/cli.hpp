@@ -17,9 +17,10 @@ struct Command {
   int (*run)(int argc, char** argv);
 };
 
-// The program's commands (commands.cpp) and the usage text built from them.
+// The program's commands (main.cpp) and the usage text built from them: all, or one command's.
 const std::vector<Command>& commands();
 std::string usage();
+std::string usage(const std::string& command);
 
 struct Options {
   std::map<std::string, std::string> values;
@@ -35,7 +36,8 @@ struct Options {
 [[noreturn]] void fail(const std::string& msg, int code = 2);
 
 // Parses argv[first..) as --key value (keys in with_value) and --flag (flags); anything else is an
-// error naming the argument, unless max_positional allows that many plain arguments.
+// error naming the argument, unless max_positional allows that many plain arguments. --help (or -h)
+// anywhere prints the usage of the command argv[1] and exits 0.
 Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
               const std::vector<std::string>& flags, std::size_t max_positional = 0);
 
@@ -55,7 +57,11 @@ sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
 // Creates --out (or def) and returns it.
 std::string make_out_dir(const Options& o, const std::string& def);
 
-// "\r<what> NN %" on stderr.
+// "\r<what> NN %" on stderr when it is a terminal; otherwise (a log, a CI capture) a line
+// "<what> NN %" at every tenth, so that the log gets a few lines rather than one of thousands of
+// carriage returns.
 void print_progress(const char* what, double fraction);
+// Ends the progress indicator with done_text on a line of its own.
+void end_progress(const char* done_text);
 
 }  // namespace mirrorcal::app

@@ -34,7 +34,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
           rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::fprintf(stderr, "\rcalibrating done   \n");
+  end_progress("calibrating done");
 
   const CalibrationResult& r = run.result;
   const auto& first = run.first_frame;
@@ -85,7 +85,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
       (unsigned long long)lc.frames_without_markers, (unsigned long long)rec.frames_outside_imu,
       (unsigned long long)lc.imu_gaps, (unsigned long long)fc.markers_used,
       (unsigned long long)fc.markers_gated, (unsigned long long)fc.failures, wall);
-  if (const std::string w = convergence_warning(run.result); !w.empty())
+  for (const std::string& w : result_warnings(run.result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_run_outputs(out, run, err)) fail(err, 1);
   std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n", out.c_str());

@@ -286,7 +286,7 @@ int cmd_montecarlo(int argc, char** argv) {
   for (std::uint64_t j = 0; j < jobs; ++j) pool.emplace_back(worker);
   for (auto& t : pool) t.join();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::fprintf(stderr, "\n");
+  end_progress("all runs done");
 
   const std::size_t np = params.size();
   const auto truth = truth_display(s, !intrinsics ? 0 : hold_skew ? 4 : 5);

@@ -217,7 +217,8 @@ int cmd_run(int argc, char** argv) {
   const std::size_t t_row = 6 + 3 * std::size_t(kMarkers);
   std::printf("time offset found: timeshift_cam_imu %.3f ms +- %.3f ms (t_imu = t_cam + it)\n",
               1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
-  if (const std::string w = convergence_warning(result); !w.empty())
+  result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
+  for (const std::string& w : result_warnings(result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_camchain_imucam(s.out + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(s.out + "/mirrorcal-result.yaml", result, error))

@@ -61,7 +61,7 @@ int cmd_sim(int argc, char** argv) {
   const auto report = [&](const auto& run) {
     const double wall =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    std::fprintf(stderr, "\rcalibrating done   \n");
+    end_progress("calibrating done");
 
     const auto& params = run.result.params;
     const auto truth = truth_display(s, std::decay_t<decltype(run)>::State::kIntrinsics);
@@ -94,7 +94,7 @@ int cmd_sim(int argc, char** argv) {
     if (frames.enabled) print_detection(run.detection, frames.format);
 
     std::string err;
-    if (const std::string w = convergence_warning(run.result); !w.empty())
+    for (const std::string& w : result_warnings(run.result))
       std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
     if (!write_run_outputs(dir, run, err)) fail(err, 1);
     std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n",

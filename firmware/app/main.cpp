@@ -12,6 +12,7 @@ int cmd_montecarlo(int argc, char** argv);
 int cmd_record(int argc, char** argv);
 int cmd_calibrate(int argc, char** argv);
 int cmd_run(int argc, char** argv);
+int cmd_export(int argc, char** argv);
 
 const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
@@ -75,6 +76,15 @@ const std::vector<Command>& commands() {
        "              [--from RESULT]  (start from an earlier calibration, as calibrate --from)\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_run},
+      {"export",
+       "  export      write a calibration for another tool to read directly\n"
+       "              --format openvins|vins-fusion|ros-camera-info RESULT OUT\n"
+       "              (RESULT: a mirrorcal-result.yaml, or its folder; openvins: OpenVINS's\n"
+       "              kalibr_imucam_chain.yaml; vins-fusion: the camera-IMU keys of its config, "
+       "and\n"
+       "              its camera file OUT's stem + _cam0.yaml beside it; ros-camera-info: a ROS\n"
+       "              camera_info YAML)\n",
+       cmd_export},
   };
   return table;
 }

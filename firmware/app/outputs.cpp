@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
@@ -47,6 +48,14 @@ void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* inden
                  t(i, 3));
 }
 
+// The camera's pose in the IMU frame: maps camera coordinates into the IMU's.
+Eigen::Matrix4d t_imu_cam(const CalibrationResult& r) {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = r.q_b_c.toRotationMatrix();
+  t.topRightCorner<3, 1>() = r.p_b_c;
+  return t;
+}
+
 Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
   const Eigen::Matrix3d r_c_b = r.q_b_c.toRotationMatrix().transpose();
   Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
@@ -55,28 +64,53 @@ Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
   return t;
 }
 
+// First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
+// refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
+void write_yaml_header(std::FILE* o, const char* what) {
+  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n", what);
+}
+
+// Skew is where a tool has no slot for it: said in a comment rather than silently dropped.
+void write_skew_note(std::FILE* o, const Pinhole<double>& k, const char* indent,
+                     const char* tools) {
+  std::fprintf(o, "%s# skew %.6f px (u = fu x + skew y + cu): %s\n", indent, k.skew, tools);
+}
+
+// cam0 of Kalibr's camchain-imucam.yaml, with the transform under the key OpenVINS prefers
+// (T_imu_cam) or Kalibr's (T_cam_imu). Nested keys are indented deeper than their key, as OpenCV
+// requires; comments stand on lines of their own (OpenCV keeps a trailing one in a string).
+void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_cam) {
+  const Pinhole<double>& k = r.intrinsics;
+  std::fprintf(o, "cam0:\n  camera_model: pinhole\n");
+  std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", k.fu, k.fv, k.cu, k.cv);
+  write_skew_note(o, k, "  ", "Kalibr and OpenVINS have no skew and drop it");
+  std::fprintf(o, "  # (intrinsics_skew: mirrorcal's own key, which it reads back)\n");
+  std::fprintf(o, "  intrinsics_skew: %.6f\n", k.skew);
+  std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
+               sim::kalibr_lens_name(k.distortion), k.coeffs[0], k.coeffs[1], k.coeffs[2],
+               k.coeffs[3]);
+  std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
+  std::fprintf(o, "  # s per row (a rolling shutter; 0: a global shutter)\n  line_delay: %.9g\n",
+               k.line_delay_s);
+  std::fprintf(o, "  rostopic: %s\n  cam_overlaps: []\n", r.rostopic.c_str());
+  std::fprintf(o, "  # s: t_imu = t_cam + timeshift_cam_imu\n  timeshift_cam_imu: %.9f\n", r.t_d);
+  if (imu_from_cam) {
+    std::fprintf(o, "  # the camera's pose in the IMU frame (R_CtoI, p_CinI)\n  T_imu_cam:\n");
+    write_matrix_rows(o, t_imu_cam(r), "    ");
+  } else {
+    std::fprintf(o, "  # maps IMU coordinates into the camera's\n  T_cam_imu:\n");
+    write_matrix_rows(o, t_cam_imu(r), "    ");
+  }
+}
+
 }  // namespace
 
 bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
                            std::string& error) {
   File f = open_for_writing(path, error);
   if (!f) return false;
-  std::FILE* o = f.get();
-  std::fprintf(o, "# mirrorcal calibration, Kalibr camchain-imucam format\ncam0:\n");
-  std::fprintf(o, "  camera_model: pinhole\n");
-  std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", r.intrinsics.fu, r.intrinsics.fv,
-               r.intrinsics.cu, r.intrinsics.cv);
-  std::fprintf(o, "  intrinsics_skew: %.6f\n", r.intrinsics.skew);
-  const std::array<double, 4>& d = r.intrinsics.coeffs;
-  std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
-               to_string(r.intrinsics.distortion == Distortion::kNone ? Distortion::kRadtan
-                                                                      : r.intrinsics.distortion),
-               d[0], d[1], d[2], d[3]);
-  std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
-  std::fprintf(o, "  line_delay: %.9g  # s per row (rolling shutter); 0: global shutter\n",
-               r.intrinsics.line_delay_s);
-  std::fprintf(o, "  timeshift_cam_imu: %.9f\n  T_cam_imu:\n", r.t_d);
-  write_matrix_rows(o, t_cam_imu(r), "  ");
+  write_yaml_header(f.get(), "mirrorcal calibration, Kalibr camchain-imucam format");
+  write_imucam_chain(f.get(), r, false);
   return finish(f, path, error);
 }
 
@@ -154,6 +188,29 @@ std::string convergence_warning(const CalibrationResult& r) {
   return text;
 }
 
+std::string skew_warning(const CalibrationResult& r) {
+  if (r.estimated_intrinsics != 5) return {};
+  double sigma = 0.0;
+  for (std::size_t j = 0; j < r.params.size(); ++j)
+    if (r.params[j].name == "skew") sigma = r.sigma[j];
+  if (!(std::abs(r.intrinsics.skew) > kSignificantSkewSigmas * sigma)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the estimated skew, %.3f px +- %.3f px, is significant (beyond %.0f sigma from "
+                "0): Kalibr, OpenVINS and VINS-Fusion have no skew and will use the camera "
+                "without it (camchain-imucam.yaml states it in a comment). If the camera has "
+                "none, calibrate with --hold-skew.",
+                r.intrinsics.skew, sigma, kSignificantSkewSigmas);
+  return text;
+}
+
+std::vector<std::string> result_warnings(const CalibrationResult& r) {
+  std::vector<std::string> w;
+  for (std::string s : {convergence_warning(r), skew_warning(r)})
+    if (!s.empty()) w.push_back(std::move(s));
+  return w;
+}
+
 bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error) {
   File f = open_for_writing(path, error);
   if (!f) return false;
@@ -185,6 +242,7 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
   std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
+  std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
   std::fprintf(o,
                "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
                "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
@@ -209,6 +267,122 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
     for (long j = 0; j < r.covariance.cols(); ++j)
       std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
     std::fprintf(o, "]\n");
+  }
+  return finish(f, path, error);
+}
+
+namespace {
+
+// VINS-Fusion's camera file (camodocal's PINHOLE, or KANNALA_BRANDT for an equidistant lens).
+void write_vins_camera(std::FILE* o, const CalibrationResult& r) {
+  const Pinhole<double>& k = r.intrinsics;
+  const std::array<double, 4>& d = k.coeffs;
+  write_yaml_header(o, "mirrorcal calibration: VINS-Fusion camera file (camodocal)");
+  write_skew_note(o, k, "", "VINS-Fusion's camera models have no skew and drop it");
+  const bool fisheye = k.distortion == Distortion::kEquidistant;
+  std::fprintf(o, "model_type: %s\ncamera_name: camera\nimage_width: %d\nimage_height: %d\n",
+               fisheye ? "KANNALA_BRANDT" : "PINHOLE", r.width, r.height);
+  if (fisheye) {
+    // Kannala-Brandt's theta + k2 theta^3 + ... + k5 theta^9 is Kalibr's equidistant k1..k4.
+    std::fprintf(o, "projection_parameters:\n   k2: %.12g\n   k3: %.12g\n   k4: %.12g\n", d[0],
+                 d[1], d[2]);
+    std::fprintf(o, "   k5: %.12g\n   mu: %.6f\n   mv: %.6f\n   u0: %.6f\n   v0: %.6f\n", d[3],
+                 k.fu, k.fv, k.cu, k.cv);
+    return;
+  }
+  std::fprintf(o,
+               "distortion_parameters:\n   k1: %.12g\n   k2: %.12g\n   p1: %.12g\n"
+               "   p2: %.12g\n",
+               d[0], d[1], d[2], d[3]);
+  std::fprintf(o, "projection_parameters:\n   fx: %.6f\n   fy: %.6f\n   cx: %.6f\n   cy: %.6f\n",
+               k.fu, k.fv, k.cu, k.cv);
+}
+
+// The camera-IMU keys of a VINS-Fusion config; camera_file as cam0_calib names it (beside it).
+void write_vins_config(std::FILE* o, const CalibrationResult& r, const std::string& camera_file) {
+  write_yaml_header(o, "mirrorcal calibration: the camera-IMU keys of a VINS-Fusion config");
+  std::fprintf(o,
+               "# (add the IMU noise and feature tracker keys of a VINS-Fusion example config)\n");
+  std::fprintf(o, "imu: 1\nnum_of_cam: 1\nimage0_topic: \"%s\"\ncam0_calib: \"%s\"\n",
+               r.rostopic.c_str(), camera_file.c_str());
+  std::fprintf(o, "image_width: %d\nimage_height: %d\n", r.width, r.height);
+  std::fprintf(o,
+               "# the camera's pose in the IMU (body) frame: p_imu = body_T_cam0 p_cam\n"
+               "estimate_extrinsic: 0\nbody_T_cam0: !!opencv-matrix\n   rows: 4\n   cols: 4\n"
+               "   dt: d\n   data: [");
+  const Eigen::Matrix4d t = t_imu_cam(r);
+  for (int i = 0; i < 16; ++i)
+    std::fprintf(o, "%s%.12f", i == 0 ? "" : i % 4 == 0 ? ",\n           " : ", ", t(i / 4, i % 4));
+  std::fprintf(o, "]\n# s: t_imu = t_cam + td (Kalibr's timeshift_cam_imu)\n");
+  std::fprintf(o, "estimate_td: 0\ntd: %.9f\n", r.t_d);
+}
+
+void write_ros_matrix(std::FILE* o, const char* key, int rows, int cols, const double* v) {
+  std::fprintf(o, "%s:\n  rows: %d\n  cols: %d\n  data: [", key, rows, cols);
+  for (int i = 0; i < rows * cols; ++i) std::fprintf(o, "%s%.12g", i == 0 ? "" : ", ", v[i]);
+  std::fprintf(o, "]\n");
+}
+
+// ROS's camera_info as camera_calibration_parsers reads it; K holds the skew.
+void write_ros_camera_info(std::FILE* o, const CalibrationResult& r) {
+  const Pinhole<double>& k = r.intrinsics;
+  std::fprintf(o, "# mirrorcal calibration: ROS camera_info (camera_calibration_parsers)\n");
+  std::fprintf(o, "image_width: %d\nimage_height: %d\ncamera_name: cam0\n", r.width, r.height);
+  const double kk[9] = {k.fu, k.skew, k.cu, 0.0, k.fv, k.cv, 0.0, 0.0, 1.0};
+  write_ros_matrix(o, "camera_matrix", 3, 3, kk);
+  // plumb_bob is k1 k2 p1 p2 k3 (radtan with k3 = 0); equidistant is k1..k4.
+  const bool fisheye = k.distortion == Distortion::kEquidistant;
+  std::fprintf(o, "distortion_model: %s\n", fisheye ? "equidistant" : "plumb_bob");
+  const double d[5] = {k.coeffs[0], k.coeffs[1], k.coeffs[2], k.coeffs[3], 0.0};
+  write_ros_matrix(o, "distortion_coefficients", 1, fisheye ? 4 : 5, d);
+  const double identity[9] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  write_ros_matrix(o, "rectification_matrix", 3, 3, identity);
+  const double p[12] = {k.fu, k.skew, k.cu, 0.0, 0.0, k.fv, k.cv, 0.0, 0.0, 0.0, 1.0, 0.0};
+  write_ros_matrix(o, "projection_matrix", 3, 4, p);
+}
+
+}  // namespace
+
+bool export_format_from_string(const std::string& name, ExportFormat& format) {
+  if (name == "openvins")
+    format = ExportFormat::kOpenVins;
+  else if (name == "vins-fusion")
+    format = ExportFormat::kVinsFusion;
+  else if (name == "ros-camera-info")
+    format = ExportFormat::kRosCameraInfo;
+  else
+    return false;
+  return true;
+}
+
+std::string vins_camera_file(const std::string& config_path) {
+  const std::filesystem::path p(config_path);
+  return (p.parent_path() / (p.stem().string() + "_cam0.yaml")).string();
+}
+
+bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
+                  std::string& error) {
+  if (format == ExportFormat::kVinsFusion) {
+    const std::string camera_path = vins_camera_file(path);
+    File camera = open_for_writing(camera_path, error);
+    if (!camera) return false;
+    write_vins_camera(camera.get(), r);
+    if (!finish(camera, camera_path, error)) return false;
+  }
+  File f = open_for_writing(path, error);
+  if (!f) return false;
+  switch (format) {
+    case ExportFormat::kOpenVins:
+      write_yaml_header(f.get(), "mirrorcal calibration: OpenVINS kalibr_imucam_chain.yaml");
+      write_imucam_chain(f.get(), r, true);
+      break;
+    case ExportFormat::kVinsFusion:
+      write_vins_config(f.get(), r,
+                        std::filesystem::path(vins_camera_file(path)).filename().string());
+      break;
+    case ExportFormat::kRosCameraInfo:
+      write_ros_camera_info(f.get(), r);
+      break;
   }
   return finish(f, path, error);
 }

@@ -11,6 +11,7 @@
 
 #include "history.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
 
 namespace mirrorcal::app {
 
@@ -23,6 +24,7 @@ struct CalibrationResult {
   Pinhole<double> intrinsics{};
   int estimated_intrinsics = 0;  // 0, 4 (fu fv cu cv; skew held) or 5 (with skew)
   int width = 0, height = 0;
+  std::string rostopic = sim::kDefaultCameraTopic;  // camchain.yaml's, for Kalibr and OpenVINS
   std::vector<double> sigma;   // calibration block, in calibration_params() order (SI)
   Eigen::MatrixXd covariance;  // of the calibration block, same order
   std::vector<ParamInfo> params;
@@ -72,6 +74,12 @@ constexpr double kSigmaRatioLimit = 0.8;
 bool path_gained_false_information(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do.
 std::string convergence_warning(const CalibrationResult& r);
+// Empty, or that the estimated skew is significant (beyond kSignificantSkewSigmas of its sigmas
+// from 0) and that Kalibr, OpenVINS and VINS-Fusion, which have no skew, will drop it.
+constexpr double kSignificantSkewSigmas = 3.0;
+std::string skew_warning(const CalibrationResult& r);
+// Every warning a user of the result should read (convergence, skew).
+std::vector<std::string> result_warnings(const CalibrationResult& r);
 
 template <class Filter>
 CalibrationResult make_result(const Filter& f, int width, int height) {
@@ -103,8 +111,21 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   return r;
 }
 
-// Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's.
+// Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's. Read unmodified
+// by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike.
 bool write_camchain_imucam(const std::string& path, const CalibrationResult& r, std::string& error);
+
+// What `mirrorcal export` writes for other tools to read directly.
+enum class ExportFormat {
+  kOpenVins,       // kalibr_imucam_chain.yaml with OpenVINS's T_imu_cam
+  kVinsFusion,     // the camera-IMU keys of a VINS-Fusion config, and its camera file
+  kRosCameraInfo,  // a ROS camera_info YAML (camera_calibration_parsers)
+};
+bool export_format_from_string(const std::string& name, ExportFormat& format);
+// VINS-Fusion's camera file, written beside its config at config_path: "<stem>_cam0.yaml".
+std::string vins_camera_file(const std::string& config_path);
+bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
+                  std::string& error);
 // Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
 // and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
 bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error);

@@ -438,16 +438,26 @@ bool RecordingWriter::close(std::string& error) {
   return error_.empty();
 }
 
+namespace {
+
+std::string result_file(const std::string& path) {
+  std::error_code ec;
+  return std::filesystem::is_directory(path, ec) ? path + "/mirrorcal-result.yaml" : path;
+}
+
+}  // namespace
+
+bool read_calibration_result(const std::string& path, CalibrationStart& out, std::string& error) {
+  const std::string file = result_file(path);
+  std::string text;
+  return read_file(file, text, error) && parse_calibration_start(text, file, out, error);
+}
+
 bool read_calibration_start(const std::string& path, int markers, CalibrationStart& out,
                             std::string& error) {
-  std::error_code ec;
-  const std::string file =
-      std::filesystem::is_directory(path, ec) ? path + "/mirrorcal-result.yaml" : path;
-  std::string text;
-  if (!read_file(file, text, error) || !parse_calibration_start(text, file, out, error))
-    return false;
+  if (!read_calibration_result(path, out, error)) return false;
   if (out.features_c.size() != static_cast<std::size_t>(markers)) {
-    error = file + ": lists " + std::to_string(out.features_c.size()) +
+    error = result_file(path) + ": lists " + std::to_string(out.features_c.size()) +
             " markers; this build calibrates M = " + std::to_string(markers);
     return false;
   }

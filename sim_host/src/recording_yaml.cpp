@@ -215,11 +215,6 @@ std::string wxyz(const Eigen::Quaterniond& q) {
   const double v[4] = {q.w(), q.x(), q.y(), q.z()};
   return list(v, 4);
 }
-// camchain.yaml's distortion_model: radtan (with zero coefficients) for no lens, which every
-// reader takes.
-const char* lens_name(Distortion d) {
-  return d == Distortion::kNone ? to_string(Distortion::kRadtan) : to_string(d);
-}
 std::array<double, 5> as_array(const Pinhole<double>& k) {
   return {k.fu, k.fv, k.cu, k.cv, k.skew};
 }
@@ -236,10 +231,12 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
          y.positive("update_rate", out.imu_rate_hz);
 }
 
+namespace {
+
 // A rolling shutter's line_delay (s per row, default 0: a global shutter). Real sensors read a
 // row in 5-100 us; a whole frame's readout beyond 0.1 s is no camera (or microseconds given as
 // seconds).
-bool parse_line_delay(const YamlMap& cam, SensorInfo& out) {
+bool parse_line_delay(const YamlMap& cam, CameraInfo& out) {
   double& line_delay = out.intrinsics.line_delay_s;
   line_delay = 0.0;
   if (!cam.has("line_delay")) return true;
@@ -252,22 +249,16 @@ bool parse_line_delay(const YamlMap& cam, SensorInfo& out) {
   return true;
 }
 
-bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
-                         std::vector<std::string>& notes, std::string& error) {
-  YamlMap top(file, error, &notes), cam(file, error, &notes);
-  if (!top.load(text) || !cam.sub(top, "cam0")) return false;
-  std::string model;
-  if (!cam.string("camera_model", model)) return false;
-  if (model != "pinhole")
-    return cam.fail(cam.node("camera_model"), "camera_model",
-                    text::quoted(model) + " is not supported (mirrorcal models a pinhole)");
+// The camera keys camchain.yaml's cam0 and mirrorcal-result.yaml share: intrinsics, skew (under
+// skew_key, 0 if absent), resolution, the lens and the topic.
+bool read_camera(const YamlMap& cam, const char* skew_key, CameraInfo& out) {
   double k[4];
   if (!cam.numbers("intrinsics", 4, k)) return false;
   out.intrinsics = {k[0], k[1], k[2], k[3], 0.0};
-  if (cam.has("intrinsics_skew")) {
-    if (!cam.number("intrinsics_skew", out.intrinsics.skew)) return false;
+  if (cam.has(skew_key)) {
+    if (!cam.number(skew_key, out.intrinsics.skew)) return false;
   } else {
-    cam.note_default("intrinsics_skew", "0 px");
+    cam.note_default(skew_key, "0 px");
   }
   double res[2];
   if (!cam.numbers("resolution", 2, res)) return false;
@@ -277,6 +268,8 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
                     "expected two positive integers [width, height]");
   out.width = static_cast<int>(res[0]);
   out.height = static_cast<int>(res[1]);
+  out.rostopic = kDefaultCameraTopic;
+  if (cam.has("rostopic") && !cam.string("rostopic", out.rostopic)) return false;
   // The lens: Kalibr's pinhole distortion models, the features being raw (distorted) pixels.
   Distortion& d = out.intrinsics.distortion;
   if (cam.has("distortion_model")) {
@@ -293,7 +286,8 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
   if (cam.has("distortion_coeffs")) {
     const YAML::Node n = cam.node("distortion_coeffs");
     // "none" with an empty or all-zero list, as some tools write it.
-    if (d == Distortion::kNone && n.IsSequence() && n.size() == 0) return true;
+    if (d == Distortion::kNone && n.IsSequence() && n.size() == 0)
+      return parse_line_delay(cam, out);
     if (!cam.numbers("distortion_coeffs", 4, c)) return false;
     if (d == Distortion::kNone && (c[0] != 0.0 || c[1] != 0.0 || c[2] != 0.0 || c[3] != 0.0))
       return cam.fail(n, "distortion_coeffs",
@@ -306,6 +300,20 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
   if (d == Distortion::kRadtan && c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0)
     d = Distortion::kNone;
   return parse_line_delay(cam, out);
+}
+
+}  // namespace
+
+bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
+                         std::vector<std::string>& notes, std::string& error) {
+  YamlMap top(file, error, &notes), cam(file, error, &notes);
+  if (!top.load(text) || !cam.sub(top, "cam0")) return false;
+  std::string model;
+  if (!cam.string("camera_model", model)) return false;
+  if (model != "pinhole")
+    return cam.fail(cam.node("camera_model"), "camera_model",
+                    text::quoted(model) + " is not supported (mirrorcal models a pinhole)");
+  return read_camera(cam, "intrinsics_skew", out);
 }
 
 bool parse_priors_yaml(std::string_view text, const std::string& file,
@@ -426,12 +434,12 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   std::string cam = "# Kalibr camera description (pixels: origin at the top-left pixel's centre)\n";
   cam += "cam0:\n  camera_model: pinhole\n  intrinsics: " + list(k.data(), 4) + "\n";
   cam += "  intrinsics_skew: " + number(s.intrinsics.skew) + "\n";
-  cam += std::string("  distortion_model: ") + lens_name(s.intrinsics.distortion) + "\n";
+  cam += std::string("  distortion_model: ") + kalibr_lens_name(s.intrinsics.distortion) + "\n";
   cam += "  distortion_coeffs: " + list(s.intrinsics.coeffs.data(), 4) + "\n";
   cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
   cam +=
       "  line_delay: " + number(s.intrinsics.line_delay_s) + "  # s per row; 0: global shutter\n";
-  cam += "  rostopic: /cam0/image_raw\n";
+  cam += "  rostopic: " + s.rostopic + "\n";
   return write_text(dir + "/imu.yaml", imu, error) &&
          write_text(dir + "/camchain.yaml", cam, error);
 }
@@ -527,7 +535,8 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
     return y.fail(rows, "covariance", "is not symmetric");
   if (out.covariance.llt().info() != Eigen::Success)
     return y.fail(rows, "covariance", "is not positive definite");
-  return true;
+  out.has_camera = y.has("intrinsics");
+  return !out.has_camera || read_camera(y, "skew", out.camera);
 }
 
 }  // namespace mirrorcal::sim

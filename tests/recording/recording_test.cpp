@@ -195,6 +195,8 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   r.markers = {Eigen::Vector3d(0.02, -1.0 / 30.0, -0.03), Eigen::Vector3d(0.05, 0.04, -0.03),
                Eigen::Vector3d(-0.08, 0.06, std::nextafter(0.01, 1.0))};
   r.t_d = std::nextafter(0.0123, 1.0);
+  r.width = 640;  // the camera is read too (for export), and checked
+  r.height = 480;
   r.params = mc::app::calibration_params(3, 5);
   const int n = static_cast<int>(r.params.size());
   Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n);
@@ -263,4 +265,56 @@ TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {
   EXPECT_NE(err.find("mirrorcal-result.yaml: lists 1 markers; this build calibrates M = 3"),
             std::string::npos)
       << err;
+}
+
+// The camera a calibration ends with reads back through mirrorcal's own readers: from
+// camchain-imucam.yaml (the %YAML directive and the rows Kalibr's and OpenVINS's readers need)
+// as a recording's camchain.yaml, and from mirrorcal-result.yaml for `export`.
+TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
+  mc::app::CalibrationResult r;
+  r.intrinsics = {831.25, 829.5, 321.75, 247.125, 2.5};
+  r.intrinsics.distortion = mc::Distortion::kEquidistant;
+  r.intrinsics.coeffs = {-0.01, 0.002, -0.0003, 0.00004};
+  r.width = 752;
+  r.height = 480;
+  r.rostopic = "/rig/front/image_raw";
+  r.params = mc::app::calibration_params(3, 0);
+  const int n = static_cast<int>(r.params.size());
+  r.covariance = 1e-6 * Eigen::MatrixXd::Identity(n, n);
+  r.sigma.assign(std::size_t(n), 1e-3);
+  r.markers.assign(3, Eigen::Vector3d(0.02, 0.03, -0.04));
+  const TempDir tmp("camera-files");
+  std::string err;
+  const std::string chain = tmp.path + "/camchain-imucam.yaml";
+  ASSERT_TRUE(mc::app::write_camchain_imucam(chain, r, err)) << err;
+  ASSERT_TRUE(mc::app::write_result_yaml(tmp.path + "/mirrorcal-result.yaml", r, err)) << err;
+  EXPECT_EQ(slurp(chain).rfind("%YAML 1.0\n---\n", 0), 0u);  // OpenCV needs the directive first
+
+  const auto expect_camera = [&](const mc::sim::CameraInfo& c, const char* file) {
+    const mc::Pinhole<double>& k = c.intrinsics;
+    EXPECT_NEAR(k.fu, r.intrinsics.fu, 1e-6) << file;
+    EXPECT_NEAR(k.fv, r.intrinsics.fv, 1e-6) << file;
+    EXPECT_NEAR(k.cu, r.intrinsics.cu, 1e-6) << file;
+    EXPECT_NEAR(k.cv, r.intrinsics.cv, 1e-6) << file;
+    EXPECT_NEAR(k.skew, r.intrinsics.skew, 1e-6) << file;
+    EXPECT_EQ(k.distortion, mc::Distortion::kEquidistant) << file;
+    for (std::size_t i = 0; i < 4; ++i) EXPECT_NEAR(k.coeffs[i], r.intrinsics.coeffs[i], 1e-12);
+    EXPECT_EQ(c.width, 752) << file;
+    EXPECT_EQ(c.height, 480) << file;
+    EXPECT_EQ(c.rostopic, "/rig/front/image_raw") << file;
+  };
+  mc::sim::SensorInfo sensors;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(mc::sim::parse_camchain_yaml(slurp(chain), chain, sensors, notes, err)) << err;
+  expect_camera(sensors, "camchain-imucam.yaml");
+  mc::sim::CalibrationStart result;
+  ASSERT_TRUE(mc::sim::read_calibration_result(tmp.path, result, err)) << err;
+  ASSERT_TRUE(result.has_camera);
+  expect_camera(result.camera, "mirrorcal-result.yaml");
+  // A camchain.yaml that names no topic gets Kalibr's default.
+  const std::string bare =
+      "cam0:\n  camera_model: pinhole\n  intrinsics: [800, 800, 320, 240]\n"
+      "  resolution: [640, 480]\n";
+  ASSERT_TRUE(mc::sim::parse_camchain_yaml(bare, "camchain.yaml", sensors, notes, err)) << err;
+  EXPECT_EQ(sensors.rostopic, "/cam0/image_raw");
 }

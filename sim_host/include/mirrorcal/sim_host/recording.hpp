@@ -24,12 +24,26 @@
 
 namespace mirrorcal::sim {
 
+// Kalibr's topic of the first camera: what camchain.yaml names when it names none.
+inline constexpr const char* kDefaultCameraTopic = "/cam0/image_raw";
+
+// camchain.yaml's distortion_model: radtan (with zero coefficients) for no lens, which every
+// reader takes.
+inline const char* kalibr_lens_name(Distortion d) {
+  return to_string(d == Distortion::kNone ? Distortion::kRadtan : d);
+}
+
+// A camera as camchain.yaml and mirrorcal-result.yaml describe it.
+struct CameraInfo {
+  Pinhole<double> intrinsics{};  // skew: camchain.yaml's intrinsics_skew (0 if absent)
+  int width = 640, height = 480;
+  std::string rostopic = kDefaultCameraTopic;  // written back for Kalibr and OpenVINS
+};
+
 // What imu.yaml and camchain.yaml say about the sensors.
-struct SensorInfo {
+struct SensorInfo : CameraInfo {
   ImuNoise imu{};
   double imu_rate_hz = 200.0;
-  Pinhole<double> intrinsics{};  // skew from camchain.yaml's intrinsics_skew (0 if absent)
-  int width = 640, height = 480;
 };
 
 // What mirrorcal.yaml says is known before calibrating. SI units, rotations in rad; quaternions
@@ -119,11 +133,15 @@ struct CalibrationStart {
   bool has_t_d = false;        // results written before the time offset was estimated have none
   double t_d = 0.0;            // timeshift_cam_imu (s)
   Eigen::MatrixXd covariance;  // (6 + 3M, + 1 with the time offset) square, positive definite
+  // The camera the calibration ended with (`mirrorcal export`); hand-written starts may omit it.
+  bool has_camera = false;
+  CameraInfo camera;
 };
 
-// Reads a mirrorcal-result.yaml (path, or a folder holding one) as a start for a calibration with
-// M = markers; on bad input (or another number of markers) false with a message naming the file,
-// the line and what is wrong.
+// Reads a mirrorcal-result.yaml (path, or a folder holding one); on bad input false with a message
+// naming the file, the line and what is wrong.
+bool read_calibration_result(const std::string& path, CalibrationStart& out, std::string& error);
+// The same as a start for a calibration with M = markers (another number of markers is refused).
 bool read_calibration_start(const std::string& path, int markers, CalibrationStart& out,
                             std::string& error);
 bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,
