@@ -1,12 +1,14 @@
 // The command line end to end: a recording made by `record` and calibrated by `calibrate` gives
 // the bytes `sim` gives with the same seed; the Kalibr file it writes means what Kalibr reads.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cstdio>
-#include <cstdlib>
+#include <sstream>
+#include <vector>
 
+#include "process.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -18,14 +20,24 @@ struct Result {
   std::string output;  // stdout and stderr
 };
 
-Result run_mirrorcal(const std::string& args, const std::string& scratch) {
+// mirrorcal with the arguments args, run in cwd (default: ours) without a shell.
+Result run_mirrorcal(const std::vector<std::string>& args, const std::string& scratch,
+                     const std::string& cwd = "") {
   const std::string log = scratch + "/command.log";
-  const std::string cmd = std::string(MIRRORCAL_BIN) + " " + args + " > " + log + " 2>&1";
-  const int status = std::system(cmd.c_str());
+  std::vector<std::string> argv = {MIRRORCAL_BIN};
+  argv.insert(argv.end(), args.begin(), args.end());
   Result r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  r.code = mc::app::run_program(argv, cwd, log).status;
   r.output = slurp(log);
   return r;
+}
+
+// The same with the arguments split at spaces (none of these tests' paths has one).
+Result run_mirrorcal(const std::string& args, const std::string& scratch) {
+  std::vector<std::string> argv;
+  std::istringstream words(args);
+  for (std::string w; words >> w;) argv.push_back(w);
+  return run_mirrorcal(argv, scratch);
 }
 
 Eigen::Matrix4d matrix4(const YAML::Node& rows) {
@@ -336,4 +348,30 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
   const Result r = run_mirrorcal("record --seed 1", dir.path);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
+}
+
+// No shell anywhere: an --out holding quotes, spaces, $(), backquotes, a semicolon and a newline is
+// just a folder's name. Nothing it spells runs (a shell would create PWNED files in the folder the
+// program runs in), the plots are drawn, and every result is in that folder.
+TEST(Cli, AnOutputFolderNamedLikeACommandIsOnlyAFolder) {
+  TempDir dir("cli-hostile-out");
+  const std::string out =
+      dir.path + "/John's run $(touch PWNED1) `touch PWNED2`; touch PWNED3; '\n\"x";
+  const Result r = run_mirrorcal({"sim", "--seed", "2", "--out", out}, dir.path, dir.path);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("no plots"), std::string::npos) << r.output;
+  for (const char* f :
+       {"camchain-imucam.yaml", "mirrorcal-result.yaml", "estimates.csv", "error_p.png",
+        "error_rot.png", "error_markers.png", "error_timeshift.png", "nees.png"})
+    EXPECT_GT(fs::file_size(out + "/" + f), 0u) << f;
+  // The scratch folder holds the output folder and the log, nothing a command made.
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir.path)) names.push_back(e.path().filename());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"John's run $(touch PWNED1) `touch PWNED2`; touch "
+                                             "PWNED3; '\n\"x",
+                                             "command.log"}));
+  // Nor are the plots' scratch files left behind.
+  for (const char* f : {"plots.gp", "errors.dat", "band.dat", "gnuplot.log"})
+    EXPECT_FALSE(fs::exists(out + "/" + f)) << f;
 }
