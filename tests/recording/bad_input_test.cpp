@@ -5,6 +5,8 @@
 
 #include <vector>
 
+#include <sys/stat.h>
+
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -339,6 +341,17 @@ TEST_F(BadInput, UnknownKeyIsNoted) {
 TEST_F(BadInput, ImuYamlWithoutUpdateRate) {
   drop_key(dir() + "/imu.yaml", "update_rate");
   expect_error({dir() + "/imu.yaml: missing required key 'update_rate'"});
+}
+
+// Only regular files are read: a FIFO would block the read for ever, /dev/zero would fill the
+// memory.
+TEST_F(BadInput, AFifoOrADeviceForAFileIsRefused) {
+  fs::remove(features());
+  ASSERT_EQ(mkfifo(features().c_str(), 0644), 0);
+  expect_error({features() + ": not a regular file (a FIFO)"});
+  fs::remove(imu());
+  fs::create_symlink("/dev/zero", imu());
+  expect_error({imu() + ": not a regular file (a character device)"});
 }
 
 TEST_F(BadInput, CameraModelThatIsNotPinhole) {
