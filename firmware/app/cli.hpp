@@ -39,9 +39,10 @@ struct Options {
 Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
               const std::vector<std::string>& flags, std::size_t max_positional = 0);
 
-// An unsigned integer option >= min, or def when absent; anything else fails with a message.
+// An unsigned integer option within min..max, or def when absent; anything else fails with a
+// message.
 std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
-                          std::uint64_t min);
+                          std::uint64_t min, std::uint64_t max = UINT64_MAX);
 
 // The scenario named by --scenario (default "paper"); the random family's draw for seed. With
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with

@@ -213,10 +213,9 @@ int cmd_montecarlo(int argc, char** argv) {
   const std::uint64_t runs = parse_count(o, "runs", 0, 1);
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
-  // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
-  const Passes passes = o.flag("passes")
-                            ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))
-                            : Passes{};
+  // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
+  // last gated too many.
+  const Passes passes = passes_option(o);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/montecarlo");

@@ -69,6 +69,18 @@ class YamlMap {
     if (!number(key, v)) return false;
     return v > 0.0 || fail(root_[key], key, "must be > 0");
   }
+  // A number within lo..hi (unit in the message).
+  bool within(const char* key, double lo, double hi, const char* unit, double& v) const {
+    if (!number(key, v)) return false;
+    if (v >= lo && v <= hi) return true;
+    std::string range;
+    text::append(range, lo);
+    range += "..";
+    text::append(range, hi);
+    return fail(
+        root_[key], key,
+        "must lie within " + range + " " + unit + ", not " + text::quoted(root_[key].Scalar()));
+  }
   bool integer(const YAML::Node& n, const char* key, std::int64_t& v) const {
     if (!n.IsScalar() || !text::parse(n.Scalar(), v)) return fail(n, key, "expected an integer");
     return true;
@@ -233,7 +245,7 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
          y.positive("accelerometer_random_walk", out.imu.accel_random_walk) &&
          y.positive("gyroscope_noise_density", out.imu.gyro_noise_density) &&
          y.positive("gyroscope_random_walk", out.imu.gyro_random_walk) &&
-         y.positive("update_rate", out.imu_rate_hz);
+         y.within("update_rate", kMinImuRateHz, kMaxImuRateHz, "Hz", out.imu_rate_hz);
 }
 
 bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,

@@ -350,6 +350,21 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
 }
 
+// --passes replays the whole recording each time: a count beyond kMaxRequestedPasses (20) is
+// refused before anything runs, as a mistake rather than a run that never ends.
+TEST(Cli, AHugePassCountIsRefused) {
+  TempDir dir("cli-passes");
+  for (const std::string command : {"sim", "montecarlo"}) {
+    std::vector<std::string> args = {command, "--passes", "1000000000", "--out", dir.path + "/o"};
+    if (command == "montecarlo") args.insert(args.end(), {"--runs", "1"});
+    const Result r = run_mirrorcal(args, dir.path);
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("--passes must be an integer within 1..20, not '1000000000'"),
+              std::string::npos)
+        << r.output;
+  }
+}
+
 // No shell anywhere: an --out holding quotes, spaces, $(), backquotes, a semicolon and a newline is
 // just a folder's name. Nothing it spells runs (a shell would create PWNED files in the folder the
 // program runs in), the plots are drawn, and every result is in that folder.

@@ -24,6 +24,10 @@
 
 namespace mirrorcal::sim {
 
+// The IMU sample rates imu.yaml's update_rate may give (Hz): every real part's lies within, and
+// beyond them the sample period in ns rounds to 0 or overflows.
+constexpr double kMinImuRateHz = 1.0, kMaxImuRateHz = 10000.0;
+
 // What imu.yaml and camchain.yaml say about the sensors.
 struct SensorInfo {
   ImuNoise imu{};
