@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include "mirrorcal/sim_host/files.hpp"
+
 namespace mirrorcal::app {
 
 std::string usage() {
@@ -87,11 +89,17 @@ sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
   return s;
 }
 
-std::string make_out_dir(const Options& o, const std::string& def) {
-  const std::string dir = o.get("out", def);
+void create_out_dir(const std::string& dir) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) fail("cannot create output directory " + dir + ": " + ec.message(), 1);
+  std::string error;
+  if (!files::lock_folder(dir, error)) fail(error, 1);
+}
+
+std::string make_out_dir(const Options& o, const std::string& def) {
+  const std::string dir = o.get("out", def);
+  create_out_dir(dir);
   return dir;
 }
 

@@ -50,7 +50,10 @@ std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
 sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
 
-// Creates --out (or def) and returns it.
+// Creates dir and locks it against a second mirrorcal writing into it (files::lock_folder) for as
+// long as this one runs; fails with a message if it cannot.
+void create_out_dir(const std::string& dir);
+// The same for --out (or def), which it returns.
 std::string make_out_dir(const Options& o, const std::string& def);
 
 // "\r<what> NN %" on stderr.

@@ -27,20 +27,6 @@ std::vector<ParamInfo> calibration_params(int markers, int intrinsics) {
 
 namespace {
 
-using File = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
-
-File open_for_writing(const std::string& path, std::string& error) {
-  File f(std::fopen(path.c_str(), "w"), &std::fclose);
-  if (!f) error = "cannot write " + path + ": " + std::strerror(errno);
-  return f;
-}
-
-bool finish(File& f, const std::string& path, std::string& error) {
-  const bool ok = std::ferror(f.get()) == 0 && std::fclose(f.release()) == 0;
-  if (!ok) error = "error writing " + path;
-  return ok;
-}
-
 void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* indent) {
   for (int i = 0; i < 4; ++i)
     std::fprintf(f, "%s- [%.12f, %.12f, %.12f, %.12f]\n", indent, t(i, 0), t(i, 1), t(i, 2),
@@ -57,11 +43,10 @@ Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
 
 }  // namespace
 
-bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
-                           std::string& error) {
-  File f = open_for_writing(path, error);
-  if (!f) return false;
-  std::FILE* o = f.get();
+bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
+                           const CalibrationResult& r, std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
   std::fprintf(o, "# mirrorcal calibration, Kalibr camchain-imucam format\ncam0:\n");
   std::fprintf(o, "  camera_model: pinhole\n");
   std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", r.intrinsics.fu, r.intrinsics.fv,
@@ -75,7 +60,7 @@ bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
   std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
   std::fprintf(o, "  timeshift_cam_imu: %.9f\n  T_cam_imu:\n", r.t_d);
   write_matrix_rows(o, t_cam_imu(r), "  ");
-  return finish(f, path, error);
+  return true;
 }
 
 namespace {
@@ -152,10 +137,10 @@ std::string convergence_warning(const CalibrationResult& r) {
   return text;
 }
 
-bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error) {
-  File f = open_for_writing(path, error);
-  if (!f) return false;
-  std::FILE* o = f.get();
+bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                       std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
   std::fprintf(o,
                "# mirrorcal result: SI units (m, rad, px); sigma is 1-sigma, rotations as the\n"
                "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n");
@@ -206,16 +191,15 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
       std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
     std::fprintf(o, "]\n");
   }
-  return finish(f, path, error);
+  return true;
 }
 
 template <class Filter>
-bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<Filter>>& rows,
-                         std::string& error) {
+bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+                         const std::vector<HistoryRow<Filter>>& rows, std::string& error) {
   using State = typename Filter::State;
-  File f = open_for_writing(path, error);
-  if (!f) return false;
-  std::FILE* o = f.get();
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
   const auto params = calibration_params(State::kMarkers, State::kIntrinsics);
   std::fprintf(o, "#time [s],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z");
   for (int i = 0; i < State::kMarkers; ++i)
@@ -241,16 +225,16 @@ bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<F
     for (int j = 0; j < r.sigma.size(); ++j) std::fprintf(o, ",%.6g", r.sigma(j));
     std::fprintf(o, "\n");
   }
-  return finish(f, path, error);
+  return true;
 }
 
-template bool write_estimates_csv(const std::string&,
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
                                   std::string&);
-template bool write_estimates_csv(const std::string&,
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
                                   std::string&);
-template bool write_estimates_csv(const std::string&,
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
                                   std::string&);
 

@@ -11,6 +11,7 @@
 
 #include "history.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::app {
 
@@ -103,16 +104,20 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   return r;
 }
 
+// The writers add their file to out, which writes it when committed (files.hpp); false,
+// with a message naming the file, if it cannot be created.
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's.
-bool write_camchain_imucam(const std::string& path, const CalibrationResult& r, std::string& error);
+bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
+                           const CalibrationResult& r, std::string& error);
 // Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
 // and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
-bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error);
+bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                       std::string& error);
 
 // estimates.csv: time and every calibration state with its 1-sigma (SI units, rotation as the
 // quaternion q_b_c with the 1-sigma of its error vector's components).
 template <class Filter>
-bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<Filter>>& rows,
-                         std::string& error);
+bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+                         const std::vector<HistoryRow<Filter>>& rows, std::string& error);
 
 }  // namespace mirrorcal::app

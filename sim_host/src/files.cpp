@@ -1,9 +1,12 @@
 #include "mirrorcal/sim_host/files.hpp"
 
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -15,6 +18,20 @@ std::string reason(int error_number) {
   return std::strerror(error_number != 0 ? error_number : EIO);
 }
 
+std::string folder_of(const std::string& path) {
+  const std::size_t slash = path.rfind('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
+// A name beside path no other writer uses: hidden, with our pid and a count.
+std::string temporary_name(const std::string& path) {
+  static std::atomic<unsigned> count{0};
+  const std::size_t slash = path.rfind('/');
+  const std::size_t base = slash == std::string::npos ? 0 : slash + 1;
+  return path.substr(0, base) + "." + path.substr(base) + ".tmp-" + std::to_string(getpid()) + "-" +
+         std::to_string(count++);
+}
+
 const char* kind_of(mode_t mode) {
   return S_ISFIFO(mode)   ? "a FIFO"
          : S_ISCHR(mode)  ? "a character device"
@@ -24,7 +41,86 @@ const char* kind_of(mode_t mode) {
                           : "not a file";
 }
 
+// The renames themselves on disk: sync the folder that holds them.
+void sync_folder(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
 }  // namespace
+
+struct OutputSet::File {
+  std::string path, temporary;
+  std::FILE* f = nullptr;
+  bool renamed = false;
+  ~File() {
+    if (f != nullptr) std::fclose(f);
+    if (!renamed) ::unlink(temporary.c_str());
+  }
+  // Everything written on disk, the file closed; false with errno.
+  bool flush_and_sync() {
+    errno = 0;
+    const bool written = std::fflush(f) == 0 && std::ferror(f) == 0;
+    const int write_errno = errno;
+    const bool synced = written && ::fsync(fileno(f)) == 0;
+    const int sync_errno = errno;
+    const bool closed = std::fclose(f) == 0;
+    f = nullptr;
+    errno = !written ? write_errno : !synced ? sync_errno : errno;
+    return written && synced && closed;
+  }
+};
+
+OutputSet::OutputSet() = default;
+OutputSet::~OutputSet() = default;
+
+std::FILE* OutputSet::add(const std::string& path, std::string& error) {
+  auto file = std::make_unique<File>();
+  file->path = path;
+  file->temporary = temporary_name(path);
+  const int fd = ::open(file->temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    discard(path, error);
+    return nullptr;
+  }
+  file->f = ::fdopen(fd, "w");
+  if (file->f == nullptr) {
+    const int e = errno;
+    ::close(fd);
+    ::unlink(file->temporary.c_str());
+    errno = e;
+    discard(path, error);
+    return nullptr;
+  }
+  files_.push_back(std::move(file));
+  return files_.back()->f;
+}
+
+bool OutputSet::commit(std::string& error) {
+  // A file that failed while being written first: the error names it, not a small file whose
+  // buffered bytes found the disk full after it.
+  std::stable_partition(files_.begin(), files_.end(), [](const std::unique_ptr<File>& file) {
+    return std::ferror(file->f) != 0;
+  });
+  for (auto& file : files_)
+    if (!file->flush_and_sync()) return discard(file->path, error);
+  for (auto& file : files_) {
+    if (::rename(file->temporary.c_str(), file->path.c_str()) != 0)
+      return discard(file->path, error);
+    file->renamed = true;
+  }
+  for (auto& file : files_) sync_folder(folder_of(file->path));
+  files_.clear();
+  return true;
+}
+
+bool OutputSet::discard(const std::string& path, std::string& error) {
+  error = path + ": cannot write: " + reason(errno);
+  files_.clear();  // closes and removes the temporary files
+  return false;
+}
 
 bool read_file(const std::string& path, std::string& text, std::string& error) {
   // O_NONBLOCK: opening a FIFO must not wait for a writer (it changes nothing for a file).
@@ -55,6 +151,36 @@ bool read_file(const std::string& path, std::string& text, std::string& error) {
   }
   ::close(fd);
   return true;
+}
+
+bool write_file(const std::string& path, const std::string& text, std::string& error) {
+  OutputSet set;
+  std::FILE* f = set.add(path, error);
+  if (f == nullptr) return false;
+  std::fwrite(text.data(), 1, text.size(), f);
+  return set.commit(error);
+}
+
+bool lock_folder(const std::string& dir, std::string& error) {
+  static std::vector<std::string> held;  // a second lock of ours would refuse us
+  if (std::find(held.begin(), held.end(), dir) != held.end()) return true;
+  const std::string path = dir + "/" + kLockFile;
+  // Never closed: the lock lasts as long as the process, and goes with it however it ends.
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    error = path + ": cannot create the output folder's lock: " + reason(errno);
+    return false;
+  }
+  if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+    held.push_back(dir);
+    return true;
+  }
+  const int e = errno;
+  ::close(fd);
+  error = e == EWOULDBLOCK ? dir + ": another mirrorcal is writing into this folder (it holds " +
+                                 path + "); wait for it to finish or choose another --out"
+                           : path + ": cannot lock: " + reason(e);
+  return false;
 }
 
 }  // namespace mirrorcal::files

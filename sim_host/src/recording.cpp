@@ -261,11 +261,8 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
 
 struct RecordingWriter::File {
   std::string path;
-  std::FILE* f = nullptr;
+  std::FILE* f = nullptr;  // a temporary file of streams_, until close()
   std::vector<char> buffer;
-  ~File() {
-    if (f != nullptr) std::fclose(f);
-  }
 };
 
 namespace {
@@ -304,12 +301,12 @@ bool RecordingWriter::open(const std::string& dir, std::string& error) {
       return false;
     }
   }
+  streams_ = std::make_unique<files::OutputSet>();
   const auto make = [&](const std::string& path, const char* header, std::unique_ptr<File>& file) {
     file = std::make_unique<File>();
     file->path = path;
-    errno = 0;
-    file->f = std::fopen(path.c_str(), "w");
-    if (file->f == nullptr) return fail("cannot write", path);
+    file->f = streams_->add(path, error_);
+    if (file->f == nullptr) return false;
     file->buffer.resize(1 << 16);
     std::setvbuf(file->f, file->buffer.data(), _IOFBF, file->buffer.size());
     std::fprintf(file->f, "%s\n", header);
@@ -411,14 +408,11 @@ bool RecordingWriter::write_image(std::int64_t t_ns, const GrayImage& image) {
 }
 
 bool RecordingWriter::close(std::string& error) {
-  for (auto* file : {&imu_, &frames_, &features_}) {
-    if (!*file || (*file)->f == nullptr) continue;
-    std::FILE* f = (*file)->f;
-    (*file)->f = nullptr;
-    errno = 0;
-    const bool ok = std::ferror(f) == 0;
-    if (std::fclose(f) != 0 || !ok) fail("error writing", (*file)->path);
-  }
+  for (auto* file : {&imu_, &frames_, &features_})
+    if (*file) (*file)->f = nullptr;
+  // The three CSV files replace those of an earlier recording only all together and complete.
+  if (streams_ && error_.empty()) streams_->commit(error_);
+  streams_.reset();
   error = error_;
   return error_.empty();
 }

@@ -6,12 +6,11 @@
 #include <Eigen/Cholesky>
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <initializer_list>
 
+#include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "text_io.hpp"
 
@@ -190,21 +189,6 @@ class YamlMap {
   YAML::Node root_;
   std::string prefix_;
 };
-
-bool write_text(const std::string& path, const std::string& text, std::string& error) {
-  errno = 0;
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (f == nullptr) {
-    error = path + ": cannot write: " + std::strerror(errno);
-    return false;
-  }
-  const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
-  if (std::fclose(f) != 0 || !ok) {
-    error = path + ": error writing";
-    return false;
-  }
-  return true;
-}
 
 // "[a, b, c]" in shortest round-trip form.
 std::string list(const double* v, std::size_t n) {
@@ -426,8 +410,8 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   cam += "  distortion_coeffs: " + list(s.intrinsics.coeffs.data(), 4) + "\n";
   cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
   cam += "  rostopic: /cam0/image_raw\n";
-  return write_text(dir + "/imu.yaml", imu, error) &&
-         write_text(dir + "/camchain.yaml", cam, error);
+  return files::write_file(dir + "/imu.yaml", imu, error) &&
+         files::write_file(dir + "/camchain.yaml", cam, error);
 }
 
 bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::string& error) {
@@ -456,7 +440,7 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   const auto k = as_array(r.intrinsics_guess);
   t += "intrinsics_guess: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew (px)\n";
   t += "sigma_intrinsics: " + list(r.sigma_intrinsics.data(), 5) + "\n";
-  return write_text(dir + "/mirrorcal.yaml", t, error);
+  return files::write_file(dir + "/mirrorcal.yaml", t, error);
 }
 
 bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::string& error) {
@@ -467,7 +451,7 @@ bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::stri
   const auto k = as_array(t.intrinsics);
   y += "intrinsics: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew\n";
   y += "timeshift_cam_imu: " + number(t.t_d) + "  # s\n";
-  return write_text(dir + "/truth.yaml", y, error);
+  return files::write_file(dir + "/truth.yaml", y, error);
 }
 
 bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingTruth& out,

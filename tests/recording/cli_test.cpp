@@ -4,10 +4,18 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
+#include <map>
 #include <sstream>
 #include <vector>
 
+#include <fcntl.h>
+#include <sys/mount.h>
+#include <unistd.h>
+
+#include "mirrorcal/sim_host/files.hpp"
 #include "process.hpp"
 #include "test_support.hpp"
 
@@ -389,4 +397,105 @@ TEST(Cli, AnOutputFolderNamedLikeACommandIsOnlyAFolder) {
   // Nor are the plots' scratch files left behind.
   for (const char* f : {"plots.gp", "errors.dat", "band.dat", "gnuplot.log"})
     EXPECT_FALSE(fs::exists(out + "/" + f)) << f;
+}
+
+// A second mirrorcal writing into a folder another holds (here, this test) is refused at once with
+// a clear error, and writes nothing there.
+TEST(Cli, ASecondWriterIntoTheSameOutputFolderIsRefused) {
+  TempDir dir("cli-locked");
+  const std::string out = dir.path + "/out";
+  fs::create_directories(out);
+  std::string err;
+  ASSERT_TRUE(mc::files::lock_folder(out, err)) << err;
+  for (const std::string command : {"sim", "montecarlo", "record"}) {
+    std::vector<std::string> args = {command, "--out", out};
+    if (command == "montecarlo") args.insert(args.end(), {"--runs", "1"});
+    const Result r = run_mirrorcal(args, dir.path);
+    EXPECT_EQ(r.code, 1) << command << ": " << r.output;
+    EXPECT_NE(r.output.find(out + ": another mirrorcal is writing into this folder"),
+              std::string::npos)
+        << command << ": " << r.output;
+  }
+  EXPECT_EQ(std::distance(fs::directory_iterator(out), fs::directory_iterator()), 1);  // the lock
+}
+
+namespace {
+
+// A tmpfs of its own mounted on a folder (root only), unmounted when it goes.
+struct SmallFilesystem {
+  explicit SmallFilesystem(const std::string& dir, const char* size) : path(dir) {
+    fs::create_directories(dir);
+    mounted = ::mount("tmpfs", dir.c_str(), "tmpfs", 0, size) == 0;
+    if (!mounted) why = std::strerror(errno);
+  }
+  ~SmallFilesystem() {
+    if (mounted) ::umount2(path.c_str(), MNT_DETACH);
+  }
+  // Fills it up to keep_free bytes; false if it cannot be written at all.
+  bool fill(const std::string& name, std::size_t keep_free) const {
+    const std::string filler = path + "/" + name;
+    const int fd = ::open(filler.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return false;
+    static const char block[4096] = {};
+    off_t size = 0;
+    for (ssize_t n; (n = ::write(fd, block, sizeof block)) > 0;) size += n;
+    const bool full = errno == ENOSPC;
+    const bool ok =
+        full && ::ftruncate(fd, size > off_t(keep_free) ? size - off_t(keep_free) : 0) == 0;
+    ::close(fd);
+    return ok;
+  }
+  std::string path, why;
+  bool mounted = false;
+};
+
+}  // namespace
+
+// A full disk: each command fails with a non-zero exit naming the file it could not write, and the
+// results of its earlier run stay byte for byte. With room for camchain-imucam.yaml and
+// mirrorcal-result.yaml but not estimates.csv, none of the three is replaced (a set).
+TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
+  TempDir dir("cli-full-disk");
+  const SmallFilesystem disk(dir.path + "/disk", "size=16m");
+  if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
+  const std::string sim = disk.path + "/sim", mc_out = disk.path + "/mc", rec = disk.path + "/rec";
+  const std::vector<std::vector<std::string>> commands = {
+      {"sim", "--seed", "2", "--no-plots", "--out", sim},
+      {"montecarlo", "--runs", "2", "--jobs", "1", "--no-plots", "--out", mc_out},
+      {"record", "--seed", "2", "--out", rec}};
+  for (const auto& c : commands) ASSERT_EQ(run_mirrorcal(c, dir.path).code, 0) << c[0];
+  const auto snapshot = [&] {
+    std::map<std::string, std::string> bytes;
+    for (const auto& e : fs::recursive_directory_iterator(disk.path))
+      if (e.is_regular_file() && e.path().filename().string()[0] != '.')
+        bytes[e.path().string()] = slurp(e.path().string());
+    return bytes;
+  };
+  const auto before = snapshot();
+  ASSERT_GE(before.size(), 10u);
+
+  ASSERT_TRUE(disk.fill(".filler", 16 * 1024));
+  Result r = run_mirrorcal(commands[0], dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(sim + "/estimates.csv: cannot write: No space left on device"),
+            std::string::npos)
+      << r.output;
+  ASSERT_TRUE(disk.fill(".filler2", 0));
+  r = run_mirrorcal(commands[1], dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(mc_out + "/summary.csv: cannot write: No space left on device"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("wrote"), std::string::npos) << r.output;
+  r = run_mirrorcal(commands[2], dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(rec + "/mav0/imu0/data.csv: cannot write: No space left on device"),
+            std::string::npos)
+      << r.output;
+  const auto after = snapshot();
+  EXPECT_EQ(after.size(), before.size());
+  for (const auto& [path, bytes] : before) EXPECT_TRUE(after.at(path) == bytes) << path;
+  // No temporary file is left to fill the disk.
+  for (const auto& e : fs::recursive_directory_iterator(disk.path))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
 }

@@ -202,7 +202,10 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   for (int j = 0; j < n; ++j) r.sigma.push_back(std::sqrt(r.covariance(j, j)));
   const TempDir tmp("start");
   std::string err;
-  ASSERT_TRUE(mc::app::write_result_yaml(tmp.path + "/mirrorcal-result.yaml", r, err)) << err;
+  mc::files::OutputSet out;
+  ASSERT_TRUE(mc::app::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
+              out.commit(err))
+      << err;
 
   mc::sim::CalibrationStart start;
   ASSERT_TRUE(mc::sim::read_calibration_start(tmp.path, 3, start, err)) << err;  // the folder

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "mirrorcal/estimator/prior.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 
 namespace mirrorcal::sim {
@@ -216,7 +217,8 @@ class RecordingWriter {
   RecordingWriter& operator=(const RecordingWriter&) = delete;
   ~RecordingWriter();
 
-  // Creates DIR/mav0/imu0 and DIR/mav0/cam0 and the CSV files with their headers.
+  // Creates DIR/mav0/imu0 and DIR/mav0/cam0 and the CSV files with their headers (temporary
+  // files until close()).
   bool open(const std::string& dir, std::string& error);
   bool add_imu(const ImuSample& sample);
   // The frame's marker observations; its image too, when there is one (into cam0/data/).
@@ -231,7 +233,8 @@ class RecordingWriter {
     }
     return true;
   }
-  // Flushes and closes the files; false if anything failed since open().
+  // Flushes and closes the files, and renames them into place if all went well (an earlier
+  // recording's CSV files stay as they were otherwise); false if anything failed since open().
   bool close(std::string& error);
   const std::string& error() const { return error_; }
 
@@ -243,6 +246,7 @@ class RecordingWriter {
   bool write_image(std::int64_t t_ns, const GrayImage& image);
 
   std::string dir_, images_path_, error_;
+  std::unique_ptr<files::OutputSet> streams_;  // the CSV files, renamed into place by close()
   std::unique_ptr<File> imu_, frames_, features_;
   std::int64_t last_imu_ns_ = 0, last_frame_ns_ = 0;
   bool any_imu_ = false, any_frame_ = false, images_dir_ = false;
