@@ -171,11 +171,14 @@ bool lock_folder(const std::string& dir, std::string& error) {
     error = path + ": cannot create the output folder's lock: " + reason(errno);
     return false;
   }
-  if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+  const bool locked = ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+  const int e = errno;
+  // A filesystem without locks (NFS without lockd) cannot keep a second writer out; the atomic
+  // renames still keep every file whole, so the run goes on.
+  if (locked || e == ENOLCK || e == EOPNOTSUPP) {
     held.push_back(dir);
     return true;
   }
-  const int e = errno;
   ::close(fd);
   error = e == EWOULDBLOCK ? dir + ": another mirrorcal is writing into this folder (it holds " +
                                  path + "); wait for it to finish or choose another --out"
