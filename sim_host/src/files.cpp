@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -23,13 +26,33 @@ std::string folder_of(const std::string& path) {
   return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
 }
 
-// A name beside path no other writer uses: hidden, with our pid and a count.
-std::string temporary_name(const std::string& path) {
-  static std::atomic<unsigned> count{0};
+// The start of the temporary names of path: hidden, beside it; a writer adds its pid and a count.
+std::string temporary_prefix(const std::string& path) {
   const std::size_t slash = path.rfind('/');
   const std::size_t base = slash == std::string::npos ? 0 : slash + 1;
-  return path.substr(0, base) + "." + path.substr(base) + ".tmp-" + std::to_string(getpid()) + "-" +
-         std::to_string(count++);
+  return path.substr(0, base) + "." + path.substr(base) + ".tmp-";
+}
+
+std::string temporary_name(const std::string& path) {
+  static std::atomic<unsigned> count{0};
+  return temporary_prefix(path) + std::to_string(getpid()) + "-" + std::to_string(count++);
+}
+
+// Removes the temporary files of path whose writer is gone (killed before its commit), so that
+// they do not pile up.
+void remove_orphaned_temporaries(const std::string& path) {
+  const std::string prefix = temporary_prefix(path);
+  const std::string folder = folder_of(path), name_prefix = prefix.substr(prefix.rfind('/') + 1);
+  DIR* d = ::opendir(folder.c_str());
+  if (d == nullptr) return;
+  while (const dirent* e = ::readdir(d)) {
+    const std::string name = e->d_name;
+    if (name.rfind(name_prefix, 0) != 0) continue;
+    const long pid = std::strtol(name.c_str() + name_prefix.size(), nullptr, 10);
+    if (pid > 0 && pid != getpid() && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH)
+      ::unlink((folder + "/" + name).c_str());
+  }
+  ::closedir(d);
 }
 
 const char* kind_of(mode_t mode) {
@@ -77,6 +100,7 @@ OutputSet::OutputSet() = default;
 OutputSet::~OutputSet() = default;
 
 std::FILE* OutputSet::add(const std::string& path, std::string& error) {
+  remove_orphaned_temporaries(path);
   auto file = std::make_unique<File>();
   file->path = path;
   file->temporary = temporary_name(path);

@@ -102,6 +102,14 @@ TEST(OutputSet, AWriterKilledWhileWritingLeavesTheEarlierFiles) {
   kill_writer_at(tmp.path, KillAt::kWhileWriting);
   EXPECT_EQ(slurp(tmp.path + "/a.txt"), "old a");
   EXPECT_EQ(slurp(tmp.path + "/b.txt"), "old b");
+  // Its temporary files are left; the next writer of those files removes them.
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp.path), fs::directory_iterator()), 4);
+  std::string err;
+  mc::files::OutputSet set;
+  ASSERT_NE(set.add(tmp.path + "/a.txt", err), nullptr) << err;
+  ASSERT_NE(set.add(tmp.path + "/b.txt", err), nullptr) << err;
+  ASSERT_TRUE(set.commit(err)) << err;
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp.path), fs::directory_iterator()), 2);
 }
 
 TEST(OutputSet, AWriterKilledAfterItsCommitLeavesTheNewFilesComplete) {
