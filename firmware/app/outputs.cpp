@@ -1,11 +1,8 @@
 #include "outputs.hpp"
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
-#include <memory>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
 

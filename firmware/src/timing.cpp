@@ -1,11 +1,11 @@
 #include "mirrorcal/firmware/timing.hpp"
 
-#include "mirrorcal/sim_host/files.hpp"
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::firmware {
 

@@ -140,6 +140,31 @@ TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
   EXPECT_NE(err.find("must increase"), std::string::npos) << err;
 }
 
+// A recording abandoned before close() (an error, the end of the program) leaves the earlier
+// recording's files as they were, and no temporary file.
+TEST(Recording, AWriterNeverClosedLeavesTheEarlierRecording) {
+  const TempDir tmp("writer-abandoned");
+  const std::string imu_csv = tmp.path + "/mav0/imu0/data.csv";
+  std::string err;
+  mc::ImuSample s;
+  s.t_ns = 10;
+  {
+    mc::sim::RecordingWriter w;
+    ASSERT_TRUE(w.open(tmp.path, err) && w.add_imu(s) && w.close(err)) << err;
+  }
+  const std::string before = slurp(imu_csv);
+  ASSERT_NE(before.find("\n10,"), std::string::npos) << before;
+  {
+    mc::sim::RecordingWriter w;
+    ASSERT_TRUE(w.open(tmp.path, err)) << err;
+    s.t_ns = 20;
+    ASSERT_TRUE(w.add_imu(s));
+  }
+  EXPECT_EQ(slurp(imu_csv), before);
+  EXPECT_EQ(
+      std::distance(fs::directory_iterator(tmp.path + "/mav0/imu0"), fs::directory_iterator()), 1);
+}
+
 TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
   const TempDir tmp("images");
   const std::string& dir = tmp.path;

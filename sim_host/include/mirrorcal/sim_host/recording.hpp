@@ -246,8 +246,10 @@ class RecordingWriter {
   bool write_image(std::int64_t t_ns, const GrayImage& image);
 
   std::string dir_, images_path_, error_;
-  std::unique_ptr<files::OutputSet> streams_;  // the CSV files, renamed into place by close()
   std::unique_ptr<File> imu_, frames_, features_;
+  // The CSV files, renamed into place by close(). Declared after the Files so that it goes first,
+  // closing its files while their buffers still exist.
+  std::unique_ptr<files::OutputSet> streams_;
   std::int64_t last_imu_ns_ = 0, last_frame_ns_ = 0;
   bool any_imu_ = false, any_frame_ = false, images_dir_ = false;
 };
