@@ -61,7 +61,7 @@ const char* kind_of(mode_t mode) {
          : S_ISBLK(mode)  ? "a block device"
          : S_ISDIR(mode)  ? "a folder"
          : S_ISSOCK(mode) ? "a socket"
-                          : "not a file";
+                          : "another kind of file";
 }
 
 // The renames themselves on disk: sync the folder that holds them.
@@ -156,7 +156,7 @@ bool read_file(const std::string& path, std::string& text, std::string& error) {
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
-    error = path + ": not a regular file (" + kind_of(st.st_mode) + "); expected a file";
+    error = path + ": not a regular file (" + kind_of(st.st_mode) + ")";
     return false;
   }
   text.clear();
