@@ -8,6 +8,8 @@
 
 #include <unistd.h>
 
+#include "mirrorcal/sim_host/files.hpp"
+
 namespace mirrorcal::app {
 
 std::string usage() {
@@ -60,14 +62,17 @@ Options parse(int argc, char** argv, int first, const std::vector<std::string>& 
 }
 
 std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
-                          std::uint64_t min) {
+                          std::uint64_t min, std::uint64_t max) {
   const std::string s = o.get(key, "");
   if (s.empty()) return def;
   char* end = nullptr;
   errno = 0;
   const unsigned long long v = std::strtoull(s.c_str(), &end, 10);
-  if (errno != 0 || end == s.c_str() || *end != '\0' || s[0] == '-' || v < min)
-    fail("--" + key + " must be an integer >= " + std::to_string(min) + ", not '" + s + "'");
+  if (errno != 0 || end == s.c_str() || *end != '\0' || s[0] == '-' || v < min || v > max)
+    fail("--" + key + " must be an integer " +
+         (max == UINT64_MAX ? ">= " + std::to_string(min)
+                            : "within " + std::to_string(min) + ".." + std::to_string(max)) +
+         ", not '" + s + "'");
   return v;
 }
 
@@ -119,11 +124,17 @@ sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
   return s;
 }
 
-std::string make_out_dir(const Options& o, const std::string& def) {
-  const std::string dir = o.get("out", def);
+void create_out_dir(const std::string& dir) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) fail("cannot create output directory " + dir + ": " + ec.message(), 1);
+  std::string error;
+  if (!files::lock_folder(dir, error)) fail(error, 1);
+}
+
+std::string make_out_dir(const Options& o, const std::string& def) {
+  const std::string dir = o.get("out", def);
+  create_out_dir(dir);
   return dir;
 }
 

@@ -41,9 +41,10 @@ struct Options {
 Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
               const std::vector<std::string>& flags, std::size_t max_positional = 0);
 
-// An unsigned integer option >= min, or def when absent; anything else fails with a message.
+// An unsigned integer option within min..max, or def when absent; anything else fails with a
+// message.
 std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
-                          std::uint64_t min);
+                          std::uint64_t min, std::uint64_t max = UINT64_MAX);
 
 // The scenario named by --scenario (default "paper"); the random family's draw for seed. With
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
@@ -54,7 +55,10 @@ constexpr double kMaxSimulatedTimeshiftS = 0.5;
 constexpr double kMaxSimulatedReadoutS = 0.1;
 sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
 
-// Creates --out (or def) and returns it.
+// Creates dir and locks it against a second mirrorcal writing into it (files::lock_folder) for as
+// long as this one runs; fails with a message if it cannot.
+void create_out_dir(const std::string& dir);
+// The same for --out (or def), which it returns.
 std::string make_out_dir(const Options& o, const std::string& def);
 
 // "\r<what> NN %" on stderr when it is a terminal; otherwise (a log, a CI capture) a line

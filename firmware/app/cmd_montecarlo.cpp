@@ -114,9 +114,8 @@ struct GroupStats {
 
 // A random family's campaign: no common truth, so statistics of the errors by parameter group
 // (p_b_c, rotation, markers: rows 0-2, 3-5, 6..), over all runs and by each axis the family draws
-// (mirror, motion, camera rate, pixel noise, prior width), into summary.csv and on stdout.
-void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_hi,
-                   const std::string& dir) {
+// (mirror, motion, camera rate, pixel noise, prior width), into summary.csv (f) and on stdout.
+void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_hi, std::FILE* f) {
   struct Group {
     std::string axis, value;
     std::function<bool(const sim::Scenario&)> has;
@@ -137,9 +136,6 @@ void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_
       {"marker prior", "6.5-10 cm",
        [](const sim::Scenario& s) { return s.priors.marker >= 0.065; }},
   };
-  const std::string path = dir + "/summary.csv";
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) fail("cannot write " + path, 1);
   std::fprintf(f,
                "axis,value,runs,nees_mean,nees_median,runs_beyond_4_sigma,flagged,"
                "unflagged_beyond_4_sigma,rms_p_b_c [cm],rms_rot_b_c [deg],rms_markers [mm],"
@@ -174,7 +170,6 @@ void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_
                  lim[1], lim[2], lim[3], lim_ok[0], lim_ok[1], lim_ok[2], lim_ok[3]);
   }
   std::fprintf(f, "# nees_99_lo=%.4f nees_99_hi=%.4f\n", nees_lo, nees_hi);
-  if (std::fclose(f) != 0) fail("cannot write " + path, 1);
   std::printf(
       "(RMS errors and root-mean-square reported sigmas by parameter group; >4sig: runs with a "
       "state beyond 4 sigma, flag: runs that said consistent: false, missed: runs beyond 4 sigma "
@@ -214,10 +209,9 @@ int cmd_montecarlo(int argc, char** argv) {
   const std::uint64_t runs = parse_count(o, "runs", 0, 1);
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
-  // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
-  const Passes passes = o.flag("passes")
-                            ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))
-                            : Passes{};
+  // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
+  // last gated too many.
+  const Passes passes = passes_option(o);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/montecarlo");
@@ -306,6 +300,12 @@ int cmd_montecarlo(int argc, char** argv) {
   const double nees_lo = chi2_quantile(0.025, n * double(np)) / n;
   const double nees_hi = chi2_quantile(0.975, n * double(np)) / n;
 
+  // summary.csv and runs.csv, written together when both are complete.
+  files::OutputSet results;
+  std::string err;
+  std::FILE* const summary = results.add(dir + "/summary.csv", err);
+  std::FILE* const runs_csv = summary != nullptr ? results.add(dir + "/runs.csv", err) : nullptr;
+  if (runs_csv == nullptr) fail(err, 1);
   if (family) {
     std::vector<double> each;
     for (const auto& oc : out) each.push_back(oc.nees);
@@ -316,7 +316,7 @@ int cmd_montecarlo(int argc, char** argv) {
         "%.2f..%.2f), median of the runs %.2f: %s\n",
         np, (unsigned long long)runs, nees, lo99, hi99, median(each),
         nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
-    report_family(out, lo99, hi99, dir);
+    report_family(out, lo99, hi99, summary);
   } else {
     std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
                 !intrinsics ? " and II"
@@ -373,10 +373,8 @@ int cmd_montecarlo(int argc, char** argv) {
   std::printf("wall time %.1f s (%.2f s per run on %llu jobs)\n", wall, wall / n * double(jobs),
               (unsigned long long)jobs);
 
-  std::FILE* f = nullptr;
+  std::FILE* f = summary;
   if (!family) {
-    f = std::fopen((dir + "/summary.csv").c_str(), "w");
-    if (!f) fail("cannot write " + dir + "/summary.csv", 1);
     std::fprintf(f, "parameter,unit,truth,mean_estimate,std,rms_error,paper_std\n");
     for (std::size_t j = 0; j < np; ++j)
       std::fprintf(f, "%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f\n", params[j].name.c_str(),
@@ -393,10 +391,8 @@ int cmd_montecarlo(int argc, char** argv) {
                    (unsigned long long)detection.markers_labelled,
                    (unsigned long long)detection.wrong_labels, detection.centroid_rms_px,
                    detection.centroid_max_px, detection.ms_per_frame);
-    std::fclose(f);
   }
-  f = std::fopen((dir + "/runs.csv").c_str(), "w");
-  if (!f) fail("cannot write " + dir + "/runs.csv", 1);
+  f = runs_csv;
   std::fprintf(f, "run,seed");
   for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
@@ -427,12 +423,11 @@ int cmd_montecarlo(int argc, char** argv) {
     }
     std::fprintf(f, "\n");
   }
-  std::fclose(f);
+  if (!results.commit(err)) fail(err, 1);
   std::printf("wrote %s/summary.csv, %s/runs.csv\n", dir.c_str(), dir.c_str());
   if (!o.flag("no-plots")) {
     std::vector<ErrorSeries> series;
     for (auto& oc : out) series.push_back(std::move(oc.series));
-    std::string err;
     const auto pngs = plot_errors(dir, "mirrorcal Monte Carlo, " + std::to_string(runs) + " runs",
                                   params, series, nees_lo, nees_hi, err);
     if (pngs.empty()) std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());

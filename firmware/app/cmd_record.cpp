@@ -3,11 +3,11 @@
 // --imu, of the board's devices (the IMU's samples and the markers detected in the camera's
 // frames, labelled by their brightness) through the same writer.
 #include <cstdio>
-#include <filesystem>
 #include <string>
 
 #include "cli.hpp"
 #include "devices.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "sim_run.hpp"
 
@@ -65,11 +65,11 @@ int record_devices(const Options& o, const std::string& dir) {
   if (imu_status == hal::SourceStatus::kError) fail(imu.error(), 1);
   if (frame_status == hal::SourceStatus::kError) fail(devices.camera->markers->error(), 1);
   if (!s.sensors.empty()) {
-    std::error_code ec;
+    std::string text;
     for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
-      if (!std::filesystem::copy_file(s.sensors + "/" + f, dir + "/" + f,
-                                      std::filesystem::copy_options::overwrite_existing, ec))
-        fail(dir + "/" + f + ": cannot write: " + ec.message(), 1);
+      if (!files::read_file(s.sensors + "/" + f, text, err) ||
+          !files::write_file(dir + "/" + f, text, err))
+        fail(err, 1);
   }
   std::printf("wrote %s/mav0%s\n", dir.c_str(),
               s.sensors.empty() ? "" : " and the sensor files of --sensors");

@@ -6,7 +6,6 @@
 // it consumed; the result is then calibrated from it as `mirrorcal calibrate` calibrates a
 // recording (kDefaultPasses passes from the prior: one pass alone is over-confident).
 #include <cstdio>
-#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -137,7 +136,7 @@ int cmd_run(int argc, char** argv) {
   const Devices devices =
       open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz);
   const std::unique_ptr<Camera>& camera = devices.camera;
-  std::filesystem::create_directories(s.out);
+  create_out_dir(s.out);
 
   using Filter = CalibrationFilter<double, kMarkers, 0>;
   Filter filter(recording_config(sensors));
@@ -220,8 +219,10 @@ int cmd_run(int argc, char** argv) {
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
   for (const std::string& w : result_warnings(result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
-  if (!write_camchain_imucam(s.out + "/camchain-imucam.yaml", result, error) ||
-      !write_result_yaml(s.out + "/mirrorcal-result.yaml", result, error))
+  files::OutputSet out;
+  if (!write_camchain_imucam(out, s.out + "/camchain-imucam.yaml", result, error) ||
+      !write_result_yaml(out, s.out + "/mirrorcal-result.yaml", result, error) ||
+      !out.commit(error))
     fail(error, 1);
   std::printf("wrote %s/camchain-imucam.yaml and %s/mirrorcal-result.yaml\n", s.out.c_str(),
               s.out.c_str());

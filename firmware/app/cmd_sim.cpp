@@ -40,10 +40,9 @@ int cmd_sim(int argc, char** argv) {
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const sim::Scenario s =
       o.flag("hold-skew") ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
-  // --passes N: exactly N; by default kDefaultPasses, more while the last gated too many.
-  const Passes passes = o.flag("passes")
-                            ? Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1)))
-                            : Passes{};
+  // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
+  // last gated too many.
+  const Passes passes = passes_option(o);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
   const std::string dir = make_out_dir(o, "out/sim");

@@ -4,8 +4,6 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <sstream>
 #include <string>
 
 #include "cli.hpp"
@@ -14,6 +12,7 @@
 #include "mirrorcal/drivers/driver_error.hpp"
 #include "mirrorcal/drivers/open_imu.hpp"
 #include "mirrorcal/drivers/register_imu.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::app {
 
@@ -89,18 +88,6 @@ void print_imu_counters(const hal::ImuSource& imu) {
   }
 }
 
-bool read_text(const std::string& path, std::string& text, std::string& error) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    error = path + ": cannot read";
-    return false;
-  }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  text = ss.str();
-  return true;
-}
-
 std::atomic<int> g_stop_signal{0};
 static_assert(std::atomic<int>::is_always_lock_free, "the signal handler needs a lock-free flag");
 
@@ -116,7 +103,8 @@ RunSettings device_settings(const Options& o, const char* command, bool sensors_
   if (o.flag("config")) {
     const std::string file = o.get("config", "");
     std::string text;
-    if (!read_text(file, text, error) || !parse_run_config(text, file, s, error)) fail(error, 2);
+    if (!files::read_file(file, text, error) || !parse_run_config(text, file, s, error))
+      fail(error, 2);
   }
   for (const char* key : kRunKeys)
     if (o.flag(key) && !set_run_setting(s, key, o.get(key, ""), error)) fail("--" + error, 2);
@@ -134,10 +122,10 @@ void read_sensors(const std::string& dir, sim::Recording& r) {
   std::string text, error;
   const std::string imu = dir + "/imu.yaml", cam = dir + "/camchain.yaml",
                     priors = dir + "/mirrorcal.yaml";
-  if (!read_text(imu, text, error) || !sim::parse_imu_yaml(text, imu, r.sensors, error) ||
-      !read_text(cam, text, error) ||
+  if (!files::read_file(imu, text, error) || !sim::parse_imu_yaml(text, imu, r.sensors, error) ||
+      !files::read_file(cam, text, error) ||
       !sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) ||
-      !read_text(priors, text, error) ||
+      !files::read_file(priors, text, error) ||
       !sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error))
     fail(error, 2);
 }

@@ -45,6 +45,11 @@ void report_profile(const firmware::LoopProfiler& p, const std::string& title,
   std::printf("wrote %s (cyclictest histogram format)\n", path.c_str());
 }
 
+Passes passes_option(const Options& o) {
+  if (!o.flag("passes")) return Passes{};
+  return Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1, kMaxRequestedPasses)));
+}
+
 FrameMode frame_mode_option(const Options& o) {
   FrameMode frames;
   frames.enabled = o.flag("frames");

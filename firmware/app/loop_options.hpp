@@ -33,6 +33,11 @@ std::unique_ptr<firmware::LoopProfiler> make_profiler(const Options& o, hal::Clo
 // them without --frames.
 FrameMode frame_mode_option(const Options& o);
 
+// --passes N of sim and montecarlo: exactly N passes, 1 <= N <= kMaxRequestedPasses (each replays
+// the whole recording); without it, the default (Passes{}).
+constexpr std::uint64_t kMaxRequestedPasses = 20;
+Passes passes_option(const Options& o);
+
 // Prints the timing table under a title and writes the histograms to <dir>/timing-histogram.txt.
 void report_profile(const firmware::LoopProfiler& p, const std::string& title,
                     const std::string& dir);

@@ -1,12 +1,9 @@
 #include "outputs.hpp"
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
-#include <memory>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
 
@@ -27,20 +24,6 @@ std::vector<ParamInfo> calibration_params(int markers, int intrinsics) {
 }
 
 namespace {
-
-using File = std::unique_ptr<std::FILE, int (*)(std::FILE*)>;
-
-File open_for_writing(const std::string& path, std::string& error) {
-  File f(std::fopen(path.c_str(), "w"), &std::fclose);
-  if (!f) error = "cannot write " + path + ": " + std::strerror(errno);
-  return f;
-}
-
-bool finish(File& f, const std::string& path, std::string& error) {
-  const bool ok = std::ferror(f.get()) == 0 && std::fclose(f.release()) == 0;
-  if (!ok) error = "error writing " + path;
-  return ok;
-}
 
 void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* indent) {
   for (int i = 0; i < 4; ++i)
@@ -105,13 +88,13 @@ void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_
 
 }  // namespace
 
-bool write_camchain_imucam(const std::string& path, const CalibrationResult& r,
-                           std::string& error) {
-  File f = open_for_writing(path, error);
-  if (!f) return false;
-  write_yaml_header(f.get(), "mirrorcal calibration, Kalibr camchain-imucam format");
-  write_imucam_chain(f.get(), r, false);
-  return finish(f, path, error);
+bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
+                           const CalibrationResult& r, std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  write_yaml_header(o, "mirrorcal calibration, Kalibr camchain-imucam format");
+  write_imucam_chain(o, r, false);
+  return true;
 }
 
 namespace {
@@ -211,10 +194,10 @@ std::vector<std::string> result_warnings(const CalibrationResult& r) {
   return w;
 }
 
-bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error) {
-  File f = open_for_writing(path, error);
-  if (!f) return false;
-  std::FILE* o = f.get();
+bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                       std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
   std::fprintf(o,
                "# mirrorcal result: SI units (m, rad, px); sigma is 1-sigma, rotations as the\n"
                "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n");
@@ -268,7 +251,7 @@ bool write_result_yaml(const std::string& path, const CalibrationResult& r, std:
       std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
     std::fprintf(o, "]\n");
   }
-  return finish(f, path, error);
+  return true;
 }
 
 namespace {
@@ -362,38 +345,35 @@ std::string vins_camera_file(const std::string& config_path) {
 
 bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
                   std::string& error) {
+  files::OutputSet out;
   if (format == ExportFormat::kVinsFusion) {
-    const std::string camera_path = vins_camera_file(path);
-    File camera = open_for_writing(camera_path, error);
-    if (!camera) return false;
-    write_vins_camera(camera.get(), r);
-    if (!finish(camera, camera_path, error)) return false;
+    std::FILE* camera = out.add(vins_camera_file(path), error);
+    if (camera == nullptr) return false;
+    write_vins_camera(camera, r);
   }
-  File f = open_for_writing(path, error);
-  if (!f) return false;
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
   switch (format) {
     case ExportFormat::kOpenVins:
-      write_yaml_header(f.get(), "mirrorcal calibration: OpenVINS kalibr_imucam_chain.yaml");
-      write_imucam_chain(f.get(), r, true);
+      write_yaml_header(o, "mirrorcal calibration: OpenVINS kalibr_imucam_chain.yaml");
+      write_imucam_chain(o, r, true);
       break;
     case ExportFormat::kVinsFusion:
-      write_vins_config(f.get(), r,
-                        std::filesystem::path(vins_camera_file(path)).filename().string());
+      write_vins_config(o, r, std::filesystem::path(vins_camera_file(path)).filename().string());
       break;
     case ExportFormat::kRosCameraInfo:
-      write_ros_camera_info(f.get(), r);
+      write_ros_camera_info(o, r);
       break;
   }
-  return finish(f, path, error);
+  return out.commit(error);
 }
 
 template <class Filter>
-bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<Filter>>& rows,
-                         std::string& error) {
+bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+                         const std::vector<HistoryRow<Filter>>& rows, std::string& error) {
   using State = typename Filter::State;
-  File f = open_for_writing(path, error);
-  if (!f) return false;
-  std::FILE* o = f.get();
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
   const auto params = calibration_params(State::kMarkers, State::kIntrinsics);
   std::fprintf(o, "#time [s],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z");
   for (int i = 0; i < State::kMarkers; ++i)
@@ -419,16 +399,16 @@ bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<F
     for (int j = 0; j < r.sigma.size(); ++j) std::fprintf(o, ",%.6g", r.sigma(j));
     std::fprintf(o, "\n");
   }
-  return finish(f, path, error);
+  return true;
 }
 
-template bool write_estimates_csv(const std::string&,
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
                                   std::string&);
-template bool write_estimates_csv(const std::string&,
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
                                   std::string&);
-template bool write_estimates_csv(const std::string&,
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const std::vector<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
                                   std::string&);
 

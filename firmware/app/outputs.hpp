@@ -11,6 +11,7 @@
 
 #include "history.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 
 namespace mirrorcal::app {
@@ -113,7 +114,10 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
 
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's. Read unmodified
 // by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike.
-bool write_camchain_imucam(const std::string& path, const CalibrationResult& r, std::string& error);
+// The writers add their file to out, which writes it when committed (files.hpp); false,
+// with a message naming the file, if it cannot be created.
+bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
+                           const CalibrationResult& r, std::string& error);
 
 // What `mirrorcal export` writes for other tools to read directly.
 enum class ExportFormat {
@@ -124,16 +128,18 @@ enum class ExportFormat {
 bool export_format_from_string(const std::string& name, ExportFormat& format);
 // VINS-Fusion's camera file, written beside its config at config_path: "<stem>_cam0.yaml".
 std::string vins_camera_file(const std::string& config_path);
+// Writes the file (and VINS-Fusion's camera file) whole or not at all.
 bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
                   std::string& error);
 // Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
 // and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
-bool write_result_yaml(const std::string& path, const CalibrationResult& r, std::string& error);
+bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                       std::string& error);
 
 // estimates.csv: time and every calibration state with its 1-sigma (SI units, rotation as the
 // quaternion q_b_c with the 1-sigma of its error vector's components).
 template <class Filter>
-bool write_estimates_csv(const std::string& path, const std::vector<HistoryRow<Filter>>& rows,
-                         std::string& error);
+bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+                         const std::vector<HistoryRow<Filter>>& rows, std::string& error);
 
 }  // namespace mirrorcal::app

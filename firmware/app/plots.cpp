@@ -2,8 +2,9 @@
 
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <fstream>
+
+#include "process.hpp"
 
 namespace mirrorcal::app {
 
@@ -34,6 +35,16 @@ std::vector<Group> groups_of(const std::vector<ParamInfo>& params) {
   for (auto& x : g)
     if (!x.params.empty()) used.push_back(x);
   return used;
+}
+
+// text as a gnuplot string: single-quoted, where only a doubled quote is special.
+std::string quoted(const std::string& text) {
+  std::string q = "'";
+  for (char c : text) {
+    if (c == '\n') c = ' ';
+    q += c == '\'' ? std::string("''") : std::string(1, c);
+  }
+  return q + "'";
 }
 
 }  // namespace
@@ -76,39 +87,48 @@ std::vector<std::string> plot_errors(const std::string& dir, const std::string& 
       return written;
     }
   }
-  const std::string script = dir + "/plots.gp";
+  // The script names only files in dir, where gnuplot runs: the folder's name (quotes, newlines,
+  // anything) never enters gnuplot's language, nor a shell's.
   {
-    std::ofstream g(script);
+    std::ofstream g(dir + "/plots.gp");
     g << "set terminal pngcairo size 1500,900 font 'DejaVu Sans,10'\nset grid\n"
       << "set key off\nset xlabel 'time [s]'\n";
     const std::string line =
         runs.size() > 1 ? "lc rgb '#a0336699' lw 0.6" : "lc rgb '#336699' lw 1.2";
     for (const Group& grp : groups_of(params)) {
       const std::size_t n = grp.params.size(), cols = 3, rows = (n + cols - 1) / cols;
-      g << "set output '" << dir << "/" << grp.file << "'\n"
-        << "set multiplot layout " << rows << "," << cols << " title '" << title << ": "
-        << grp.label << " error and +-3 sigma'\n";
+      g << "set output '" << grp.file << "'\n"
+        << "set multiplot layout " << rows << "," << cols << " title "
+        << quoted(title + ": " + grp.label + " error and +-3 sigma") << "\n";
       for (std::size_t j : grp.params) {
         const std::size_t c = j + 2;  // 1-based column in both files
-        g << "set title '" << params[j].name << "'\nset ylabel '" << params[j].unit << "'\n"
-          << "plot '" << dir << "/errors.dat' using 1:" << c << " with lines " << line << ", '"
-          << dir << "/band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
+        g << "set title " << quoted(params[j].name) << "\nset ylabel " << quoted(params[j].unit)
+          << "\nplot 'errors.dat' using 1:" << c << " with lines " << line
+          << ", 'band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
           << ", '' using 1:(-$" << c << ") with lines lc rgb '#cc2222' lw 1.5\n";
       }
       g << "unset multiplot\n";
       written.push_back(dir + "/" + grp.file);
     }
     const std::size_t nc = params.size() + 2;
-    g << "set output '" << dir << "/nees.png'\nset terminal pngcairo size 900,500\n"
+    g << "set output 'nees.png'\nset terminal pngcairo size 900,500\n"
       << "set title 'NEES of the " << params.size() << " calibration states, mean over "
       << runs.size() << " run(s), with its 95 % interval'\nset ylabel 'NEES'\nset logscale y\n"
-      << "plot '" << dir << "/band.dat' using 1:" << nc << " with lines lc rgb '#336699' lw 1.5, "
-      << nees_lo << " lc rgb '#cc2222' dt 2, " << nees_hi << " lc rgb '#cc2222' dt 2\n";
+      << "plot 'band.dat' using 1:" << nc << " with lines lc rgb '#336699' lw 1.5, " << nees_lo
+      << " lc rgb '#cc2222' dt 2, " << nees_hi << " lc rgb '#cc2222' dt 2\n";
     written.push_back(dir + "/nees.png");
+    if (!g.flush()) {
+      error = "cannot write " + dir + "/plots.gp";
+      written.clear();
+      return written;
+    }
   }
-  const std::string cmd = "gnuplot '" + script + "' 2>'" + dir + "/gnuplot.log'";
-  if (std::system(cmd.c_str()) != 0) {
-    error = "gnuplot failed or is not installed (see " + dir + "/gnuplot.log); data left in " + dir;
+  const ProgramExit gnuplot = run_program({"gnuplot", "plots.gp"}, dir, dir + "/gnuplot.log");
+  if (gnuplot.status != 0) {
+    error = gnuplot.error +
+            (gnuplot.status < 0 ? " (Debian: apt-get install gnuplot-nox)"
+                                : " (see " + dir + "/gnuplot.log)") +
+            "; data left in " + dir;
     written.clear();
     return written;
   }

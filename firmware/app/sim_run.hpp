@@ -225,9 +225,10 @@ Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& dat
 // camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir.
 template <int NK>
 bool write_run_outputs(const std::string& dir, const SimRun<NK>& run, std::string& error) {
-  return write_camchain_imucam(dir + "/camchain-imucam.yaml", run.result, error) &&
-         write_result_yaml(dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(dir + "/estimates.csv", run.history, error);
+  files::OutputSet out;
+  return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
+         write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
+         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) && out.commit(error);
 }
 
 }  // namespace mirrorcal::app

@@ -1,10 +1,11 @@
 #include "mirrorcal/firmware/timing.hpp"
 
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstring>
+#include <cstdio>
+
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::firmware {
 
@@ -145,11 +146,9 @@ std::string LoopProfiler::table() const {
 // The layout of cyclictest -h (rt-tests' print_hist): one line per bin, one column per "thread"
 // (here per stage), then the summary lines. Lines starting with # are comments to its readers.
 bool LoopProfiler::write_histogram(const std::string& path, std::string& err) const {
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (f == nullptr) {
-    err = path + ": " + std::strerror(errno);
-    return false;
-  }
+  files::OutputSet out;
+  std::FILE* f = out.add(path, err);
+  if (f == nullptr) return false;
   const std::size_t n = hist_.size();
   std::fprintf(f, "# mirrorcal loop timing, 1 us bins; columns (cyclictest threads):");
   for (std::size_t j = 0; j < n; ++j) std::fprintf(f, " %s", stage_name(static_cast<Stage>(j)));
@@ -179,11 +178,7 @@ bool LoopProfiler::write_histogram(const std::string& path, std::string& err) co
     std::fprintf(f, "\n");
   }
   std::fprintf(f, "\n");
-  if (std::fclose(f) != 0) {
-    err = path + ": " + std::strerror(errno);
-    return false;
-  }
-  return true;
+  return out.commit(err);
 }
 
 std::int64_t MonotonicClock::now_ns() {

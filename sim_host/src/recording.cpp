@@ -8,12 +8,11 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include <fcntl.h>
 #include <unistd.h>
 
+#include "mirrorcal/sim_host/files.hpp"
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
@@ -102,22 +101,6 @@ class CsvReader {
   std::string& error_;
   std::size_t pos_ = 0, line_no_ = 0;
 };
-
-bool read_file(const std::string& path, std::string& out, std::string& error) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    error = path + ": cannot open: " + std::strerror(errno);
-    return false;
-  }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) {
-    error = path + ": read error";
-    return false;
-  }
-  out = ss.str();
-  return true;
-}
 
 }  // namespace
 
@@ -216,24 +199,26 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
   const std::string features_csv = dir + "/mav0/cam0/features.csv";
   const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
   const std::string priors_yaml = dir + "/mirrorcal.yaml";
-  if (!read_file(imu_yaml, text, error) || !parse_imu_yaml(text, imu_yaml, out.sensors, error))
+  if (!files::read_file(imu_yaml, text, error) ||
+      !parse_imu_yaml(text, imu_yaml, out.sensors, error))
     return false;
-  if (!read_file(cam_yaml, text, error) ||
+  if (!files::read_file(cam_yaml, text, error) ||
       !parse_camchain_yaml(text, cam_yaml, out.sensors, out.notes, error))
     return false;
-  if (!read_file(priors_yaml, text, error) ||
+  if (!files::read_file(priors_yaml, text, error) ||
       !parse_priors_yaml(text, priors_yaml, out.sensors.intrinsics, out.priors, out.notes, error))
     return false;
   const std::string truth_yaml = dir + "/truth.yaml";
   out.has_truth = std::filesystem::exists(truth_yaml);
-  if (out.has_truth && (!read_file(truth_yaml, text, error) ||
+  if (out.has_truth && (!files::read_file(truth_yaml, text, error) ||
                         !parse_truth_yaml(text, truth_yaml, out.truth, error)))
     return false;
-  if (!read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
+  if (!files::read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
     return false;
-  if (!read_file(frames_csv, text, error) || !parse_frames_csv(text, frames_csv, out.frames, error))
+  if (!files::read_file(frames_csv, text, error) ||
+      !parse_frames_csv(text, frames_csv, out.frames, error))
     return false;
-  if (!read_file(features_csv, text, error) ||
+  if (!files::read_file(features_csv, text, error) ||
       !parse_features_csv(text, features_csv, markers, out.frames, error))
     return false;
 
@@ -276,11 +261,8 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
 
 struct RecordingWriter::File {
   std::string path;
-  std::FILE* f = nullptr;
+  std::FILE* f = nullptr;  // a temporary file of streams_, until close()
   std::vector<char> buffer;
-  ~File() {
-    if (f != nullptr) std::fclose(f);
-  }
 };
 
 namespace {
@@ -319,12 +301,12 @@ bool RecordingWriter::open(const std::string& dir, std::string& error) {
       return false;
     }
   }
+  streams_ = std::make_unique<files::OutputSet>();
   const auto make = [&](const std::string& path, const char* header, std::unique_ptr<File>& file) {
     file = std::make_unique<File>();
     file->path = path;
-    errno = 0;
-    file->f = std::fopen(path.c_str(), "w");
-    if (file->f == nullptr) return fail("cannot write", path);
+    file->f = streams_->add(path, error_);
+    if (file->f == nullptr) return false;
     file->buffer.resize(1 << 16);
     std::setvbuf(file->f, file->buffer.data(), _IOFBF, file->buffer.size());
     std::fprintf(file->f, "%s\n", header);
@@ -426,14 +408,11 @@ bool RecordingWriter::write_image(std::int64_t t_ns, const GrayImage& image) {
 }
 
 bool RecordingWriter::close(std::string& error) {
-  for (auto* file : {&imu_, &frames_, &features_}) {
-    if (!*file || (*file)->f == nullptr) continue;
-    std::FILE* f = (*file)->f;
-    (*file)->f = nullptr;
-    errno = 0;
-    const bool ok = std::ferror(f) == 0;
-    if (std::fclose(f) != 0 || !ok) fail("error writing", (*file)->path);
-  }
+  for (auto* file : {&imu_, &frames_, &features_})
+    if (*file) (*file)->f = nullptr;
+  // The three CSV files replace those of an earlier recording only all together and complete.
+  if (streams_ && error_.empty()) streams_->commit(error_);
+  streams_.reset();
   error = error_;
   return error_.empty();
 }
@@ -450,7 +429,7 @@ std::string result_file(const std::string& path) {
 bool read_calibration_result(const std::string& path, CalibrationStart& out, std::string& error) {
   const std::string file = result_file(path);
   std::string text;
-  return read_file(file, text, error) && parse_calibration_start(text, file, out, error);
+  return files::read_file(file, text, error) && parse_calibration_start(text, file, out, error);
 }
 
 bool read_calibration_start(const std::string& path, int markers, CalibrationStart& out,

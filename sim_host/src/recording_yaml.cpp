@@ -6,12 +6,11 @@
 #include <Eigen/Cholesky>
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <initializer_list>
 
+#include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "text_io.hpp"
 
@@ -68,6 +67,18 @@ class YamlMap {
   bool positive(const char* key, double& v) const {
     if (!number(key, v)) return false;
     return v > 0.0 || fail(root_[key], key, "must be > 0");
+  }
+  // A number within lo..hi (unit in the message).
+  bool within(const char* key, double lo, double hi, const char* unit, double& v) const {
+    if (!number(key, v)) return false;
+    if (v >= lo && v <= hi) return true;
+    std::string range;
+    text::append(range, lo);
+    range += "..";
+    text::append(range, hi);
+    return fail(
+        root_[key], key,
+        "must lie within " + range + " " + unit + ", not " + text::quoted(root_[key].Scalar()));
   }
   bool integer(const YAML::Node& n, const char* key, std::int64_t& v) const {
     if (!n.IsScalar() || !text::parse(n.Scalar(), v)) return fail(n, key, "expected an integer");
@@ -179,21 +190,6 @@ class YamlMap {
   std::string prefix_;
 };
 
-bool write_text(const std::string& path, const std::string& text, std::string& error) {
-  errno = 0;
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (f == nullptr) {
-    error = path + ": cannot write: " + std::strerror(errno);
-    return false;
-  }
-  const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
-  if (std::fclose(f) != 0 || !ok) {
-    error = path + ": error writing";
-    return false;
-  }
-  return true;
-}
-
 // "[a, b, c]" in shortest round-trip form.
 std::string list(const double* v, std::size_t n) {
   std::string s = "[";
@@ -228,7 +224,7 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
          y.positive("accelerometer_random_walk", out.imu.accel_random_walk) &&
          y.positive("gyroscope_noise_density", out.imu.gyro_noise_density) &&
          y.positive("gyroscope_random_walk", out.imu.gyro_random_walk) &&
-         y.positive("update_rate", out.imu_rate_hz);
+         y.within("update_rate", kMinImuRateHz, kMaxImuRateHz, "Hz", out.imu_rate_hz);
 }
 
 namespace {
@@ -440,8 +436,8 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   cam +=
       "  line_delay: " + number(s.intrinsics.line_delay_s) + "  # s per row; 0: global shutter\n";
   cam += "  rostopic: " + s.rostopic + "\n";
-  return write_text(dir + "/imu.yaml", imu, error) &&
-         write_text(dir + "/camchain.yaml", cam, error);
+  return files::write_file(dir + "/imu.yaml", imu, error) &&
+         files::write_file(dir + "/camchain.yaml", cam, error);
 }
 
 bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::string& error) {
@@ -470,7 +466,7 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   const auto k = as_array(r.intrinsics_guess);
   t += "intrinsics_guess: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew (px)\n";
   t += "sigma_intrinsics: " + list(r.sigma_intrinsics.data(), 5) + "\n";
-  return write_text(dir + "/mirrorcal.yaml", t, error);
+  return files::write_file(dir + "/mirrorcal.yaml", t, error);
 }
 
 bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::string& error) {
@@ -481,7 +477,7 @@ bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::stri
   const auto k = as_array(t.intrinsics);
   y += "intrinsics: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew\n";
   y += "timeshift_cam_imu: " + number(t.t_d) + "  # s\n";
-  return write_text(dir + "/truth.yaml", y, error);
+  return files::write_file(dir + "/truth.yaml", y, error);
 }
 
 bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingTruth& out,

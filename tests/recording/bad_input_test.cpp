@@ -5,6 +5,8 @@
 
 #include <vector>
 
+#include <sys/stat.h>
+
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -339,6 +341,34 @@ TEST_F(BadInput, UnknownKeyIsNoted) {
 TEST_F(BadInput, ImuYamlWithoutUpdateRate) {
   drop_key(dir() + "/imu.yaml", "update_rate");
   expect_error({dir() + "/imu.yaml: missing required key 'update_rate'"});
+}
+
+// A rate no IMU has (a period of 0 ns, or one that overflows, would loop for ever) is refused
+// with the file and line; the bounds themselves are rates.
+TEST_F(BadInput, UpdateRateOutsideAnyImusIsRefused) {
+  const std::string imu_yaml = dir() + "/imu.yaml";
+  for (const char* rate : {"1e12", "2e9", "1e-12", "0.5", "10001"}) {
+    set_key(imu_yaml, "update_rate", std::string("update_rate: ") + rate);
+    expect_error({imu_yaml + ":",
+                  "update_rate: must lie within 1..10000 Hz, not '" + std::string(rate) + "'"});
+  }
+  for (const char* rate : {"1", "10000"}) {
+    set_key(imu_yaml, "update_rate", std::string("update_rate: ") + rate);
+    mc::sim::Recording r;
+    std::string err;
+    EXPECT_EQ(mc::sim::read_recording(dir(), 3, r, err), true) << err;
+  }
+}
+
+// Only regular files are read: a FIFO would block the read for ever, /dev/zero would fill the
+// memory.
+TEST_F(BadInput, AFifoOrADeviceForAFileIsRefused) {
+  fs::remove(features());
+  ASSERT_EQ(mkfifo(features().c_str(), 0644), 0);
+  expect_error({features() + ": not a regular file (a FIFO)"});
+  fs::remove(imu());
+  fs::create_symlink("/dev/zero", imu());
+  expect_error({imu() + ": not a regular file (a character device)"});
 }
 
 TEST_F(BadInput, CameraModelThatIsNotPinhole) {

@@ -1,12 +1,22 @@
 // The command line end to end: a recording made by `record` and calibrated by `calibrate` gives
 // the bytes `sim` gives with the same seed; the Kalibr file it writes means what Kalibr reads.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cstdio>
-#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <sstream>
+#include <vector>
 
+#include <fcntl.h>
+#include <sys/mount.h>
+#include <unistd.h>
+
+#include "mirrorcal/sim_host/files.hpp"
+#include "process.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -18,14 +28,24 @@ struct Result {
   std::string output;  // stdout and stderr
 };
 
-Result run_mirrorcal(const std::string& args, const std::string& scratch) {
+// mirrorcal with the arguments args, run in cwd (default: ours) without a shell.
+Result run_mirrorcal(const std::vector<std::string>& args, const std::string& scratch,
+                     const std::string& cwd = "") {
   const std::string log = scratch + "/command.log";
-  const std::string cmd = std::string(MIRRORCAL_BIN) + " " + args + " > " + log + " 2>&1";
-  const int status = std::system(cmd.c_str());
+  std::vector<std::string> argv = {MIRRORCAL_BIN};
+  argv.insert(argv.end(), args.begin(), args.end());
   Result r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  r.code = mc::app::run_program(argv, cwd, log).status;
   r.output = slurp(log);
   return r;
+}
+
+// The same with the arguments split at spaces (none of these tests' paths has one).
+Result run_mirrorcal(const std::string& args, const std::string& scratch) {
+  std::vector<std::string> argv;
+  std::istringstream words(args);
+  for (std::string w; words >> w;) argv.push_back(w);
+  return run_mirrorcal(argv, scratch);
 }
 
 Eigen::Matrix4d matrix4(const YAML::Node& rows) {
@@ -409,6 +429,147 @@ TEST(Cli, ExportRefusesWhatItCannotWrite) {
   EXPECT_NE(r.output.find(d + "/old.yaml: holds no camera"), std::string::npos) << r.output;
   r = run_mirrorcal("export --format ros-camera-info " + d + " " + d + "/no/such/dir/x.yaml", d);
   EXPECT_EQ(r.code, 1) << r.output;
-  EXPECT_NE(r.output.find("cannot write " + d + "/no/such/dir/x.yaml"), std::string::npos)
+  EXPECT_NE(r.output.find(d + "/no/such/dir/x.yaml: cannot write"), std::string::npos) << r.output;
+}
+
+// --passes replays the whole recording each time: a count beyond kMaxRequestedPasses (20) is
+// refused before anything runs, as a mistake rather than a run that never ends.
+TEST(Cli, AHugePassCountIsRefused) {
+  TempDir dir("cli-passes");
+  for (const std::string command : {"sim", "montecarlo"}) {
+    std::vector<std::string> args = {command, "--passes", "1000000000", "--out", dir.path + "/o"};
+    if (command == "montecarlo") args.insert(args.end(), {"--runs", "1"});
+    const Result r = run_mirrorcal(args, dir.path);
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("--passes must be an integer within 1..20, not '1000000000'"),
+              std::string::npos)
+        << r.output;
+  }
+}
+
+// No shell anywhere: an --out holding quotes, spaces, $(), backquotes, a semicolon and a newline is
+// just a folder's name. Nothing it spells runs (a shell would create PWNED files in the folder the
+// program runs in), the plots are drawn, and every result is in that folder.
+TEST(Cli, AnOutputFolderNamedLikeACommandIsOnlyAFolder) {
+  TempDir dir("cli-hostile-out");
+  const std::string out =
+      dir.path + "/John's run $(touch PWNED1) `touch PWNED2`; touch PWNED3; '\n\"x";
+  const Result r = run_mirrorcal({"sim", "--seed", "2", "--out", out}, dir.path, dir.path);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("no plots"), std::string::npos) << r.output;
+  for (const char* f :
+       {"camchain-imucam.yaml", "mirrorcal-result.yaml", "estimates.csv", "error_p.png",
+        "error_rot.png", "error_markers.png", "error_timeshift.png", "nees.png"})
+    EXPECT_GT(fs::file_size(out + "/" + f), 0u) << f;
+  // The scratch folder holds the output folder and the log, nothing a command made.
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir.path)) names.push_back(e.path().filename());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"John's run $(touch PWNED1) `touch PWNED2`; touch "
+                                             "PWNED3; '\n\"x",
+                                             "command.log"}));
+  // Nor are the plots' scratch files left behind.
+  for (const char* f : {"plots.gp", "errors.dat", "band.dat", "gnuplot.log"})
+    EXPECT_FALSE(fs::exists(out + "/" + f)) << f;
+}
+
+// A second mirrorcal writing into a folder another holds (here, this test) is refused at once with
+// a clear error, and writes nothing there.
+TEST(Cli, ASecondWriterIntoTheSameOutputFolderIsRefused) {
+  TempDir dir("cli-locked");
+  const std::string out = dir.path + "/out";
+  fs::create_directories(out);
+  std::string err;
+  ASSERT_TRUE(mc::files::lock_folder(out, err)) << err;
+  for (const std::string command : {"sim", "montecarlo", "record"}) {
+    std::vector<std::string> args = {command, "--out", out};
+    if (command == "montecarlo") args.insert(args.end(), {"--runs", "1"});
+    const Result r = run_mirrorcal(args, dir.path);
+    EXPECT_EQ(r.code, 1) << command << ": " << r.output;
+    EXPECT_NE(r.output.find(out + ": another mirrorcal is writing into this folder"),
+              std::string::npos)
+        << command << ": " << r.output;
+  }
+  EXPECT_EQ(std::distance(fs::directory_iterator(out), fs::directory_iterator()), 1);  // the lock
+}
+
+namespace {
+
+// A tmpfs of its own mounted on a folder (root only), unmounted when it goes.
+struct SmallFilesystem {
+  explicit SmallFilesystem(const std::string& dir, const char* size) : path(dir) {
+    fs::create_directories(dir);
+    mounted = ::mount("tmpfs", dir.c_str(), "tmpfs", 0, size) == 0;
+    if (!mounted) why = std::strerror(errno);
+  }
+  ~SmallFilesystem() {
+    if (mounted) ::umount2(path.c_str(), MNT_DETACH);
+  }
+  // Fills it up to keep_free bytes; false if it cannot be written at all.
+  bool fill(const std::string& name, std::size_t keep_free) const {
+    const std::string filler = path + "/" + name;
+    const int fd = ::open(filler.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return false;
+    static const char block[4096] = {};
+    off_t size = 0;
+    for (ssize_t n; (n = ::write(fd, block, sizeof block)) > 0;) size += n;
+    const bool full = errno == ENOSPC;
+    const bool ok =
+        full && ::ftruncate(fd, size > off_t(keep_free) ? size - off_t(keep_free) : 0) == 0;
+    ::close(fd);
+    return ok;
+  }
+  std::string path, why;
+  bool mounted = false;
+};
+
+}  // namespace
+
+// A full disk: each command fails with a non-zero exit naming the file it could not write, and the
+// results of its earlier run stay byte for byte. With room for camchain-imucam.yaml and
+// mirrorcal-result.yaml but not estimates.csv, none of the three is replaced (a set).
+TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
+  TempDir dir("cli-full-disk");
+  const SmallFilesystem disk(dir.path + "/disk", "size=16m");
+  if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
+  const std::string sim = disk.path + "/sim", mc_out = disk.path + "/mc", rec = disk.path + "/rec";
+  const std::vector<std::vector<std::string>> commands = {
+      {"sim", "--seed", "2", "--no-plots", "--out", sim},
+      {"montecarlo", "--runs", "2", "--jobs", "1", "--no-plots", "--out", mc_out},
+      {"record", "--seed", "2", "--out", rec}};
+  for (const auto& c : commands) ASSERT_EQ(run_mirrorcal(c, dir.path).code, 0) << c[0];
+  const auto snapshot = [&] {
+    std::map<std::string, std::string> bytes;
+    for (const auto& e : fs::recursive_directory_iterator(disk.path))
+      if (e.is_regular_file() && e.path().filename().string()[0] != '.')
+        bytes[e.path().string()] = slurp(e.path().string());
+    return bytes;
+  };
+  const auto before = snapshot();
+  ASSERT_GE(before.size(), 10u);
+
+  ASSERT_TRUE(disk.fill(".filler", 16 * 1024));
+  Result r = run_mirrorcal(commands[0], dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(sim + "/estimates.csv: cannot write: No space left on device"),
+            std::string::npos)
       << r.output;
+  ASSERT_TRUE(disk.fill(".filler2", 0));
+  r = run_mirrorcal(commands[1], dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(mc_out + "/summary.csv: cannot write: No space left on device"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("wrote"), std::string::npos) << r.output;
+  r = run_mirrorcal(commands[2], dir.path);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(rec + "/mav0/imu0/data.csv: cannot write: No space left on device"),
+            std::string::npos)
+      << r.output;
+  const auto after = snapshot();
+  EXPECT_EQ(after.size(), before.size());
+  for (const auto& [path, bytes] : before) EXPECT_TRUE(after.at(path) == bytes) << path;
+  // No temporary file is left to fill the disk.
+  for (const auto& e : fs::recursive_directory_iterator(disk.path))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
 }

@@ -140,6 +140,31 @@ TEST(Recording, WriterRefusesTimestampsThatDoNotIncrease) {
   EXPECT_NE(err.find("must increase"), std::string::npos) << err;
 }
 
+// A recording abandoned before close() (an error, the end of the program) leaves the earlier
+// recording's files as they were, and no temporary file.
+TEST(Recording, AWriterNeverClosedLeavesTheEarlierRecording) {
+  const TempDir tmp("writer-abandoned");
+  const std::string imu_csv = tmp.path + "/mav0/imu0/data.csv";
+  std::string err;
+  mc::ImuSample s;
+  s.t_ns = 10;
+  {
+    mc::sim::RecordingWriter w;
+    ASSERT_TRUE(w.open(tmp.path, err) && w.add_imu(s) && w.close(err)) << err;
+  }
+  const std::string before = slurp(imu_csv);
+  ASSERT_NE(before.find("\n10,"), std::string::npos) << before;
+  {
+    mc::sim::RecordingWriter w;
+    ASSERT_TRUE(w.open(tmp.path, err)) << err;
+    s.t_ns = 20;
+    ASSERT_TRUE(w.add_imu(s));
+  }
+  EXPECT_EQ(slurp(imu_csv), before);
+  EXPECT_EQ(
+      std::distance(fs::directory_iterator(tmp.path + "/mav0/imu0"), fs::directory_iterator()), 1);
+}
+
 TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
   const TempDir tmp("images");
   const std::string& dir = tmp.path;
@@ -204,7 +229,10 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   for (int j = 0; j < n; ++j) r.sigma.push_back(std::sqrt(r.covariance(j, j)));
   const TempDir tmp("start");
   std::string err;
-  ASSERT_TRUE(mc::app::write_result_yaml(tmp.path + "/mirrorcal-result.yaml", r, err)) << err;
+  mc::files::OutputSet out;
+  ASSERT_TRUE(mc::app::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
+              out.commit(err))
+      << err;
 
   mc::sim::CalibrationStart start;
   ASSERT_TRUE(mc::sim::read_calibration_start(tmp.path, 3, start, err)) << err;  // the folder
@@ -286,8 +314,12 @@ TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
   const TempDir tmp("camera-files");
   std::string err;
   const std::string chain = tmp.path + "/camchain-imucam.yaml";
-  ASSERT_TRUE(mc::app::write_camchain_imucam(chain, r, err)) << err;
-  ASSERT_TRUE(mc::app::write_result_yaml(tmp.path + "/mirrorcal-result.yaml", r, err)) << err;
+  r.intrinsics.line_delay_s = 2.5e-5;
+  mc::files::OutputSet out;
+  ASSERT_TRUE(mc::app::write_camchain_imucam(out, chain, r, err) &&
+              mc::app::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
+              out.commit(err))
+      << err;
   EXPECT_EQ(slurp(chain).rfind("%YAML 1.0\n---\n", 0), 0u);  // OpenCV needs the directive first
 
   const auto expect_camera = [&](const mc::sim::CameraInfo& c, const char* file) {
@@ -302,6 +334,7 @@ TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
     EXPECT_EQ(c.width, 752) << file;
     EXPECT_EQ(c.height, 480) << file;
     EXPECT_EQ(c.rostopic, "/rig/front/image_raw") << file;
+    EXPECT_EQ(k.line_delay_s, 2.5e-5) << file;
   };
   mc::sim::SensorInfo sensors;
   std::vector<std::string> notes;

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "mirrorcal/estimator/prior.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 
 namespace mirrorcal::sim {
@@ -39,6 +40,10 @@ struct CameraInfo {
   int width = 640, height = 480;
   std::string rostopic = kDefaultCameraTopic;  // written back for Kalibr and OpenVINS
 };
+
+// The IMU sample rates imu.yaml's update_rate may give (Hz): every real part's lies within, and
+// beyond them the sample period in ns rounds to 0 or overflows.
+constexpr double kMinImuRateHz = 1.0, kMaxImuRateHz = 10000.0;
 
 // What imu.yaml and camchain.yaml say about the sensors.
 struct SensorInfo : CameraInfo {
@@ -230,7 +235,8 @@ class RecordingWriter {
   RecordingWriter& operator=(const RecordingWriter&) = delete;
   ~RecordingWriter();
 
-  // Creates DIR/mav0/imu0 and DIR/mav0/cam0 and the CSV files with their headers.
+  // Creates DIR/mav0/imu0 and DIR/mav0/cam0 and the CSV files with their headers (temporary
+  // files until close()).
   bool open(const std::string& dir, std::string& error);
   bool add_imu(const ImuSample& sample);
   // The frame's marker observations; its image too, when there is one (into cam0/data/).
@@ -245,7 +251,8 @@ class RecordingWriter {
     }
     return true;
   }
-  // Flushes and closes the files; false if anything failed since open().
+  // Flushes and closes the files, and renames them into place if all went well (an earlier
+  // recording's CSV files stay as they were otherwise); false if anything failed since open().
   bool close(std::string& error);
   const std::string& error() const { return error_; }
 
@@ -258,6 +265,9 @@ class RecordingWriter {
 
   std::string dir_, images_path_, error_;
   std::unique_ptr<File> imu_, frames_, features_;
+  // The CSV files, renamed into place by close(). Declared after the Files so that it goes first,
+  // closing its files while their buffers still exist.
+  std::unique_ptr<files::OutputSet> streams_;
   std::int64_t last_imu_ns_ = 0, last_frame_ns_ = 0;
   bool any_imu_ = false, any_frame_ = false, images_dir_ = false;
 };

@@ -1,0 +1,54 @@
+// Files read and written safely. Only regular files are read: a FIFO or a device (/dev/zero) is
+// refused, never waited on or read without end.
+//
+// Results are written whole or not at all. Every file mirrorcal writes goes first to a temporary
+// file beside it (same folder, so the rename is atomic), is flushed and synced to disk, and is
+// renamed over its name only when all of its set is complete: a full disk, a crash or a kill leaves
+// the earlier results as they were, never a cut file. A lock on the output folder keeps a second
+// mirrorcal from writing into it at the same time.
+#pragma once
+
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace mirrorcal::files {
+
+// The files of one result, committed together.
+class OutputSet {
+ public:
+  OutputSet();
+  ~OutputSet();  // removes the temporary files of a set never committed
+  OutputSet(const OutputSet&) = delete;
+  OutputSet& operator=(const OutputSet&) = delete;
+
+  // A new temporary file for path, open for writing; nullptr with a message naming path if it
+  // cannot be created.
+  std::FILE* add(const std::string& path, std::string& error);
+  // Flushes and syncs every file, then renames each over its path; if any cannot be written
+  // (a full disk), none is renamed and error names that file. A set that failed is discarded.
+  bool commit(std::string& error);
+
+ private:
+  struct File;
+  // Sets error for path from errno, removes every temporary file and returns false.
+  bool discard(const std::string& path, std::string& error);
+  std::vector<std::unique_ptr<File>> files_;
+};
+
+// The whole of the regular file path into text; false with a message naming path otherwise
+// ("PATH: cannot open: reason", "PATH: not a regular file").
+bool read_file(const std::string& path, std::string& text, std::string& error);
+
+// text as the whole of path, through an OutputSet of one.
+bool write_file(const std::string& path, const std::string& text, std::string& error);
+
+// The lock file in an output folder: a mirrorcal writing into the folder holds an exclusive
+// flock() on it for as long as it runs.
+constexpr const char* kLockFile = ".mirrorcal.lock";
+// Takes that lock on dir for the rest of the process; false, with a message naming the folder,
+// if another process holds it.
+bool lock_folder(const std::string& dir, std::string& error);
+
+}  // namespace mirrorcal::files

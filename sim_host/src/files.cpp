@@ -1,0 +1,213 @@
+#include "mirrorcal/sim_host/files.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace mirrorcal::files {
+
+namespace {
+
+std::string reason(int error_number) {
+  return std::strerror(error_number != 0 ? error_number : EIO);
+}
+
+std::string folder_of(const std::string& path) {
+  const std::size_t slash = path.rfind('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
+// The start of the temporary names of path: hidden, beside it; a writer adds its pid and a count.
+std::string temporary_prefix(const std::string& path) {
+  const std::size_t slash = path.rfind('/');
+  const std::size_t base = slash == std::string::npos ? 0 : slash + 1;
+  return path.substr(0, base) + "." + path.substr(base) + ".tmp-";
+}
+
+std::string temporary_name(const std::string& path) {
+  static std::atomic<unsigned> count{0};
+  return temporary_prefix(path) + std::to_string(getpid()) + "-" + std::to_string(count++);
+}
+
+// Removes the temporary files of path whose writer is gone (killed before its commit), so that
+// they do not pile up.
+void remove_orphaned_temporaries(const std::string& path) {
+  const std::string prefix = temporary_prefix(path);
+  const std::string folder = folder_of(path), name_prefix = prefix.substr(prefix.rfind('/') + 1);
+  DIR* d = ::opendir(folder.c_str());
+  if (d == nullptr) return;
+  while (const dirent* e = ::readdir(d)) {
+    const std::string name = e->d_name;
+    if (name.rfind(name_prefix, 0) != 0) continue;
+    const long pid = std::strtol(name.c_str() + name_prefix.size(), nullptr, 10);
+    if (pid > 0 && pid != getpid() && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH)
+      ::unlink((folder + "/" + name).c_str());
+  }
+  ::closedir(d);
+}
+
+const char* kind_of(mode_t mode) {
+  return S_ISFIFO(mode)   ? "a FIFO"
+         : S_ISCHR(mode)  ? "a character device"
+         : S_ISBLK(mode)  ? "a block device"
+         : S_ISDIR(mode)  ? "a folder"
+         : S_ISSOCK(mode) ? "a socket"
+                          : "another kind of file";
+}
+
+// The renames themselves on disk: sync the folder that holds them.
+void sync_folder(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
+}  // namespace
+
+struct OutputSet::File {
+  std::string path, temporary;
+  std::FILE* f = nullptr;
+  bool renamed = false;
+  ~File() {
+    if (f != nullptr) std::fclose(f);
+    if (!renamed) ::unlink(temporary.c_str());
+  }
+  // Everything written on disk, the file closed; false with errno.
+  bool flush_and_sync() {
+    errno = 0;
+    const bool written = std::fflush(f) == 0 && std::ferror(f) == 0;
+    const int write_errno = errno;
+    const bool synced = written && ::fsync(fileno(f)) == 0;
+    const int sync_errno = errno;
+    const bool closed = std::fclose(f) == 0;
+    f = nullptr;
+    errno = !written ? write_errno : !synced ? sync_errno : errno;
+    return written && synced && closed;
+  }
+};
+
+OutputSet::OutputSet() = default;
+OutputSet::~OutputSet() = default;
+
+std::FILE* OutputSet::add(const std::string& path, std::string& error) {
+  remove_orphaned_temporaries(path);
+  auto file = std::make_unique<File>();
+  file->path = path;
+  file->temporary = temporary_name(path);
+  const int fd = ::open(file->temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    discard(path, error);
+    return nullptr;
+  }
+  file->f = ::fdopen(fd, "w");
+  if (file->f == nullptr) {
+    const int e = errno;
+    ::close(fd);
+    ::unlink(file->temporary.c_str());
+    errno = e;
+    discard(path, error);
+    return nullptr;
+  }
+  files_.push_back(std::move(file));
+  return files_.back()->f;
+}
+
+bool OutputSet::commit(std::string& error) {
+  // A file that failed while being written first: the error names it, not a small file whose
+  // buffered bytes found the disk full after it.
+  std::stable_partition(files_.begin(), files_.end(), [](const std::unique_ptr<File>& file) {
+    return std::ferror(file->f) != 0;
+  });
+  for (auto& file : files_)
+    if (!file->flush_and_sync()) return discard(file->path, error);
+  for (auto& file : files_) {
+    if (::rename(file->temporary.c_str(), file->path.c_str()) != 0)
+      return discard(file->path, error);
+    file->renamed = true;
+  }
+  for (auto& file : files_) sync_folder(folder_of(file->path));
+  files_.clear();
+  return true;
+}
+
+bool OutputSet::discard(const std::string& path, std::string& error) {
+  error = path + ": cannot write: " + reason(errno);
+  files_.clear();  // closes and removes the temporary files
+  return false;
+}
+
+bool read_file(const std::string& path, std::string& text, std::string& error) {
+  // O_NONBLOCK: opening a FIFO must not wait for a writer (it changes nothing for a file).
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) {
+    error = path + ": cannot open: " + reason(errno);
+    return false;
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    error = path + ": not a regular file (" + kind_of(st.st_mode) + ")";
+    return false;
+  }
+  text.clear();
+  text.reserve(static_cast<std::size_t>(st.st_size));
+  char buffer[1 << 16];
+  for (;;) {
+    const ssize_t n = ::read(fd, buffer, sizeof buffer);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      error = path + ": read error: " + reason(errno);
+      ::close(fd);
+      return false;
+    }
+    if (n == 0) break;
+    text.append(buffer, static_cast<std::size_t>(n));
+  }
+  ::close(fd);
+  return true;
+}
+
+bool write_file(const std::string& path, const std::string& text, std::string& error) {
+  OutputSet set;
+  std::FILE* f = set.add(path, error);
+  if (f == nullptr) return false;
+  std::fwrite(text.data(), 1, text.size(), f);
+  return set.commit(error);
+}
+
+bool lock_folder(const std::string& dir, std::string& error) {
+  static std::vector<std::string> held;  // a second lock of ours would refuse us
+  if (std::find(held.begin(), held.end(), dir) != held.end()) return true;
+  const std::string path = dir + "/" + kLockFile;
+  // Never closed: the lock lasts as long as the process, and goes with it however it ends.
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    error = path + ": cannot create the output folder's lock: " + reason(errno);
+    return false;
+  }
+  const bool locked = ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+  const int e = errno;
+  // A filesystem without locks (NFS without lockd) cannot keep a second writer out; the atomic
+  // renames still keep every file whole, so the run goes on.
+  if (locked || e == ENOLCK || e == EOPNOTSUPP) {
+    held.push_back(dir);
+    return true;
+  }
+  ::close(fd);
+  error = e == EWOULDBLOCK ? dir + ": another mirrorcal is writing into this folder (it holds " +
+                                 path + "); wait for it to finish or choose another --out"
+                           : path + ": cannot lock: " + reason(e);
+  return false;
+}
+
+}  // namespace mirrorcal::files
