@@ -430,3 +430,21 @@ TEST_F(BadInput, TruthFileThatIsDamaged) {
   spit(dir() + "/truth.yaml", "p_b_c: [0.01, 0.02]\n");
   expect_error({dir() + "/truth.yaml:1:", "p_b_c: expected a list of 3 numbers"});
 }
+
+// A 1-sigma no guess can have (another unit, or a typo) is refused with the file and line.
+TEST_F(BadInput, AbsurdSigmasAreRefused) {
+  auto l = lines_of(priors());
+  std::size_t n = 0;
+  while (l[n].rfind("sigma_features_c:", 0) != 0) ++n;
+  l[n + 2] = "  - [0.01, 1e200, 0.01]";
+  write_lines(priors(), l);
+  expect_error({priors() + ":" + std::to_string(n + 3) + ": sigma_features_c: a 1-sigma of",
+                "m is no guess (at most 1 m"});
+  write_recording(dir(), short_scenario(), mc::sim::simulate(short_scenario(), 17), 17);
+  set_key(priors(), "pixel_sigma", "pixel_sigma: 500");
+  expect_error({priors() + ":", "pixel_sigma: a 1-sigma of 500 px is no guess (at most 100 px"});
+  set_key(priors(), "pixel_sigma", "pixel_sigma: 100");
+  mc::sim::Recording r;
+  std::string err;
+  EXPECT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+}
