@@ -102,6 +102,7 @@ int cmd_calibrate(int argc, char** argv) {
   std::string err;
   if (!sim::read_recording(in, kMarkers, rec, err)) fail(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
+  for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
   // calibration (of another recording: the same data twice would count twice).
   sim::CalibrationStart start;

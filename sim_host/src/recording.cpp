@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/files.hpp"
+#include "recording_checks.hpp"
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
@@ -228,6 +229,11 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
             " IMU samples; the filter needs at least 2 (it propagates between samples)";
     return false;
   }
+  const RecordingFiles named{imu_csv, frames_csv, imu_yaml};
+  if (!check_imu_rate(out, named, error) || !check_frames_against_imu(out, named, error) ||
+      !check_imu_units(out, named, error))
+    return false;
+  check_noise_densities(out, named, out.warnings);
   const std::int64_t t0 = out.imu.front().t_ns, t1 = out.imu.back().t_ns;
   const auto outside = [&](const ObservedFrame& f) { return f.t_ns < t0 || f.t_ns > t1; };
   const std::size_t before = out.frames.size();
@@ -237,11 +243,6 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
     out.notes.push_back(frames_csv + ": " + std::to_string(out.frames_outside_imu) +
                         " frames outside the IMU data (" + std::to_string(t0) + ".." +
                         std::to_string(t1) + " ns) skipped");
-  if (out.frames.empty()) {
-    error = frames_csv + ": no frame within the IMU data (" + std::to_string(t0) + ".." +
-            std::to_string(t1) + " ns); the filter needs at least one";
-    return false;
-  }
   for (int id = 0; id < markers; ++id) {
     const bool seen =
         std::any_of(out.frames.begin(), out.frames.end(), [&](const ObservedFrame& f) {

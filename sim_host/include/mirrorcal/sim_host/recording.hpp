@@ -91,12 +91,14 @@ struct Recording {
   RecordingPriors priors;
   std::uint64_t frames_outside_imu = 0;  // skipped: before the first or after the last IMU sample
   std::vector<std::string> notes;        // defaults used, frames skipped: tell the user
+  std::vector<std::string> warnings;     // the data disagree with a description (noise densities)
   bool has_truth = false;                // truth.yaml was there
   RecordingTruth truth;
 };
 
 // Reads DIR for a calibration with M = markers. On bad input returns false with a message that
-// names the file, the line and what is wrong.
+// names the file, the line and what is wrong; data that contradict their descriptions (timestamps
+// in another unit than ns, deg/s for rad/s, g for m/s^2) are bad input too.
 bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error);
 
 // The parsers behind read_recording, on a file's text; file names the file in messages.
