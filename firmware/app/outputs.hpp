@@ -26,8 +26,9 @@ struct CalibrationResult {
   int estimated_intrinsics = 0;  // 0, 4 (fu fv cu cv; skew held) or 5 (with skew)
   int width = 0, height = 0;
   std::string rostopic = sim::kDefaultCameraTopic;  // camchain.yaml's, for Kalibr and OpenVINS
-  std::vector<double> sigma;   // calibration block, in calibration_params() order (SI)
-  Eigen::MatrixXd covariance;  // of the calibration block, same order
+  std::string recording_fingerprint;  // of the recording calibrated (none for a simulation)
+  std::vector<double> sigma;          // calibration block, in calibration_params() order (SI)
+  Eigen::MatrixXd covariance;         // of the calibration block, same order
   std::vector<ParamInfo> params;
   // Over the last pass: markers used, gated, and those the model could not predict at the
   // estimate (their mirror image not in front of the camera).

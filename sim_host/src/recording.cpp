@@ -192,6 +192,30 @@ bool parse_features_csv(std::string_view text, const std::string& file, int mark
   return !csv.failed();
 }
 
+namespace {
+
+// FNV-1a over the bytes of each file in turn: the same data give the same fingerprint, wherever
+// the recording lies.
+class Fingerprint {
+ public:
+  void add(std::string_view bytes) {
+    for (const char c : bytes) {
+      hash_ ^= static_cast<unsigned char>(c);
+      hash_ *= 0x100000001b3ULL;
+    }
+  }
+  std::string hex() const {
+    char s[17];
+    std::snprintf(s, sizeof s, "%016llx", static_cast<unsigned long long>(hash_));
+    return s;
+  }
+
+ private:
+  std::uint64_t hash_ = 0xcbf29ce484222325ULL;
+};
+
+}  // namespace
+
 bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
   out = Recording{};
   std::string text;
@@ -214,14 +238,19 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
   if (out.has_truth && (!files::read_file(truth_yaml, text, error) ||
                         !parse_truth_yaml(text, truth_yaml, out.truth, error)))
     return false;
+  Fingerprint fingerprint;
   if (!files::read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
     return false;
+  fingerprint.add(text);
   if (!files::read_file(frames_csv, text, error) ||
       !parse_frames_csv(text, frames_csv, out.frames, error))
     return false;
+  fingerprint.add(text);
   if (!files::read_file(features_csv, text, error) ||
       !parse_features_csv(text, features_csv, markers, out.frames, error))
     return false;
+  fingerprint.add(text);
+  out.fingerprint = fingerprint.hex();
 
   // The filter starts at the first IMU sample and ends at the last: frames outside are skipped.
   if (out.imu.size() < 2) {

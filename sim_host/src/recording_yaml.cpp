@@ -565,6 +565,10 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
     return y.fail(rows, "covariance", "is not symmetric");
   if (out.covariance.llt().info() != Eigen::Success)
     return y.fail(rows, "covariance", "is not positive definite");
+  out.recording_fingerprint.clear();
+  if (y.has("recording_fingerprint") &&
+      !y.string("recording_fingerprint", out.recording_fingerprint))
+    return false;
   out.has_camera = y.has("intrinsics");
   return !out.has_camera || read_camera(y, "skew", out.camera);
 }

@@ -473,6 +473,7 @@ void scale_imu(const std::string& path, bool gyro, double factor) {
 
 TEST_F(BadInput, AnUndamagedRecordingHasNoWarnings) {
   EXPECT_TRUE(rec.warnings.empty()) << rec.warnings.front();
+  EXPECT_EQ(rec.fingerprint.size(), 16u);
 }
 
 // EuRoC's classic slip: the IMU's timestamps in us or ms; its rate is then 1000 or 10^6 times
