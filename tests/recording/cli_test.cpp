@@ -615,3 +615,51 @@ TEST(Cli, CalibratingFromAResultOfTheSameDataIsRefused) {
   r = run_mirrorcal("calibrate " + d + "/rec6 --from " + d + "/c1 --out " + d + "/c4", d);
   EXPECT_EQ(r.code, 0) << r.output;
 }
+
+// A prior far more confident than right (p_b_c 2 cm off with a 1 mm sigma) is contradicted by
+// the estimate: a WARNING naming the state, and consistent: false.
+TEST(Cli, APriorContradictedByTheDataIsFlagged) {
+  TempDir dir("cli-prior");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal("record --seed 5 --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/good", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("WARNING"), std::string::npos) << r.output;
+  EXPECT_TRUE(YAML::LoadFile(d + "/good/mirrorcal-result.yaml")["consistent"].as<bool>());
+
+  const std::string priors = d + "/rec/mirrorcal.yaml";
+  const YAML::Node y = YAML::LoadFile(priors);
+  const double x = y["p_b_c"][0].as<double>() + 0.02;
+  std::string text = slurp(priors), lines;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind("p_b_c:", 0) == 0)
+      l = "p_b_c: [" + std::to_string(x) + ", " + y["p_b_c"][1].as<std::string>() + ", " +
+          y["p_b_c"][2].as<std::string>() + "]";
+    if (l.rfind("sigma_p_b_c:", 0) == 0) l = "sigma_p_b_c: 0.001";
+    lines += l + "\n";
+  }
+  spit(priors, lines);
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/bad", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("WARNING: the estimate of p_"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("of the prior's sigmas from its guess"), std::string::npos) << r.output;
+  const YAML::Node bad = YAML::LoadFile(d + "/bad/mirrorcal-result.yaml");
+  EXPECT_FALSE(bad["consistent"].as<bool>());
+  EXPECT_GT(bad["prior_offset"].as<double>(), 5.0);
+}
+
+// A run that used under half the markers in its data is not to be trusted, however well they fit.
+TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
+  mc::app::CalibrationResult r;
+  r.markers_observed = 8764;
+  r.markers_used = 8700;
+  EXPECT_EQ(mc::app::convergence_warning(r), "");
+  r.markers_used = 109;
+  const std::string w = mc::app::convergence_warning(r);
+  EXPECT_NE(w.find("the filter used 109 of the 8764 markers in the data (1.2 %)"),
+            std::string::npos)
+      << w;
+  ASSERT_EQ(mc::app::result_warnings(r).size(), 1u);
+}
