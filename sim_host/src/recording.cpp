@@ -258,6 +258,11 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
             " IMU samples; the filter needs at least 2 (it propagates between samples)";
     return false;
   }
+  // An IMU-only recording (record without a camera) says so before anything about its data.
+  if (out.frames.empty()) {
+    error = frames_csv + ": no frame within the IMU data; the filter needs at least one";
+    return false;
+  }
   const RecordingFiles named{imu_csv, frames_csv, imu_yaml};
   if (!check_imu_rate(out, named, error) || !check_frames_against_imu(out, named, error) ||
       !check_imu_units(out, named, error))

@@ -121,11 +121,6 @@ bool check_frames_against_imu(const Recording& r, const RecordingFiles& files, s
   for (const ObservedFrame& f : r.frames)
     if (f.t_ns >= t0 && f.t_ns <= t1) inside.push_back(f.t_ns);
   const std::string imu_span = std::to_string(t0) + ".." + std::to_string(t1) + " ns";
-  if (r.frames.empty()) {
-    error = files.frames_csv + ": no frame within the IMU data (" + imu_span +
-            "); the filter needs at least one";
-    return false;
-  }
   if (inside.empty() || 2 * inside.size() < r.frames.size()) {
     const double cam_mid = 0.5 * (double(r.frames.front().t_ns) + double(r.frames.back().t_ns));
     const double imu_mid = 0.5 * (double(t0) + double(t1));

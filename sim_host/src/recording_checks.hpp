@@ -18,8 +18,8 @@ struct RecordingFiles {
 // The IMU's sample rate in its timestamps against imu.yaml's update_rate (false: beyond
 // kImuRateTolerance, most likely timestamps in us or ms).
 bool check_imu_rate(const Recording& r, const RecordingFiles& files, std::string& error);
-// The frames lie within the IMU data and span about as long (false: most outside it, or a span
-// orders of magnitude shorter, most likely the camera's timestamps in another unit).
+// The frames (at least one) lie within the IMU data and span about as long (false: most outside
+// it, or a span orders of magnitude shorter, most likely the camera's timestamps in another unit).
 bool check_frames_against_imu(const Recording& r, const RecordingFiles& files, std::string& error);
 // Gyro and accelerometer magnitudes in rad/s and m/s^2 (false: deg/s, or g).
 bool check_imu_units(const Recording& r, const RecordingFiles& files, std::string& error);

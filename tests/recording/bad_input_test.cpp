@@ -503,6 +503,14 @@ TEST_F(BadInput, CameraTimestampsInAnotherUnitThanNsAreRefused) {
   expect_error({cam() + ": no frame within the IMU data", "microseconds instead of nanoseconds?"});
 }
 
+// An IMU-only recording (record without a camera) is told so first, whatever its IMU data.
+TEST_F(BadInput, ARecordingWithoutFramesSaysSoFirst) {
+  write_lines(cam(), {line(cam(), 1)});
+  write_lines(features(), {line(features(), 1)});
+  set_key(dir() + "/imu.yaml", "update_rate", "update_rate: 100");
+  expect_error({cam() + ": no frame within the IMU data; the filter needs at least one"});
+}
+
 TEST_F(BadInput, GyroInDegreesPerSecondIsRefused) {
   scale_imu(imu(), true, 180.0 / M_PI);
   expect_error({imu() + ": the gyro's median rate is", "deg/s given for rad/s?"});
