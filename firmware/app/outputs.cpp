@@ -271,8 +271,9 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
   std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
   if (!r.recording_fingerprint.empty())
-    std::fprintf(o, "recording_fingerprint: %s  # of the CSV files calibrated (calibrate --from)\n",
-                 r.recording_fingerprint.c_str());
+    std::fprintf(
+        o, "recording_fingerprint: \"%s\"  # of the CSV files calibrated (calibrate --from)\n",
+        r.recording_fingerprint.c_str());
   std::fprintf(o,
                "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
                "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
