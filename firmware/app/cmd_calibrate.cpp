@@ -95,19 +95,27 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
 }  // namespace
 
 int cmd_calibrate(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"out", "from"}, {"intrinsics", "hold-skew"}, 1);
+  const Options o =
+      parse(argc, argv, 2, {"out", "from"}, {"intrinsics", "hold-skew", "from-same-data"}, 1);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
   sim::Recording rec;
   std::string err;
   if (!sim::read_recording(in, kMarkers, rec, err)) fail(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
+  for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
   // calibration (of another recording: the same data twice would count twice).
   sim::CalibrationStart start;
   const sim::CalibrationStart* from = nullptr;
   if (o.flag("from")) {
     if (!sim::read_calibration_start(o.get("from", ""), kMarkers, start, err)) fail(err, 1);
+    if (start.recording_fingerprint == rec.fingerprint && !o.flag("from-same-data"))
+      fail(o.get("from", "") + " was calibrated from this recording's data (" + in +
+               ", recording_fingerprint " + rec.fingerprint +
+               "): calibrating it again would count the data twice and shrink every sigma. "
+               "Calibrate another recording from it, or give --from-same-data if that is meant.",
+           1);
     from = &start;
     std::printf(
         "mirrorcal calibrate: the camera pose and markers start from %s (estimate and "

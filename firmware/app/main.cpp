@@ -59,9 +59,11 @@ const std::vector<Command>& commands() {
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
        "mirrorcal.yaml)\n"
-       "              DIR [--intrinsics [--hold-skew]] [--from RESULT] [--out OUT]\n"
+       "              DIR [--intrinsics [--hold-skew]] [--from RESULT [--from-same-data]]\n"
+       "              [--out OUT]\n"
        "              (--from: start the camera pose and markers from an earlier calibration's\n"
-       "              mirrorcal-result.yaml, or its folder: stage 2 after a stage 1)\n"
+       "              mirrorcal-result.yaml, or its folder: stage 2 after a stage 1; one of\n"
+       "              this same recording is refused unless --from-same-data)\n"
        "              (--hold-skew: skew stays at camchain.yaml's intrinsics_skew, 0 if absent)\n",
        cmd_calibrate},
       {"run",

@@ -128,7 +128,18 @@ bool path_gained_false_information(const CalibrationResult& r) {
   return r.sigma_ratio < kSigmaRatioLimit;
 }
 
-std::string convergence_warning(const CalibrationResult& r) {
+bool used_too_few(const CalibrationResult& r) {
+  return r.markers_observed > 0 &&
+         double(r.markers_used) < kMinUsedFraction * double(r.markers_observed);
+}
+
+bool prior_contradicted(const CalibrationResult& r) {
+  return r.prior_offset_sigmas > kPriorContradictedSigmas;
+}
+
+namespace {
+
+std::string fit_warning(const CalibrationResult& r) {
   const double seen = markers_offered(r);
   if (seen == 0.0) return "no marker was seen: nothing was calibrated beyond the priors";
   char text[480];
@@ -171,6 +182,39 @@ std::string convergence_warning(const CalibrationResult& r) {
   return text;
 }
 
+std::string markers_used_warning(const CalibrationResult& r) {
+  if (!used_too_few(r)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the filter used %llu of the %llu markers in the data (%.1f %%): it calibrated "
+                "on a sliver of the recording. Check that the frames' timestamps lie within the "
+                "IMU data and in its unit (ns), and the camera's resolution.",
+                static_cast<unsigned long long>(r.markers_used),
+                static_cast<unsigned long long>(r.markers_observed),
+                100.0 * double(r.markers_used) / double(r.markers_observed));
+  return text;
+}
+
+std::string prior_warning(const CalibrationResult& r) {
+  if (!prior_contradicted(r)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the estimate of %s lies %.1f of the prior's sigmas from its guess (more than "
+                "%.0f): the prior (mirrorcal.yaml, or --from) claimed far more than it knew, and "
+                "the estimate is pulled towards it. Give that guess a sigma as large as its "
+                "error can be, and calibrate again.",
+                r.prior_offset_state.c_str(), r.prior_offset_sigmas, kPriorContradictedSigmas);
+  return text;
+}
+
+}  // namespace
+
+std::string convergence_warning(const CalibrationResult& r) {
+  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r)})
+    if (!w.empty()) return w;
+  return {};
+}
+
 std::string skew_warning(const CalibrationResult& r) {
   if (r.estimated_intrinsics != 5) return {};
   double sigma = 0.0;
@@ -189,7 +233,7 @@ std::string skew_warning(const CalibrationResult& r) {
 
 std::vector<std::string> result_warnings(const CalibrationResult& r) {
   std::vector<std::string> w;
-  for (std::string s : {convergence_warning(r), skew_warning(r)})
+  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), skew_warning(r)})
     if (!s.empty()) w.push_back(std::move(s));
   return w;
 }
@@ -226,19 +270,30 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                r.estimated_intrinsics > 0 ? "true" : "false",
                r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
   std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
+  if (!r.recording_fingerprint.empty())
+    std::fprintf(
+        o, "recording_fingerprint: \"%s\"  # of the CSV files calibrated (calibrate --from)\n",
+        r.recording_fingerprint.c_str());
   std::fprintf(o,
                "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
                "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
                r.passes, static_cast<unsigned long long>(r.markers_used),
                static_cast<unsigned long long>(r.markers_gated),
                static_cast<unsigned long long>(r.markers_invalid));
+  if (r.markers_observed > 0)
+    std::fprintf(o, "markers_observed: %llu  # in the data the loop was given\n",
+                 static_cast<unsigned long long>(r.markers_observed));
+  if (!r.prior_offset_state.empty())
+    std::fprintf(o, "prior_offset: %.2f  # sigmas of the prior, at its furthest: %s\n",
+                 r.prior_offset_sigmas, r.prior_offset_state.c_str());
   std::fprintf(o,
                "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
                "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n",
                r.nis_per_dof, r.sigma_ratio);
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
-               "above 1 or sigma_ratio below 0.8: do not trust it\n",
+               "above 1, sigma_ratio below 0.8, under half the markers used or a prior "
+               "contradicted by 5 sigma: do not trust it\n",
                convergence_warning(r).empty() ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)

@@ -53,6 +53,7 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
   run = run_loop<NK>(recording_config(r), x0, p0, recording_loop_data(r),
                      r.has_truth ? &truth : nullptr, progress);
   run.result.rostopic = r.sensors.rostopic;
+  run.result.recording_fingerprint = r.fingerprint;
   return true;
 }
 

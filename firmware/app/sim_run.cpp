@@ -185,6 +185,30 @@ bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
   return true;
 }
 
+std::uint64_t markers_in(const LoopData& data) {
+  std::uint64_t n = 0;
+  for (const auto& f : data.frames) n += f.markers.size();
+  return n;
+}
+
+// For the self-check: the calibration state the final estimate lies furthest from its prior guess,
+// in the prior's sigmas (rotations as the error vector, R = R_guess Exp(e)).
+template <int NK>
+void record_prior_offset(const typename SimRun<NK>::State& x0,
+                         const typename SimRun<NK>::Filter::Covariance& p0, SimRun<NK>& run) {
+  using State = typename SimRun<NK>::State;
+  constexpr int B = State::kPbc, L = State::kDim - B;
+  const auto d = run.history.back().state.template boxminus_block<B, L>(x0);
+  CalibrationResult& r = run.result;
+  for (int j = 0; j < L && std::size_t(j) < r.params.size(); ++j) {
+    const double sigmas = std::abs(double(d(j))) / std::sqrt(double(p0(B + j, B + j)));
+    if (!(sigmas <= r.prior_offset_sigmas)) {
+      r.prior_offset_sigmas = sigmas;
+      r.prior_offset_state = r.params[std::size_t(j)].name;
+    }
+  }
+}
+
 }  // namespace
 
 template <int NK>
@@ -286,6 +310,8 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       lowest = std::min(lowest, std::sqrt(own(i, i) / run.covariance(i, i)));
     run.result.sigma_ratio = lowest;
   }
+  run.result.markers_observed = markers_in(data);
+  if (!run.history.empty()) record_prior_offset<NK>(x0, p0, run);
   return run;
 }
 

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/files.hpp"
+#include "recording_checks.hpp"
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
@@ -191,6 +192,30 @@ bool parse_features_csv(std::string_view text, const std::string& file, int mark
   return !csv.failed();
 }
 
+namespace {
+
+// FNV-1a over the bytes of each file in turn: the same data give the same fingerprint, wherever
+// the recording lies.
+class Fingerprint {
+ public:
+  void add(std::string_view bytes) {
+    for (const char c : bytes) {
+      hash_ ^= static_cast<unsigned char>(c);
+      hash_ *= 0x100000001b3ULL;
+    }
+  }
+  std::string hex() const {
+    char s[17];
+    std::snprintf(s, sizeof s, "%016llx", static_cast<unsigned long long>(hash_));
+    return s;
+  }
+
+ private:
+  std::uint64_t hash_ = 0xcbf29ce484222325ULL;
+};
+
+}  // namespace
+
 bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
   out = Recording{};
   std::string text;
@@ -213,14 +238,19 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
   if (out.has_truth && (!files::read_file(truth_yaml, text, error) ||
                         !parse_truth_yaml(text, truth_yaml, out.truth, error)))
     return false;
+  Fingerprint fingerprint;
   if (!files::read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
     return false;
+  fingerprint.add(text);
   if (!files::read_file(frames_csv, text, error) ||
       !parse_frames_csv(text, frames_csv, out.frames, error))
     return false;
+  fingerprint.add(text);
   if (!files::read_file(features_csv, text, error) ||
       !parse_features_csv(text, features_csv, markers, out.frames, error))
     return false;
+  fingerprint.add(text);
+  out.fingerprint = fingerprint.hex();
 
   // The filter starts at the first IMU sample and ends at the last: frames outside are skipped.
   if (out.imu.size() < 2) {
@@ -228,6 +258,16 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
             " IMU samples; the filter needs at least 2 (it propagates between samples)";
     return false;
   }
+  // An IMU-only recording (record without a camera) says so before anything about its data.
+  if (out.frames.empty()) {
+    error = frames_csv + ": no frame within the IMU data; the filter needs at least one";
+    return false;
+  }
+  const RecordingFiles named{imu_csv, frames_csv, imu_yaml};
+  if (!check_imu_rate(out, named, error) || !check_frames_against_imu(out, named, error) ||
+      !check_imu_units(out, named, error))
+    return false;
+  check_noise_densities(out, named, out.warnings);
   const std::int64_t t0 = out.imu.front().t_ns, t1 = out.imu.back().t_ns;
   const auto outside = [&](const ObservedFrame& f) { return f.t_ns < t0 || f.t_ns > t1; };
   const std::size_t before = out.frames.size();
@@ -237,11 +277,6 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
     out.notes.push_back(frames_csv + ": " + std::to_string(out.frames_outside_imu) +
                         " frames outside the IMU data (" + std::to_string(t0) + ".." +
                         std::to_string(t1) + " ns) skipped");
-  if (out.frames.empty()) {
-    error = frames_csv + ": no frame within the IMU data (" + std::to_string(t0) + ".." +
-            std::to_string(t1) + " ns); the filter needs at least one";
-    return false;
-  }
   for (int id = 0; id < markers; ++id) {
     const bool seen =
         std::any_of(out.frames.begin(), out.frames.end(), [&](const ObservedFrame& f) {

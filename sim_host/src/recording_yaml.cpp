@@ -18,6 +18,21 @@ namespace mirrorcal::sim {
 
 namespace {
 
+// The largest 1-sigma a guess of each quantity can have: beyond it the value is in another unit
+// or a typo (a marker's 1e200 m made the filter fail numerically, silently).
+struct SigmaCeiling {
+  double max;
+  const char* unit;
+};
+constexpr SigmaCeiling kPositionSigma{1.0, "m"};        // camera and markers in the IMU's reach
+constexpr SigmaCeiling kStartPositionSigma{10.0, "m"};  // the IMU's start before the mirror
+constexpr SigmaCeiling kVelocitySigma{10.0, "m/s"};
+constexpr SigmaCeiling kRotationSigma{M_PI, "rad"};
+constexpr SigmaCeiling kAccelBiasSigma{10.0, "m/s^2"};
+constexpr SigmaCeiling kGyroBiasSigma{1.0, "rad/s"};
+constexpr SigmaCeiling kPixelSigma{100.0, "px"};
+constexpr SigmaCeiling kIntrinsicsSigma{10000.0, "px"};
+
 // Keys of one YAML map, read with messages that name the file, the line and the key.
 class YamlMap {
  public:
@@ -112,8 +127,9 @@ class YamlMap {
     return numbers(n, key, count, v);
   }
   bool vec3(const char* key, Eigen::Vector3d& v) const { return numbers(key, 3, v.data()); }
-  // A 1-sigma per axis: three numbers, or one for all axes; each > 0.
-  bool sigma3(const YAML::Node& n, const char* key, Eigen::Vector3d& v) const {
+  // A 1-sigma per axis: three numbers, or one for all axes; each > 0 and at most the ceiling.
+  bool sigma3(const YAML::Node& n, const char* key, SigmaCeiling ceiling,
+              Eigen::Vector3d& v) const {
     double s = 0.0;
     if (n.IsScalar()) {
       if (!scalar(n, key, s)) return false;
@@ -121,12 +137,22 @@ class YamlMap {
     } else if (!numbers(n, key, 3, v.data())) {
       return false;
     }
-    return v.minCoeff() > 0.0 || fail(n, key, "every 1-sigma must be > 0");
+    if (!(v.minCoeff() > 0.0)) return fail(n, key, "every 1-sigma must be > 0");
+    return below_ceiling(n, key, ceiling, v.maxCoeff());
   }
-  bool sigma3(const char* key, Eigen::Vector3d& v) const {
+  bool sigma3(const char* key, SigmaCeiling ceiling, Eigen::Vector3d& v) const {
     const YAML::Node n = root_[key];
     if (!n) return missing(key);
-    return sigma3(n, key, v);
+    return sigma3(n, key, ceiling, v);
+  }
+  bool below_ceiling(const YAML::Node& n, const char* key, SigmaCeiling ceiling,
+                     double sigma) const {
+    if (sigma <= ceiling.max) return true;
+    std::string what = "a 1-sigma of ";
+    text::append(what, sigma);
+    what += std::string(" ") + ceiling.unit + " is no guess (at most ";
+    text::append(what, ceiling.max);
+    return fail(n, key, what + " " + ceiling.unit + "; another unit?)");
   }
   // A unit quaternion [w, x, y, z] (Hamilton); up to 1e-3 off unit norm is accepted as rounding.
   bool quaternion(const char* key, Eigen::Quaterniond& q) const {
@@ -139,8 +165,8 @@ class YamlMap {
     return true;
   }
   // A list of count [x, y, z] (count < 0: any number, at least one).
-  bool vec3_list(const char* key, std::vector<Eigen::Vector3d>& out, bool sigma,
-                 long count = -1) const {
+  bool vec3_list(const char* key, std::vector<Eigen::Vector3d>& out,
+                 const SigmaCeiling* sigma = nullptr, long count = -1) const {
     const YAML::Node n = root_[key];
     if (!n) return missing(key);
     if (!n.IsSequence() || n.size() == 0) return fail(n, key, "expected a list of [x, y, z]");
@@ -150,7 +176,8 @@ class YamlMap {
                       std::to_string(count));
     out.assign(n.size(), Eigen::Vector3d::Zero());
     for (std::size_t i = 0; i < n.size(); ++i) {
-      const bool ok = sigma ? sigma3(n[i], key, out[i]) : numbers(n[i], key, 3, out[i].data());
+      const bool ok =
+          sigma ? sigma3(n[i], key, *sigma, out[i]) : numbers(n[i], key, 3, out[i].data());
       if (!ok) return false;
     }
     return true;
@@ -343,31 +370,33 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                   "sigma_timeshift_cam_imu"});
   RecordingPriors r;
   if (!y.vec3("gravity_n", r.gravity_n) || !y.vec3("p_n_b", r.p_n_b) ||
-      !y.sigma3("sigma_p_n_b", r.sigma_p_n_b) || !y.vec3("v_n_b", r.v_n_b) ||
-      !y.sigma3("sigma_v_n_b", r.sigma_v_n_b) || !y.quaternion("q_n_b_wxyz", r.q_n_b) ||
-      !y.sigma3("sigma_rot_n_b", r.sigma_rot_n_b) || !y.vec3("p_b_c", r.p_b_c) ||
-      !y.sigma3("sigma_p_b_c", r.sigma_p_b_c) || !y.quaternion("q_b_c_wxyz", r.q_b_c) ||
-      !y.sigma3("sigma_rot_b_c", r.sigma_rot_b_c) ||
-      !y.vec3_list("features_c", r.features_c, false) ||
-      !y.vec3_list("sigma_features_c", r.sigma_features_c, true,
+      !y.sigma3("sigma_p_n_b", kStartPositionSigma, r.sigma_p_n_b) || !y.vec3("v_n_b", r.v_n_b) ||
+      !y.sigma3("sigma_v_n_b", kVelocitySigma, r.sigma_v_n_b) ||
+      !y.quaternion("q_n_b_wxyz", r.q_n_b) ||
+      !y.sigma3("sigma_rot_n_b", kRotationSigma, r.sigma_rot_n_b) || !y.vec3("p_b_c", r.p_b_c) ||
+      !y.sigma3("sigma_p_b_c", kPositionSigma, r.sigma_p_b_c) ||
+      !y.quaternion("q_b_c_wxyz", r.q_b_c) ||
+      !y.sigma3("sigma_rot_b_c", kRotationSigma, r.sigma_rot_b_c) ||
+      !y.vec3_list("features_c", r.features_c) ||
+      !y.vec3_list("sigma_features_c", r.sigma_features_c, &kPositionSigma,
                    static_cast<long>(r.features_c.size())))
     return false;
   // Optional keys, with the defaults the filter's prior uses.
   const auto optional_vec3 = [&](const char* key, Eigen::Vector3d& v, const Eigen::Vector3d& def,
-                                 const char* shown, bool sigma) {
+                                 const char* shown, const SigmaCeiling* sigma) {
     if (!y.has(key)) {
       v = def;
       y.note_default(key, shown);
       return true;
     }
-    return sigma ? y.sigma3(key, v) : y.vec3(key, v);
+    return sigma ? y.sigma3(key, *sigma, v) : y.vec3(key, v);
   };
-  if (!optional_vec3("b_a", r.b_a, Eigen::Vector3d::Zero(), "[0, 0, 0] m/s^2", false) ||
+  if (!optional_vec3("b_a", r.b_a, Eigen::Vector3d::Zero(), "[0, 0, 0] m/s^2", nullptr) ||
       !optional_vec3("sigma_b_a", r.sigma_b_a, Eigen::Vector3d::Constant(0.03), "0.03 m/s^2",
-                     true) ||
-      !optional_vec3("b_g", r.b_g, Eigen::Vector3d::Zero(), "[0, 0, 0] rad/s", false) ||
+                     &kAccelBiasSigma) ||
+      !optional_vec3("b_g", r.b_g, Eigen::Vector3d::Zero(), "[0, 0, 0] rad/s", nullptr) ||
       !optional_vec3("sigma_b_g", r.sigma_b_g, Eigen::Vector3d::Constant(0.002), "0.002 rad/s",
-                     true))
+                     &kGyroBiasSigma))
     return false;
   // The time offset and its 1-sigma, in seconds: beyond 1 s (more than the loop believes) a value
   // is in the wrong unit.
@@ -387,7 +416,9 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
       !optional_seconds("sigma_timeshift_cam_imu", r.sigma_t_d, 0.02, "0.02 s", true))
     return false;
   if (y.has("pixel_sigma")) {
-    if (!y.positive("pixel_sigma", r.pixel_sigma)) return false;
+    if (!y.positive("pixel_sigma", r.pixel_sigma) ||
+        !y.below_ceiling(y.node("pixel_sigma"), "pixel_sigma", kPixelSigma, r.pixel_sigma))
+      return false;
   } else {
     r.pixel_sigma = 1.0;
     y.note_default("pixel_sigma", "1 px");
@@ -410,6 +441,9 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
     if (!y.numbers("sigma_intrinsics", 5, r.sigma_intrinsics.data())) return false;
     if (*std::min_element(r.sigma_intrinsics.begin(), r.sigma_intrinsics.end()) <= 0.0)
       return y.fail(y.node("sigma_intrinsics"), "sigma_intrinsics", "every 1-sigma must be > 0");
+    if (!y.below_ceiling(y.node("sigma_intrinsics"), "sigma_intrinsics", kIntrinsicsSigma,
+                         *std::max_element(r.sigma_intrinsics.begin(), r.sigma_intrinsics.end())))
+      return false;
   } else {
     r.sigma_intrinsics = {100.0, 100.0, 100.0, 100.0, 100.0};
     if (r.estimate_intrinsics) y.note_default("sigma_intrinsics", "100 px each (the paper's)");
@@ -485,7 +519,7 @@ bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingT
   YamlMap y(file, error);
   double k[5];
   if (!y.load(text) || !y.vec3("p_b_c", out.p_b_c) || !y.quaternion("q_b_c_wxyz", out.q_b_c) ||
-      !y.vec3_list("features_c", out.features_c, false) || !y.numbers("intrinsics", 5, k))
+      !y.vec3_list("features_c", out.features_c) || !y.numbers("intrinsics", 5, k))
     return false;
   out.intrinsics = {k[0], k[1], k[2], k[3], k[4]};
   out.t_d = 0.0;
@@ -496,7 +530,7 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
                              std::string& error) {
   YamlMap y(file, error);
   if (!y.load(text) || !y.vec3("p_b_c", out.p_b_c) || !y.quaternion("q_b_c_wxyz", out.q_b_c) ||
-      !y.vec3_list("features_c", out.features_c, false))
+      !y.vec3_list("features_c", out.features_c))
     return false;
   // Results written before the covariance was added to the file lack it.
   if (!y.has("covariance")) return y.missing("covariance");
@@ -531,6 +565,10 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
     return y.fail(rows, "covariance", "is not symmetric");
   if (out.covariance.llt().info() != Eigen::Success)
     return y.fail(rows, "covariance", "is not positive definite");
+  out.recording_fingerprint.clear();
+  if (y.has("recording_fingerprint") &&
+      !y.string("recording_fingerprint", out.recording_fingerprint))
+    return false;
   out.has_camera = y.has("intrinsics");
   return !out.has_camera || read_camera(y, "skew", out.camera);
 }

@@ -3,6 +3,9 @@
 // counted.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <functional>
+#include <utility>
 #include <vector>
 
 #include <sys/stat.h>
@@ -352,12 +355,17 @@ TEST_F(BadInput, UpdateRateOutsideAnyImusIsRefused) {
     expect_error({imu_yaml + ":",
                   "update_rate: must lie within 1..10000 Hz, not '" + std::string(rate) + "'"});
   }
+  // (The bounds parse; the recording's 200 Hz data would then contradict them.)
   for (const char* rate : {"1", "10000"}) {
     set_key(imu_yaml, "update_rate", std::string("update_rate: ") + rate);
-    mc::sim::Recording r;
+    mc::sim::SensorInfo sensors;
     std::string err;
-    EXPECT_EQ(mc::sim::read_recording(dir(), 3, r, err), true) << err;
+    EXPECT_TRUE(mc::sim::parse_imu_yaml(slurp(imu_yaml), imu_yaml, sensors, err)) << err;
   }
+  // Within them, a rate the data do not have is refused too, naming both.
+  set_key(imu_yaml, "update_rate", "update_rate: 100");
+  expect_error({imu() + ": its timestamps step by 5e+06 ns (median), 200 Hz, but " + imu_yaml +
+                "'s update_rate is 100 Hz"});
 }
 
 // Only regular files are read: a FIFO would block the read for ever, /dev/zero would fill the
@@ -429,4 +437,141 @@ TEST_F(BadInput, LineDelaysInTheWrongUnitAreRefused) {
 TEST_F(BadInput, TruthFileThatIsDamaged) {
   spit(dir() + "/truth.yaml", "p_b_c: [0.01, 0.02]\n");
   expect_error({dir() + "/truth.yaml:1:", "p_b_c: expected a list of 3 numbers"});
+}
+
+// --- the data against what the files say they are --------------------------------------------
+
+namespace {
+
+// Rewrites each data line's timestamp (the first field) of a CSV file.
+void map_times(const std::string& path, const std::function<std::int64_t(std::int64_t)>& f) {
+  auto l = lines_of(path);
+  for (std::size_t i = 1; i < l.size(); ++i) {
+    const std::size_t comma = l[i].find(',');
+    l[i] = std::to_string(f(std::stoll(l[i].substr(0, comma)))) + l[i].substr(comma);
+  }
+  write_lines(path, l);
+}
+
+// Multiplies the gyro (columns 1-3) or accelerometer (4-6) readings of imu0/data.csv by factor.
+void scale_imu(const std::string& path, bool gyro, double factor) {
+  auto l = lines_of(path);
+  for (std::size_t i = 1; i < l.size(); ++i) {
+    std::vector<std::string> f;
+    std::istringstream in(l[i]);
+    for (std::string s; std::getline(in, s, ',');) f.push_back(s);
+    for (std::size_t j = gyro ? 1 : 4; j < (gyro ? 4u : 7u); ++j)
+      f[j] = std::to_string(std::stod(f[j]) * factor);
+    std::string joined = f[0];
+    for (std::size_t j = 1; j < f.size(); ++j) joined += "," + f[j];
+    l[i] = joined;
+  }
+  write_lines(path, l);
+}
+
+}  // namespace
+
+TEST_F(BadInput, AnUndamagedRecordingHasNoWarnings) {
+  EXPECT_TRUE(rec.warnings.empty()) << rec.warnings.front();
+  EXPECT_EQ(rec.fingerprint.size(), 16u);
+}
+
+// EuRoC's classic slip: the IMU's timestamps in us or ms; its rate is then 1000 or 10^6 times
+// imu.yaml's.
+TEST_F(BadInput, ImuTimestampsInAnotherUnitThanNsAreRefused) {
+  const std::string original = slurp(imu());
+  for (const auto& [divisor, unit] :
+       {std::pair<std::int64_t, std::string>{1000, "microseconds"}, {1000000, "milliseconds"}}) {
+    spit(imu(), original);
+    map_times(imu(), [d = divisor](std::int64_t t) { return t / d; });
+    expect_error({imu() + ": its timestamps step by", dir() + "/imu.yaml's update_rate is 200 Hz",
+                  unit + " instead of nanoseconds?"});
+  }
+}
+
+// The camera's timestamps alone in us: squeezed into the IMU data's first thousandth, or, on a
+// clock with an epoch, far before it.
+TEST_F(BadInput, CameraTimestampsInAnotherUnitThanNsAreRefused) {
+  map_times(cam(), [](std::int64_t t) { return t / 1000; });
+  map_times(features(), [](std::int64_t t) { return t / 1000; });
+  expect_error({cam() + ": the frames within the IMU data span", "microseconds instead of nano"});
+
+  constexpr std::int64_t kEpoch = 1'400'000'000'000'000'000;  // 2014, in ns
+  map_times(imu(), [](std::int64_t t) { return t + kEpoch; });
+  map_times(cam(), [](std::int64_t t) { return t + kEpoch / 1000; });
+  map_times(features(), [](std::int64_t t) { return t + kEpoch / 1000; });
+  expect_error({cam() + ": no frame within the IMU data", "microseconds instead of nanoseconds?"});
+}
+
+// An IMU-only recording (record without a camera) is told so first, whatever its IMU data.
+TEST_F(BadInput, ARecordingWithoutFramesSaysSoFirst) {
+  write_lines(cam(), {line(cam(), 1)});
+  write_lines(features(), {line(features(), 1)});
+  set_key(dir() + "/imu.yaml", "update_rate", "update_rate: 100");
+  expect_error({cam() + ": no frame within the IMU data; the filter needs at least one"});
+}
+
+TEST_F(BadInput, GyroInDegreesPerSecondIsRefused) {
+  scale_imu(imu(), true, 180.0 / M_PI);
+  expect_error({imu() + ": the gyro's median rate is", "deg/s given for rad/s?"});
+}
+
+TEST_F(BadInput, AccelerometerInGIsRefused) {
+  scale_imu(imu(), false, 1.0 / 9.81);
+  expect_error({imu() + ": the accelerometer's median magnitude is", "g given for m/s^2?"});
+}
+
+// Kalibr's mix-up: the per-sample sigma given for the density, sqrt(200) = 14 times too large;
+// densities and random walks 1000 times too large. Warned of, naming imu.yaml and the factor.
+TEST_F(BadInput, NoiseDensitiesThatAreNotTheDatasAreWarnedOf) {
+  const std::string imu_yaml = dir() + "/imu.yaml";
+  const double g = rec.sensors.imu.gyro_noise_density, a = rec.sensors.imu.accel_noise_density;
+  const auto warnings = [&] {
+    mc::sim::Recording r;
+    std::string err;
+    EXPECT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+    std::string all;
+    for (const auto& w : r.warnings) all += w + "\n";
+    return all;
+  };
+  set_key(imu_yaml, "gyroscope_noise_density",
+          "gyroscope_noise_density: " + std::to_string(g * std::sqrt(200.0)));
+  std::string w = warnings();
+  EXPECT_NE(w.find(imu_yaml + ": gyroscope_noise_density"), std::string::npos) << w;
+  EXPECT_NE(w.find("times more than " + imu()), std::string::npos) << w;
+  EXPECT_NE(w.find("per-sample sigma given for the density"), std::string::npos) << w;
+  EXPECT_EQ(w.find("accelerometer_noise_density"), std::string::npos) << w;
+
+  set_key(imu_yaml, "gyroscope_noise_density", "gyroscope_noise_density: " + std::to_string(g));
+  set_key(imu_yaml, "accelerometer_noise_density",
+          "accelerometer_noise_density: " + std::to_string(a * 1000.0));
+  w = warnings();
+  EXPECT_NE(w.find(imu_yaml + ": accelerometer_noise_density"), std::string::npos) << w;
+  EXPECT_NE(w.find("outside what real MEMS parts have"), std::string::npos) << w;
+
+  set_key(imu_yaml, "accelerometer_noise_density",
+          "accelerometer_noise_density: " + std::to_string(a));
+  set_key(imu_yaml, "gyroscope_random_walk",
+          "gyroscope_random_walk: " + std::to_string(rec.sensors.imu.gyro_random_walk * 1000.0));
+  w = warnings();
+  EXPECT_NE(w.find(imu_yaml + ": gyroscope_random_walk"), std::string::npos) << w;
+  EXPECT_EQ(w.find("noise_density"), std::string::npos) << w;
+}
+
+// A 1-sigma no guess can have (another unit, or a typo) is refused with the file and line.
+TEST_F(BadInput, AbsurdSigmasAreRefused) {
+  auto l = lines_of(priors());
+  std::size_t n = 0;
+  while (l[n].rfind("sigma_features_c:", 0) != 0) ++n;
+  l[n + 2] = "  - [0.01, 1e200, 0.01]";
+  write_lines(priors(), l);
+  expect_error({priors() + ":" + std::to_string(n + 3) + ": sigma_features_c: a 1-sigma of",
+                "m is no guess (at most 1 m"});
+  write_recording(dir(), short_scenario(), mc::sim::simulate(short_scenario(), 17), 17);
+  set_key(priors(), "pixel_sigma", "pixel_sigma: 500");
+  expect_error({priors() + ":", "pixel_sigma: a 1-sigma of 500 px is no guess (at most 100 px"});
+  set_key(priors(), "pixel_sigma", "pixel_sigma: 100");
+  mc::sim::Recording r;
+  std::string err;
+  EXPECT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
 }

@@ -48,6 +48,15 @@ Result run_mirrorcal(const std::string& args, const std::string& scratch) {
   return run_mirrorcal(argv, scratch);
 }
 
+// A calibration's files as sim writes them: calibrate adds the recording's fingerprint, which a
+// simulation, having no recording, lacks.
+std::string calibration_file(const std::string& path) {
+  std::string text = slurp(path);
+  const std::size_t at = text.find("\nrecording_fingerprint: ");
+  if (at != std::string::npos) text.erase(at, text.find('\n', at + 1) - at);
+  return text;
+}
+
 Eigen::Matrix4d matrix4(const YAML::Node& rows) {
   Eigen::Matrix4d t;
   for (int i = 0; i < 4; ++i)
@@ -70,7 +79,7 @@ TEST(Cli, RecordThenCalibrateIsBitIdenticalToSim) {
   r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
   ASSERT_EQ(r.code, 0) << r.output;
   for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
-    const std::string a = slurp(d + "/sim/" + f), b = slurp(d + "/cal/" + f);
+    const std::string a = calibration_file(d + "/sim/" + f), b = calibration_file(d + "/cal/" + f);
     EXPECT_FALSE(a.empty()) << f;
     EXPECT_TRUE(a == b) << f << " differs between sim and record -> calibrate";
   }
@@ -211,7 +220,7 @@ TEST(Cli, TwoStagesOnRecordingsGiveTheBytesOfSimWithIntrinsics) {
                       d);
     ASSERT_EQ(r.code, 0) << r.output;
     for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
-      const std::string a = slurp(d + "/sim/" + f), b = slurp(d + "/c2/" + f);
+      const std::string a = calibration_file(d + "/sim/" + f), b = calibration_file(d + "/c2/" + f);
       EXPECT_FALSE(a.empty()) << f;
       EXPECT_TRUE(a == b) << f << " differs between sim --intrinsics and the two calibrates";
     }
@@ -242,7 +251,7 @@ TEST(Cli, OneStageSimIsARecordingWithIntrinsicsCalibrated) {
   r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
   ASSERT_EQ(r.code, 0) << r.output;
   for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
-    const std::string a = slurp(d + "/sim/" + f), b = slurp(d + "/cal/" + f);
+    const std::string a = calibration_file(d + "/sim/" + f), b = calibration_file(d + "/cal/" + f);
     EXPECT_FALSE(a.empty()) << f;
     EXPECT_TRUE(a == b) << f << " differs between sim --one-stage and record -> calibrate";
   }
@@ -572,4 +581,85 @@ TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
   // No temporary file is left to fill the disk.
   for (const auto& e : fs::recursive_directory_iterator(disk.path))
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+// The same data calibrated twice count twice (every sigma shrinks to 0.71 of itself): a result of
+// this very recording is refused as a start, unless asked for; another recording's is taken.
+TEST(Cli, CalibratingFromAResultOfTheSameDataIsRefused) {
+  TempDir dir("cli-same-data");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal("record --seed 5 --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/c1", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const YAML::Node result = YAML::LoadFile(d + "/c1/mirrorcal-result.yaml");
+  const std::string fingerprint = result["recording_fingerprint"].as<std::string>("");
+  EXPECT_EQ(fingerprint.size(), 16u);
+  r = run_mirrorcal("calibrate " + d + "/rec --from " + d + "/c1 --out " + d + "/c2", d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(d + "/c1 was calibrated from this recording's data (" + d +
+                          "/rec, recording_fingerprint " + fingerprint + ")"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("--from-same-data"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(d + "/c2/mirrorcal-result.yaml"));
+  r = run_mirrorcal(
+      "calibrate " + d + "/rec --from " + d + "/c1 --from-same-data --out " + d + "/c2", d);
+  EXPECT_EQ(r.code, 0) << r.output;
+  // A copy of the recording is the same data; another seed's is not.
+  fs::copy(d + "/rec", d + "/copy", fs::copy_options::recursive);
+  r = run_mirrorcal("calibrate " + d + "/copy --from " + d + "/c1 --out " + d + "/c3", d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  r = run_mirrorcal("record --seed 6 --out " + d + "/rec6", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec6 --from " + d + "/c1 --out " + d + "/c4", d);
+  EXPECT_EQ(r.code, 0) << r.output;
+}
+
+// A prior far more confident than right (p_b_c 2 cm off with a 1 mm sigma) is contradicted by
+// the estimate: a WARNING naming the state, and consistent: false.
+TEST(Cli, APriorContradictedByTheDataIsFlagged) {
+  TempDir dir("cli-prior");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal("record --seed 5 --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/good", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("WARNING"), std::string::npos) << r.output;
+  EXPECT_TRUE(YAML::LoadFile(d + "/good/mirrorcal-result.yaml")["consistent"].as<bool>());
+
+  const std::string priors = d + "/rec/mirrorcal.yaml";
+  const YAML::Node y = YAML::LoadFile(priors);
+  const double x = y["p_b_c"][0].as<double>() + 0.02;
+  std::string text = slurp(priors), lines;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind("p_b_c:", 0) == 0)
+      l = "p_b_c: [" + std::to_string(x) + ", " + y["p_b_c"][1].as<std::string>() + ", " +
+          y["p_b_c"][2].as<std::string>() + "]";
+    if (l.rfind("sigma_p_b_c:", 0) == 0) l = "sigma_p_b_c: 0.001";
+    lines += l + "\n";
+  }
+  spit(priors, lines);
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/bad", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("WARNING: the estimate of p_"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("of the prior's sigmas from its guess"), std::string::npos) << r.output;
+  const YAML::Node bad = YAML::LoadFile(d + "/bad/mirrorcal-result.yaml");
+  EXPECT_FALSE(bad["consistent"].as<bool>());
+  EXPECT_GT(bad["prior_offset"].as<double>(), 5.0);
+}
+
+// A run that used under half the markers in its data is not to be trusted, however well they fit.
+TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
+  mc::app::CalibrationResult r;
+  r.markers_observed = 8764;
+  r.markers_used = 8700;
+  EXPECT_EQ(mc::app::convergence_warning(r), "");
+  r.markers_used = 109;
+  const std::string w = mc::app::convergence_warning(r);
+  EXPECT_NE(w.find("the filter used 109 of the 8764 markers in the data (1.2 %)"),
+            std::string::npos)
+      << w;
+  ASSERT_EQ(mc::app::result_warnings(r).size(), 1u);
 }

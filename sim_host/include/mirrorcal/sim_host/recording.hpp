@@ -91,12 +91,15 @@ struct Recording {
   RecordingPriors priors;
   std::uint64_t frames_outside_imu = 0;  // skipped: before the first or after the last IMU sample
   std::vector<std::string> notes;        // defaults used, frames skipped: tell the user
+  std::vector<std::string> warnings;     // the data disagree with a description (noise densities)
+  std::string fingerprint;               // of the CSV files' bytes: results name their recording
   bool has_truth = false;                // truth.yaml was there
   RecordingTruth truth;
 };
 
 // Reads DIR for a calibration with M = markers. On bad input returns false with a message that
-// names the file, the line and what is wrong.
+// names the file, the line and what is wrong; data that contradict their descriptions (timestamps
+// in another unit than ns, deg/s for rad/s, g for m/s^2) are bad input too.
 bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error);
 
 // The parsers behind read_recording, on a file's text; file names the file in messages.
@@ -141,6 +144,7 @@ struct CalibrationStart {
   // The camera the calibration ended with (`mirrorcal export`); hand-written starts may omit it.
   bool has_camera = false;
   CameraInfo camera;
+  std::string recording_fingerprint;  // Recording::fingerprint of its data; empty in older results
 };
 
 // Reads a mirrorcal-result.yaml (path, or a folder holding one); on bad input false with a message
