@@ -21,9 +21,8 @@ struct LoopConfig {
   // A gap longer than this (s) is not propagated across: the filter restarts its motion states at
   // the sample after it (CalibrationFilter::restart_motion), keeping the calibration, and the
   // frames inside it are skipped (frames_before_filter). The default GapMotion's attitude sigma
-  // reaches the restart's 0.5 rad at 0.24 s (1 rad at 0.3 s, 2 at 0.4 s): a longer crossing knows
-  // no more than a restart, and its nonlinearity cost a 400 ms gap in the paper scenario its
-  // self-check (sigma_ratio 0.65).
+  // is 0.3 rad after 0.2 s, 1 rad after 0.3 s and 2 after 0.4 s: crossings of 100-200 ms stay
+  // consistent, while 400 ms cost the paper scenario its self-check (sigma_ratio 0.65).
   double restart_gap_s = 0.3;
   // Times every stage of the loop when set (see timing.hpp).
   LoopProfiler* profiler = nullptr;
