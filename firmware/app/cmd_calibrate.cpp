@@ -80,10 +80,12 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   std::printf(
       "loop, last of %d passes: %llu IMU samples, %llu frames (%llu without markers, %llu "
       "outside the IMU data "
-      "skipped), %llu IMU gaps, %llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
+      "skipped), %llu IMU gaps (%llu too long to cross: motion restarted), %llu frames behind the "
+      "filter skipped, %llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
       run.result.passes, (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
       (unsigned long long)lc.frames_without_markers, (unsigned long long)rec.frames_outside_imu,
-      (unsigned long long)lc.imu_gaps, (unsigned long long)fc.markers_used,
+      (unsigned long long)lc.imu_gaps, (unsigned long long)lc.imu_restarts,
+      (unsigned long long)lc.frames_before_filter, (unsigned long long)fc.markers_used,
       (unsigned long long)fc.markers_gated, (unsigned long long)fc.failures, wall);
   for (const std::string& w : result_warnings(run.result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());

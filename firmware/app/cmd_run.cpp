@@ -183,11 +183,14 @@ int cmd_run(int argc, char** argv) {
   StopOnSignal::report("writing the calibration so far");
 
   const firmware::LoopCounters& lcount = loop.counters();
-  std::printf("loop: %llu IMU samples over %.3f s, %llu gaps, %llu out of order, %llu frames\n",
-              static_cast<unsigned long long>(lcount.imu_samples), stopping.seconds(),
-              static_cast<unsigned long long>(lcount.imu_gaps),
-              static_cast<unsigned long long>(lcount.imu_out_of_order),
-              static_cast<unsigned long long>(lcount.frames));
+  std::printf(
+      "loop: %llu IMU samples over %.3f s, %llu gaps (%llu too long to cross: motion restarted), "
+      "%llu out of order, %llu frames\n",
+      static_cast<unsigned long long>(lcount.imu_samples), stopping.seconds(),
+      static_cast<unsigned long long>(lcount.imu_gaps),
+      static_cast<unsigned long long>(lcount.imu_restarts),
+      static_cast<unsigned long long>(lcount.imu_out_of_order),
+      static_cast<unsigned long long>(lcount.frames));
   print_device_counters(devices);
   if (profiler) report_profile(*profiler, "timing", s.out);
   CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);

@@ -1,7 +1,9 @@
 // No heap in the whole loop after start-up: a 60 s simulated calibration, with the timing budget
-// on and the estimate published after every frame, must not allocate once the loop runs.
+// on, the estimate published after every frame and two IMU gaps (one crossed, one restarting the
+// motion states), must not allocate once the loop runs.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <memory>
 #include <vector>
@@ -31,7 +33,15 @@ TEST(LoopNoHeap, CounterSeesAllocations) {
 TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   using Filter = mc::CalibrationFilter<double, 3, 0>;
   const mc::sim::Scenario s = mc::sim::paper_scenario();
-  const mc::sim::SimData data = mc::sim::simulate(s, 21);
+  mc::sim::SimData data = mc::sim::simulate(s, 21);
+  constexpr std::int64_t kMs = 1'000'000;
+  for (const std::int64_t from : {20'000 * kMs, 40'000 * kMs}) {  // 200 ms, then 1 s, silent
+    const std::int64_t to = from + (from == 20'000 * kMs ? 200 : 1000) * kMs;
+    data.imu.erase(
+        std::remove_if(data.imu.begin(), data.imu.end(),
+                       [&](const mc::ImuSample& x) { return x.t_ns >= from && x.t_ns < to; }),
+        data.imu.end());
+  }
   const auto prior = mc::sim::draw_prior<3>(s, data, 21);
   // Start-up: everything the loop needs is made here.
   Filter filter(mc::app::scenario_config(s));
@@ -53,6 +63,8 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   const auto c = counting.stop();
   EXPECT_EQ(end, mc::firmware::LoopEnd::kEndOfStream);
   EXPECT_EQ(loop.counters().imu_samples, data.imu.size());
+  EXPECT_EQ(loop.counters().imu_gaps, 2u);
+  EXPECT_EQ(loop.counters().imu_restarts, 1u);
   EXPECT_GT(filter.counters().markers_used, 2000u);
   EXPECT_EQ(sink.rows().size(), loop.counters().frames + 1);
   EXPECT_EQ(c.news, 0);

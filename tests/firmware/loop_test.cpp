@@ -90,6 +90,55 @@ TEST(Loop, ImuGapIsCountedAndCrossedInNominalSteps) {
   EXPECT_TRUE(f.state().p.allFinite());
 }
 
+// Across a gap the IMU did not say how the rig moved: the attitude's uncertainty grows by far more
+// than the gyro's noise over the same time would make it.
+TEST(Loop, ImuGapAddsTheUncertaintyOfTheSignalItDidNotGive) {
+  const auto attitude_variance_after = [](const std::vector<mc::ImuSample>& imu) {
+    Filter f = make_filter();
+    const std::vector<mc::sim::ObservedFrame> frames;
+    mc::sim::VectorImuSource is(imu);
+    mc::sim::VectorMarkerSource<3> ms(frames);
+    Loop loop(f, is, ms, {});
+    loop.run();
+    return f.covariance()(Filter::State::kTheta, Filter::State::kTheta);
+  };
+  std::vector<std::int64_t> every_period;
+  for (std::int64_t t = 0; t <= 205 * kMs; t += 5 * kMs) every_period.push_back(t);
+  const double sampled = attitude_variance_after(imu_at(every_period));
+  const double gap = attitude_variance_after(imu_at({0, 5 * kMs, 205 * kMs}));
+  const double prior = make_filter().covariance()(Filter::State::kTheta, Filter::State::kTheta);
+  EXPECT_LT(sampled - prior, 1e-6);
+  EXPECT_GT(gap - prior, 1e-3);  // GapMotion: a 0.3 rad sigma over 200 ms
+}
+
+// A gap longer than restart_gap_s is not propagated across: the motion states restart at the
+// sample after it with the rig's range of motion, the calibration keeps its covariance, and the
+// frames inside the gap are skipped and counted.
+TEST(Loop, LongImuGapRestartsTheMotionStatesAndSkipsItsFrames) {
+  Filter f = make_filter();
+  const Filter::Covariance before = f.covariance();
+  const auto imu = imu_at({0, 5 * kMs, 1000 * kMs, 1005 * kMs});  // a second without samples
+  std::vector<mc::sim::ObservedFrame> frames(2);
+  frames[0].t_ns = 500 * kMs;             // inside the gap
+  frames[1].t_ns = 1002 * kMs + 500'000;  // after it
+  mc::sim::VectorImuSource is(imu);
+  mc::sim::VectorMarkerSource<3> ms(frames);
+  Loop loop(f, is, ms, {});
+  loop.run();
+  EXPECT_EQ(loop.counters().imu_gaps, 1u);
+  EXPECT_EQ(loop.counters().imu_restarts, 1u);
+  EXPECT_EQ(loop.counters().frames_before_filter, 1u);
+  EXPECT_EQ(loop.counters().frames, 1u);
+  EXPECT_EQ(f.counters().predicts, 3u);  // 0-5 ms, then 1000-1002.5 and 1002.5-1005 ms
+  const mc::MotionRange& r = f.config().restart;
+  EXPECT_NEAR(std::sqrt(f.covariance()(Filter::State::kP, Filter::State::kP)), r.position, 1e-3);
+  EXPECT_NEAR(std::sqrt(f.covariance()(Filter::State::kTheta, Filter::State::kTheta)), r.attitude,
+              1e-3);
+  constexpr int B = Filter::State::kPbc, L = Filter::kDim - B;
+  EXPECT_TRUE((f.covariance().bottomRightCorner<L, L>() == before.bottomRightCorner<L, L>()));
+  EXPECT_TRUE(f.state().p.allFinite());
+}
+
 TEST(Loop, OutOfOrderAndRepeatedSamplesAreDroppedAndCounted) {
   Filter f = make_filter();
   const auto imu = imu_at({0, 5 * kMs, 5 * kMs, 3 * kMs, 10 * kMs});

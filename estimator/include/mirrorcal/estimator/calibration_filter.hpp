@@ -22,6 +22,10 @@ struct CalibrationConfig {
   // frames). After 10 s at 20 Hz the estimate is near enough for the gate to mean what it says.
   std::uint64_t gate_after_frames = 200;
   SigmaPointParams sigma_points{};
+  // What the rig may do across an IMU gap (predict's gap_s), and after one too long to cross
+  // (restart_motion).
+  GapMotion gap{};
+  MotionRange restart{};
 };
 
 // Running counts over the filter's life.
@@ -78,8 +82,15 @@ class CalibrationFilter {
 
   // Defined below the class: member functions defined in it would be inline, and an extern
   // template declaration does not stop inline functions from being instantiated in every unit
-  // that calls them.
-  FilterStatus predict(const ImuSample& s0, const ImuSample& s1, const ImuSample* before = nullptr);
+  // that calls them. gap_s > 0: s0 and s1 lie in an IMU gap that long, on the straight line
+  // between its samples, and the process noise covers the signal the IMU did not give
+  // (noise_across_gap).
+  FilterStatus predict(const ImuSample& s0, const ImuSample& s1, const ImuSample* before = nullptr,
+                       double gap_s = 0.0);
+  // After an IMU gap too long to propagate across: the rig is taken to be where it was before the
+  // gap, at rest, within config().restart (1-sigma, correlated with nothing), at s's time; the
+  // biases and the calibration states keep their estimate and covariance.
+  void restart_motion(const ImuSample& s);
   UpdateResult update(const MarkerFrame<M>& frame);
 
   const State& state() const { return filter_.mean(); }
@@ -156,7 +167,7 @@ Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
 // paper campaigns (docs/campaign) are as consistent with it.
 template <typename S, int M, int NK>
 FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1,
-                                                  const ImuSample* before) {
+                                                  const ImuSample* before, double gap_s) {
   constexpr int D = State::kDynamicDim, C = kDim - D;
   static_assert(State::kDynamicBegin == 0, "the IMU block leads the error state");
   ++counters_.predicts;
@@ -178,7 +189,9 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   f.left_multiply(fp_dd_t, p_dd);
   Covariance& next = thread_workspace<PredictWorkspace>().next;
   next = p;
-  next.template topLeftCorner<D, D>() = p_dd + imu_process_noise<S>(config_.imu, dt);
+  const ImuNoise noise =
+      gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
+  next.template topLeftCorner<D, D>() = p_dd + imu_process_noise<S>(noise, dt);
   next.template topRightCorner<D, C>() = fp.template rightCols<C>();
   next.template bottomLeftCorner<C, D>() = fp.template rightCols<C>().transpose();
   if (!next.template topRows<D>().allFinite() || !x.v.allFinite() || !x.p.allFinite() ||
@@ -191,6 +204,25 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   timed_ = true;
   if (dt > 0.0) gyro_rate_ = ((s1.gyro - s0.gyro) / dt).template cast<S>();
   return FilterStatus::kOk;
+}
+
+template <typename S, int M, int NK>
+void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
+  State x = filter_.mean();
+  x.v.setZero();
+  Covariance& p = thread_workspace<PredictWorkspace>().next;
+  p = filter_.covariance();
+  const MotionRange& r = config_.restart;
+  const auto restart = [&p](int begin, double sigma) {
+    p.template middleRows<3>(begin).setZero();
+    p.template middleCols<3>(begin).setZero();
+    p.template block<3, 3>(begin, begin) = Mat3<S>::Identity() * S(sigma * sigma);
+  };
+  restart(State::kP, r.position);
+  restart(State::kV, r.velocity);
+  restart(State::kTheta, r.attitude);
+  filter_.reset(x, p);
+  start_at(s);
 }
 
 template <typename S, int M, int NK>

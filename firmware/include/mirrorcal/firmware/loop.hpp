@@ -15,8 +15,15 @@ namespace mirrorcal::firmware {
 struct LoopConfig {
   std::int64_t imu_period_ns = 5'000'000;  // nominal IMU period (200 Hz)
   // An interval longer than gap_periods nominal periods is an IMU gap: counted, and propagated
-  // across in steps of one nominal period on linearly interpolated samples.
+  // across in steps of one nominal period on linearly interpolated samples, with the process noise
+  // of the signal the IMU did not give (CalibrationConfig::gap).
   double gap_periods = 2.5;
+  // A gap longer than this (s) is not propagated across: the filter restarts its motion states at
+  // the sample after it (CalibrationFilter::restart_motion), keeping the calibration, and the
+  // frames inside it are skipped (frames_before_filter). The default GapMotion's attitude sigma
+  // is 0.3 rad after 0.2 s, 1 rad after 0.3 s and 2 after 0.4 s: crossings of 100-200 ms stay
+  // consistent, while 400 ms cost the paper scenario its self-check (sigma_ratio 0.65).
+  double restart_gap_s = 0.3;
   // Times every stage of the loop when set (see timing.hpp).
   LoopProfiler* profiler = nullptr;
 };
@@ -25,8 +32,9 @@ struct LoopConfig {
 struct LoopCounters {
   std::uint64_t imu_samples = 0;
   std::uint64_t imu_out_of_order = 0;  // samples not after the previous one: dropped
-  std::uint64_t imu_gaps = 0;
-  std::uint64_t frames = 0;  // frames used in an update attempt
+  std::uint64_t imu_gaps = 0;          // each gap once, however many frames fall in it
+  std::uint64_t imu_restarts = 0;      // gaps longer than restart_gap_s: motion states restarted
+  std::uint64_t frames = 0;            // frames used in an update attempt
   std::uint64_t frames_without_markers = 0;
   // frames exposed before the first IMU sample, or more than kMaxBackwardPeriods IMU periods
   // before the filter's time: skipped
@@ -81,6 +89,9 @@ class CalibrationLoop {
   // A rolling shutter's readout of the frame's mean marker row after its stamp (ns; 0 global).
   std::int64_t readout_ns(const MarkerFrame<M>& frame) const;
   void propagate_to(const ImuSample& next);
+  // Whether the IMU was silent from measured_ to sample: counts the gap, and restarts the motion
+  // states across one too long to propagate.
+  bool cross_gap(const ImuSample& sample);
   void apply_frame(const MarkerFrame<M>& frame);
   hal::SourceStatus poll_markers();
   hal::SourceStatus read_imu(ImuSample& sample);
@@ -105,6 +116,7 @@ class CalibrationLoop {
   ImuSample measured_{};
   ImuSample before_{};
   bool has_before_ = false;
+  double gap_s_ = 0.0;  // the IMU gap the filter is propagating across (s), 0 outside gaps
   MarkerFrame<M> pending_{};
   bool pending_valid_ = false;
 };

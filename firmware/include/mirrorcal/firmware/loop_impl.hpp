@@ -12,24 +12,39 @@ namespace mirrorcal::firmware {
 template <typename S, int M, int NK>
 void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
   const StageTimer timer(config_.profiler, Stage::kPropagation);
-  const std::int64_t span = next.t_ns - last_.t_ns;
-  if (span <= 0) return;
-  const auto gap_limit =
-      static_cast<std::int64_t>(config_.gap_periods * static_cast<double>(config_.imu_period_ns));
-  if (span > gap_limit) {
-    ++counters_.imu_gaps;
+  if (next.t_ns <= last_.t_ns) return;
+  if (gap_s_ > 0.0) {
     // Step across the gap one nominal period at a time so the integration stays second order.
     while (next.t_ns - last_.t_ns > config_.imu_period_ns) {
       const ImuSample mid = interpolate(last_, next, last_.t_ns + config_.imu_period_ns);
-      if (filter_.predict(last_, mid) != FilterStatus::kOk) ++counters_.filter_failures;
+      if (filter_.predict(last_, mid, nullptr, gap_s_) != FilterStatus::kOk)
+        ++counters_.filter_failures;
       last_ = mid;
     }
   }
   // The third node of the signal's parabola: the measured sample before the interval's start.
   const ImuSample* node =
       !has_before_ ? nullptr : (last_.t_ns == measured_.t_ns ? &before_ : &measured_);
-  if (filter_.predict(last_, next, node) != FilterStatus::kOk) ++counters_.filter_failures;
+  if (filter_.predict(last_, next, node, gap_s_) != FilterStatus::kOk) ++counters_.filter_failures;
   last_ = next;
+}
+
+template <typename S, int M, int NK>
+bool CalibrationLoop<S, M, NK>::cross_gap(const ImuSample& sample) {
+  const std::int64_t silent_ns = sample.t_ns - measured_.t_ns;
+  gap_s_ = 0.0;
+  if (static_cast<double>(silent_ns) <=
+      config_.gap_periods * static_cast<double>(config_.imu_period_ns))
+    return false;
+  ++counters_.imu_gaps;
+  gap_s_ = static_cast<double>(silent_ns) * 1e-9;
+  if (gap_s_ > config_.restart_gap_s) {
+    ++counters_.imu_restarts;
+    filter_.restart_motion(sample);
+    last_ = sample;
+    gap_s_ = 0.0;
+  }
+  return true;
 }
 
 template <typename S, int M, int NK>
@@ -94,8 +109,7 @@ bool CalibrationLoop<S, M, NK>::step() {
     return true;
   }
   // Across a gap the signal is the straight line (propagate_to steps through it).
-  const bool gap = static_cast<double>(sample.t_ns - measured_.t_ns) >
-                   config_.gap_periods * static_cast<double>(config_.imu_period_ns);
+  const bool gap = cross_gap(sample);
   if (gap) has_before_ = false;
   // Every frame up to this sample's time: propagate to the frame, update, go on.
   for (;;) {

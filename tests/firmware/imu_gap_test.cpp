@@ -1,0 +1,99 @@
+// IMU gaps survived: the IMU silent for 100-200 ms (a USB hiccup) is propagated across with the
+// uncertainty of the signal it did not give, and the calibration stays consistent; silent for
+// longer (400 ms, 5 s), the motion states restart and the calibration goes on as consistent.
+// Full calibrations (run_loop) of the paper scenario and of random-family rigs, the gap at 30 s.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "mirrorcal/sim_host/simulator.hpp"
+#include "sim_run.hpp"
+
+namespace mc = mirrorcal;
+using Run = mc::app::SimRun<0>;
+
+namespace {
+
+constexpr std::int64_t kMs = 1'000'000;
+constexpr std::int64_t kGapStartNs = 30'000 * kMs;
+
+// The true calibration of a scenario, for the NEES.
+Run::State truth_of(const mc::sim::Scenario& s) {
+  Run::State t;
+  t.p_b_c = s.truth.p_b_c;
+  t.q_b_c = s.truth.q_b_c;
+  for (int i = 0; i < mc::app::kMarkers; ++i)
+    t.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
+  t.t_d = s.truth.t_d;
+  return t;
+}
+
+// What `mirrorcal calibrate` makes of the recording of seed with the IMU rows of gap_ms from 30 s
+// removed.
+Run calibrate_with_gap(const mc::sim::Scenario& s, std::uint64_t seed, std::int64_t gap_ms) {
+  const mc::sim::SimData data = mc::sim::simulate(s, seed);
+  mc::app::LoopData d = mc::app::loop_data(s, data);
+  d.imu.erase(std::remove_if(d.imu.begin(), d.imu.end(),
+                             [&](const mc::ImuSample& x) {
+                               return x.t_ns >= kGapStartNs && x.t_ns < kGapStartNs + gap_ms * kMs;
+                             }),
+              d.imu.end());
+  Run::State x0;
+  Run::Filter::Covariance p0;
+  mc::initialise(mc::app::simulation_prior(s, data, seed), x0, p0);
+  const Run::State truth = truth_of(s);
+  return mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0, d, &truth);
+}
+
+// The chi-square quantile p of k degrees of freedom (Wilson-Hilferty: within 0.1 % at k >= 48).
+double chi2_quantile(double p, double k) {
+  const double z = p > 0.5 ? 1.959964 : -1.959964;  // the 2.5 % and 97.5 % points
+  const double c = 2.0 / (9.0 * k);
+  return k * std::pow(1.0 - c + z * std::sqrt(c), 3);
+}
+
+// Runs of the paper scenario (seeds 1-3) and of three random-family rigs (seeds 4-6), each with
+// the gap: every run counts the gap once and stays consistent (at most 0.5 % of its markers
+// gated), and their average NEES lies in its 95 % interval.
+void expect_gap_survived(std::int64_t gap_ms, std::uint64_t restarts) {
+  constexpr int kCalibration = 16;
+  std::vector<std::pair<mc::sim::Scenario, std::uint64_t>> rigs;
+  for (std::uint64_t seed : {1, 2, 3}) rigs.emplace_back(mc::sim::paper_scenario(), seed);
+  for (std::uint64_t seed : {4, 5, 6}) rigs.emplace_back(mc::sim::random_scenario(seed), seed);
+  double nees_sum = 0.0;
+  for (const auto& [scenario, seed] : rigs) {
+    const Run run = calibrate_with_gap(scenario, seed, gap_ms);
+    SCOPED_TRACE(scenario.name + " seed " + std::to_string(seed));
+    EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
+    EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
+    EXPECT_EQ(run.filter_counters.failures, 0u);
+    EXPECT_FALSE(mc::app::suspect(run.result))
+        << run.result.markers_gated << " gated of " << run.result.markers_used << " used";
+    nees_sum += run.history.back().nees;
+  }
+  const double dof = kCalibration * static_cast<double>(rigs.size());
+  const double n = static_cast<double>(rigs.size());
+  EXPECT_GT(nees_sum / n, chi2_quantile(0.025, dof) / n);
+  EXPECT_LT(nees_sum / n, chi2_quantile(0.975, dof) / n);
+}
+
+}  // namespace
+
+TEST(ImuGap, Of100MsIsPropagatedAcrossAndTheCalibrationStaysConsistent) {
+  expect_gap_survived(100, 0);
+}
+
+TEST(ImuGap, Of200MsIsPropagatedAcrossAndTheCalibrationStaysConsistent) {
+  expect_gap_survived(200, 0);
+}
+
+// Beyond LoopConfig::restart_gap_s (0.3 s) the crossing knows no more than a restart.
+TEST(ImuGap, Of400MsRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
+  expect_gap_survived(400, 1);
+}
+
+TEST(ImuGap, Of5SRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
+  expect_gap_survived(5000, 1);
+}
