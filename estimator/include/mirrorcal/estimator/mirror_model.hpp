@@ -7,7 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <string>
+#include <string_view>
 
 #include "mirrorcal/estimator/so3.hpp"
 
@@ -47,7 +47,7 @@ inline const char* to_string(Distortion d) {
          : d == Distortion::kEquidistant ? "equidistant"
                                          : "none";
 }
-inline bool distortion_from_string(const std::string& name, Distortion& d) {
+inline bool distortion_from_string(std::string_view name, Distortion& d) {
   for (const Distortion c : {Distortion::kNone, Distortion::kRadtan, Distortion::kEquidistant})
     if (name == to_string(c)) {
       d = c;
