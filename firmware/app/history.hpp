@@ -26,6 +26,7 @@ struct HistoryRow {
   static constexpr int kCalib = State::kDim - State::kPbc;
   std::int64_t t_ns = 0;
   State state{};
+  State predicted{};  // the estimate before this frame's update (CalibrationFilter::predicted)
   Eigen::Matrix<double, kCalib, 1> sigma = Eigen::Matrix<double, kCalib, 1>::Zero();
   Eigen::Matrix<double, kCalib, 1> error = Eigen::Matrix<double, kCalib, 1>::Zero();  // if truth
   double nees = 0.0;                                                                  // if truth
@@ -56,6 +57,7 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     HistoryRow<Filter>& r = rows_.emplace_back();
     r.t_ns = t_ns;
     r.state = f.state();
+    r.predicted = f.predicted();
     constexpr int B = Filter::State::kPbc, L = Filter::State::kDim - B;
     r.sigma = f.covariance().diagonal().template segment<L>(B).template cast<double>().cwiseSqrt();
     if (truth_ != nullptr) calibration_error(f, *truth_, r);

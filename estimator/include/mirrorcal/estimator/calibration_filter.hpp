@@ -94,6 +94,9 @@ class CalibrationFilter {
   UpdateResult update(const MarkerFrame<M>& frame);
 
   const State& state() const { return filter_.mean(); }
+  // The estimate the latest update started from: the state before its frame, which holds none of
+  // that frame's noise (the point to linearise that frame at again: sim_run.cpp).
+  const State& predicted() const { return predicted_; }
   // A frame stamped t_cam_ns against the filter's time and the IMU signal there.
   Exposure<S> exposure(std::int64_t t_cam_ns) const;
   const Covariance& covariance() const { return filter_.covariance(); }
@@ -125,6 +128,7 @@ class CalibrationFilter {
   const State* along_ = nullptr;
   const std::int64_t* along_stamps_ = nullptr;
   std::size_t along_count_ = 0, along_next_ = 0;
+  State predicted_{};
   ImuSample now_{};  // the IMU signal at the filter's time, if timed_
   // The gyro signal's derivative there: over the last predict's interval, whose end the signal's
   // parabola gave (imu_signal_at), so a short interval does not amplify the noise.
@@ -227,6 +231,7 @@ void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
 
 template <typename S, int M, int NK>
 UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
+  predicted_ = filter_.mean();
   Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
   for (int i = 0; i < M; ++i)
     if (frame.seen[i]) z.template segment<2>(2 * i) = frame.uv[i].template cast<S>();
