@@ -60,6 +60,12 @@ struct SimRun {
   std::uint64_t markers_out_of_image = 0;
   std::size_t imu_samples = 0, frames = 0;
   DetectionReport detection;  // --frames only
+  // For the report: the prior's 1-sigma of each calibration state (SI, calibration_params()
+  // order), against which the data's narrowing of it is judged, and the pixel noise assumed.
+  std::vector<double> prior_sigma;
+  double pixel_sigma = 0.0;
+  std::uint64_t gate_after_frames = 0;  // frames the estimate had to settle before the gate
+  bool has_truth = false;               // the history rows carry the error against truth
 };
 template <int NK>
 using CalibrationRun = SimRun<NK>;
