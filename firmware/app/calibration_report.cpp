@@ -21,12 +21,15 @@ constexpr double kDeg = 180.0 / M_PI;
 
 std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 std::string format(const char* fmt, ...) {
-  va_list args;
+  va_list args, again;
   va_start(args, fmt);
-  char buffer[1024];
-  std::vsnprintf(buffer, sizeof buffer, fmt, args);
+  va_copy(again, args);
+  const int n = std::vsnprintf(nullptr, 0, fmt, args);
   va_end(args);
-  return buffer;
+  std::string text(n > 0 ? std::size_t(n) : 0, '\0');
+  std::vsnprintf(text.data(), text.size() + 1, fmt, again);
+  va_end(again);
+  return text;
 }
 
 // A Euclidean calibration state's value (j in calibration_params() order; the rotation's are 0).
@@ -53,6 +56,10 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
   d.has_truth = run.has_truth;
   if (run.history.empty()) return d;
   d.final_nees = run.history.back().nees;
+  d.settled_from_s =
+      double(
+          run.history[std::min<std::size_t>(run.gate_after_frames, run.history.size() - 1)].t_ns) *
+      1e-9;
   for (int i = 0; i < 3; ++i) {
     d.accel_bias_sigma(i) = std::sqrt(run.covariance(State::kBa + i, State::kBa + i));
     d.gyro_bias_sigma(i) = std::sqrt(run.covariance(State::kBg + i, State::kBg + i));
@@ -354,18 +361,27 @@ void add_excitation(std::string& t, const ReportData& d) {
       100.0 * (*p_hi - *p_lo), a.empty() ? 0.0 : std::sqrt(a_squares / double(a.size())), a_max);
   std::string weak;
   const std::vector<ParamInfo>& params = d.result.params;
+  const std::size_t from_earlier = d.from_earlier ? 7 + 3 * d.result.markers.size() : 0;
   for (std::size_t j = 0; j < params.size() && j < d.prior_sigma.size(); ++j) {
     const double ratio = d.result.sigma[j] / d.prior_sigma[j];
-    if (ratio > kWeaklyObservedRatio)
+    if (ratio > (j < from_earlier ? kWeaklyObservedFromEarlierRatio : kWeaklyObservedRatio))
       weak += format("%s%s (%.2f)", weak.empty() ? "" : ", ", params[j].name.c_str(), ratio);
   }
-  if (d.prior_sigma.empty())
+  if (d.prior_sigma.empty()) {
     t += "weakly observed states: unknown (no prior)\n\n";
-  else
+    return;
+  }
+  t += format(
+      "weakly observed (final sigma above %.1f of the prior's; more motion about the axes that "
+      "move them helps): %s\n",
+      kWeaklyObservedRatio, weak.empty() ? "none" : weak.c_str());
+  if (d.from_earlier)
     t += format(
-        "weakly observed (final sigma above %.1f of the prior's; more motion about the "
-        "axes that move them helps): %s\n\n",
-        kWeaklyObservedRatio, weak.empty() ? "none" : weak.c_str());
+        "(the camera pose, markers and time offset started from an earlier calibration, stage 1 "
+        "or --from: judged against it, above %.1f; at 0.71 these data held as much as that "
+        "one's)\n",
+        kWeaklyObservedFromEarlierRatio);
+  t += "\n";
 }
 
 }  // namespace
@@ -479,6 +495,20 @@ void write_plot_data(const std::string& dir, const ReportData& d) {
       << chi2_quantile(0.975, w.dof) / w.dof << '\n';
 }
 
+// The range of state j's +-3 sigma band once the estimate settled, with a margin: the first
+// frames' wide band would hide the rest.
+std::pair<double, double> settled_band(const ReportData& d, std::size_t j) {
+  double lo = INFINITY, hi = -INFINITY;
+  for (std::size_t k = 0; k < d.t_s.size(); ++k) {
+    if (d.t_s[k] < d.settled_from_s) continue;
+    lo = std::min(lo, d.estimate[j][k] - 3.0 * d.sigma[j][k]);
+    hi = std::max(hi, d.estimate[j][k] + 3.0 * d.sigma[j][k]);
+  }
+  if (!(lo < hi)) return {-1.0, 1.0};
+  const double margin = 0.1 * (hi - lo);
+  return {lo - margin, hi + margin};
+}
+
 // The gnuplot script, and the figures it draws.
 std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
   std::vector<Figure> figures;
@@ -535,14 +565,17 @@ std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
       << "\n";
     for (std::size_t j : grp.params) {
       const std::size_t c = 2 + 2 * j;  // estimate's column; sigma's is c + 1
+      const auto [lo, hi] = settled_band(d, j);
       g << "set title " << gnuplot_quoted(params[j].name) << "\nset ylabel "
-        << gnuplot_quoted(params[j].unit) << "\nplot 'series.dat' using 1:" << c
-        << " with lines lc rgb '#336699' lw 1.2, '' using 1:($" << c << " + 3 * $" << c + 1
-        << ") with lines dt 2 lc rgb '#cc2222', '' using 1:($" << c << " - 3 * $" << c + 1
-        << ") with lines dt 2 lc rgb '#cc2222'\n";
+        << gnuplot_quoted(params[j].unit) << "\nset yrange [" << lo << ":" << hi << "]\n"
+        << "plot 'series.dat' using 1:" << c << " with lines lc rgb '#336699' lw 1.2, '' using 1:($"
+        << c << " + 3 * $" << c + 1 << ") with lines dt 2 lc rgb '#cc2222', '' using 1:($" << c
+        << " - 3 * $" << c + 1 << ") with lines dt 2 lc rgb '#cc2222'\n";
     }
-    g << "unset multiplot\n";
-    figures.push_back({file, grp.label.substr(0, grp.label.find(" error")) + " over time"});
+    g << "unset multiplot\nset autoscale y\n";
+    figures.push_back({file, grp.label.substr(0, grp.label.find(" error")) +
+                                 " over time (the first seconds, before the estimate settled, "
+                                 "may run off the scale)"});
   }
 
   const std::size_t extra = 2 + 2 * params.size();  // first column after the states'

@@ -19,6 +19,9 @@ namespace mirrorcal::app {
 // A calibration state whose final sigma is still above this fraction of its prior's is reported as
 // weakly observed: the motion left it mostly to the prior.
 constexpr double kWeaklyObservedRatio = 0.5;
+// The same for a state that started from an earlier calibration's estimate and covariance (stage
+// 1, --from): data as informative as the earlier ones bring it to 0.71 of that.
+constexpr double kWeaklyObservedFromEarlierRatio = 0.9;
 // The normalised innovation squared is judged over windows of this many frames with markers used.
 constexpr int kNisWindowFrames = 60;
 
@@ -40,10 +43,14 @@ struct ReportData {
   CalibrationResult result;
   double pixel_sigma = 1.0;         // px, what the filter assumed
   std::vector<double> prior_sigma;  // calibration_params() order; empty if unknown
+  // The camera pose, markers and time offset started from an earlier calibration (stage 1,
+  // calibrate --from): their prior sigmas are its.
+  bool from_earlier = false;
   bool has_truth = false;
   double final_nees = 0.0;  // against the truth, if any
   std::vector<ResidualSample> residuals;
   std::vector<double> t_s;
+  double settled_from_s = 0.0;  // the first frame after those the estimate needed to settle
   // Each calibration state in display units (ParamInfo::scale); the rotation as the components of
   // log(R_final^T R), deg.
   std::vector<std::vector<double>> estimate, sigma;  // [param][row]
@@ -86,13 +93,15 @@ ReportData report_data_without_history(const CalibrationResult& r, const std::st
 // a run, in dir, written as one set.
 template <int NK>
 bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
-                                  const std::string& title, const ReportPlots& plots,
-                                  std::string& error) {
+                                  const std::string& title, bool from_earlier,
+                                  const ReportPlots& plots, std::string& error) {
+  ReportData report = report_data(run, title);
+  report.from_earlier = from_earlier;
   files::OutputSet out;
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
          write_estimates_csv(out, dir + "/estimates.csv", run.history, error) &&
-         write_report(out, dir, report_data(run, title), plots, error) && out.commit(error);
+         write_report(out, dir, report, plots, error) && out.commit(error);
 }
 
 // RFC 4648 base64 of bytes, for data: URIs.

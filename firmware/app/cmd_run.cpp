@@ -210,6 +210,7 @@ int cmd_run(int argc, char** argv) {
       if (!calibrate_recording(sensors, run, error, {}, from)) fail(error, 1);
       result = run.result;
       report = report_data(run, title);
+      report.from_earlier = from != nullptr;
     };
     if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
       refine(SimRun<4>{});

@@ -113,7 +113,8 @@ int cmd_sim(int argc, char** argv) {
         "mirrorcal sim, scenario " + s.name + ", seed " + std::to_string(seed) +
         (intrinsics ? one_stage ? ", intrinsics in one stage" : ", intrinsics in stage 2 (reported)"
                     : "");
-    if (!write_run_outputs_and_report(dir, run, title, report_plots, err)) fail(err, 1);
+    if (!write_run_outputs_and_report(dir, run, title, intrinsics && !one_stage, report_plots, err))
+      fail(err, 1);
     std::printf(
         "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
         "report.html, residuals.csv\n",

@@ -415,3 +415,28 @@ TEST(ReportFiles, ChromiumRendersTheReport) {
   }
   EXPECT_TRUE(green) << "the verdict's colour is not on the screenshot";
 }
+
+// The paper's motion observes every state: none is left weakly observed, whether judged against
+// the user's guesses (stage 1) or against stage 1's calibration (stage 2, whose data bring the
+// camera pose and markers to about 0.71 of stage 1's sigmas).
+TEST(ReportFiles, ThePapersMotionLeavesNoStateWeaklyObserved) {
+  TempDir dir("report-observed");
+  const std::string& d = dir.path;
+  for (const std::string args :
+       {"sim --seed 2 --no-plots", "sim --seed 2 --intrinsics --no-plots"}) {
+    ASSERT_EQ(run_mirrorcal(args + " --out " + d + "/out", d), 0) << slurp(d + "/command.log");
+    const std::string report = slurp(d + "/out/report.txt");
+    EXPECT_NE(line_starting(report, "weakly observed").find("helps): none"), std::string::npos)
+        << args << "\n"
+        << report;
+    const bool stage2 = args.find("--intrinsics") != std::string::npos;
+    EXPECT_EQ(report.find("started from an earlier calibration") != std::string::npos, stage2);
+    if (!stage2) continue;
+    // Stage 2's sigma of p_y against stage 1's, as the table prints it.
+    double estimate = 0, sigma = 0, prior = 0, ratio = 0;
+    std::sscanf(line_starting(report, "p_y ").c_str(), "p_y cm %lf %lf %lf %lf", &estimate, &sigma,
+                &prior, &ratio);
+    EXPECT_GT(ratio, 0.5);
+    EXPECT_LT(ratio, 0.9);
+  }
+}
