@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <sstream>
 #include <vector>
@@ -439,4 +440,21 @@ TEST(ReportFiles, ThePapersMotionLeavesNoStateWeaklyObserved) {
     EXPECT_GT(ratio, 0.5);
     EXPECT_LT(ratio, 0.9);
   }
+}
+
+// Without gnuplot the page says the plots are unavailable and why; the text is the same.
+TEST(ReportFiles, WithoutGnuplotThePageSaysSoAndTheTextIsWhole) {
+  TempDir dir("report-no-gnuplot");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 3 --no-plots --out " + d + "/plain", d), 0);
+  const std::string path = getenv("PATH") != nullptr ? getenv("PATH") : "";
+  setenv("PATH", (d + "/no-programs-here").c_str(), 1);  // mirrorcal finds no gnuplot
+  const int status = run_mirrorcal("sim --seed 3 --out " + d + "/sim", d);
+  setenv("PATH", path.c_str(), 1);
+  ASSERT_EQ(status, 0) << slurp(d + "/command.log");
+  const std::string html = slurp(d + "/sim/report.html");
+  EXPECT_NE(html.find("<p>Plots unavailable: cannot run gnuplot"), std::string::npos);
+  EXPECT_TRUE(attribute_values(html, "src").empty());
+  EXPECT_EQ(tag_nesting_error(html), "");
+  EXPECT_EQ(slurp(d + "/sim/report.txt"), slurp(d + "/plain/report.txt"));
 }
