@@ -89,7 +89,7 @@ bool write_report(files::OutputSet& out, const std::string& dir, const ReportDat
 // For a run without data (`run` without frames): the verdict and the calibration only.
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title);
 
-// camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (write_run_outputs) and the report of
+// camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
 // a run, in dir, written as one set.
 template <int NK>
 bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
@@ -98,10 +98,8 @@ bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
   ReportData report = report_data(run, title);
   report.from_earlier = from_earlier;
   files::OutputSet out;
-  return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
-         write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) &&
-         write_report(out, dir, report, plots, error) && out.commit(error);
+  return add_run_outputs(out, dir, run, error) && write_report(out, dir, report, plots, error) &&
+         out.commit(error);
 }
 
 // RFC 4648 base64 of bytes, for data: URIs.

@@ -228,13 +228,19 @@ sim::Scenario without_skew(sim::Scenario s);
 Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& data,
                                  std::uint64_t seed);
 
-// camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir.
+// camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir: added to out, or
+// written.
+template <int NK>
+bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun<NK>& run,
+                     std::string& error) {
+  return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
+         write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
+         write_estimates_csv(out, dir + "/estimates.csv", run.history, error);
+}
 template <int NK>
 bool write_run_outputs(const std::string& dir, const SimRun<NK>& run, std::string& error) {
   files::OutputSet out;
-  return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
-         write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) && out.commit(error);
+  return add_run_outputs(out, dir, run, error) && out.commit(error);
 }
 
 }  // namespace mirrorcal::app
