@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <string>
 
+#include "calibration_report.hpp"
 #include "cli.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "recording_run.hpp"
@@ -89,8 +90,13 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
       (unsigned long long)fc.markers_gated, (unsigned long long)fc.failures, wall);
   for (const std::string& w : result_warnings(run.result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
-  if (!write_run_outputs(out, run, err)) fail(err, 1);
-  std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n", out.c_str());
+  if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
+                                    ReportPlots{}, err))
+    fail(err, 1);
+  std::printf(
+      "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
+      "report.html, residuals.csv\n",
+      out.c_str());
   return 0;
 }
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "calibration_report.hpp"
 #include "cli.hpp"
 #include "devices.hpp"
 #include "loop_options.hpp"
@@ -194,6 +195,8 @@ int cmd_run(int argc, char** argv) {
   print_device_counters(devices);
   if (profiler) report_profile(*profiler, "timing", s.out);
   CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
+  const std::string title = "mirrorcal run, IMU " + s.imu;
+  ReportData report = report_data_without_history(result, title);
   if (!log.frames.empty()) {
     std::printf(
         "calibrating from the run's %zu IMU samples and %zu labelled frames%s, in %d passes "
@@ -206,6 +209,8 @@ int cmd_run(int argc, char** argv) {
     const auto refine = [&](auto run) {
       if (!calibrate_recording(sensors, run, error, {}, from)) fail(error, 1);
       result = run.result;
+      report = report_data(run, title);
+      report.from_earlier = from != nullptr;
     };
     if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
       refine(SimRun<4>{});
@@ -220,15 +225,18 @@ int cmd_run(int argc, char** argv) {
   std::printf("time offset found: timeshift_cam_imu %.3f ms +- %.3f ms (t_imu = t_cam + it)\n",
               1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
+  report.result = result;
   for (const std::string& w : result_warnings(result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   files::OutputSet out;
   if (!write_camchain_imucam(out, s.out + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(out, s.out + "/mirrorcal-result.yaml", result, error) ||
-      !out.commit(error))
+      !write_report(out, s.out, report, ReportPlots{}, error) || !out.commit(error))
     fail(error, 1);
-  std::printf("wrote %s/camchain-imucam.yaml and %s/mirrorcal-result.yaml\n", s.out.c_str(),
-              s.out.c_str());
+  std::printf(
+      "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, report.txt, report.html, "
+      "residuals.csv\n",
+      s.out.c_str());
   if (end == firmware::LoopEnd::kImuError) fail(imu.error(), 1);
   if (end == firmware::LoopEnd::kMarkerError) fail(markers.error(), 1);
   return 0;

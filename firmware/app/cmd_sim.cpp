@@ -10,6 +10,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "calibration_report.hpp"
 #include "cli.hpp"
 #include "loop_options.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
@@ -95,20 +96,32 @@ int cmd_sim(int argc, char** argv) {
     std::string err;
     for (const std::string& w : result_warnings(run.result))
       std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
-    if (!write_run_outputs(dir, run, err)) fail(err, 1);
-    std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv\n",
-                dir.c_str());
+    // The error plots first: the report embeds them.
+    ReportPlots report_plots;
+    report_plots.draw = !o.flag("no-plots");
+    if (report_plots.draw) {
+      const std::vector<ErrorSeries> series = {error_series(run.history, params)};
+      report_plots.extra_pngs =
+          plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params, series,
+                      chi2_quantile(0.025, double(params.size())),
+                      chi2_quantile(0.975, double(params.size())), err);
+      if (report_plots.extra_pngs.empty())
+        std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
+      for (const auto& p : report_plots.extra_pngs) std::printf("plot: %s\n", p.c_str());
+    }
+    const std::string title =
+        "mirrorcal sim, scenario " + s.name + ", seed " + std::to_string(seed) +
+        (intrinsics ? one_stage ? ", intrinsics in one stage" : ", intrinsics in stage 2 (reported)"
+                    : "");
+    if (!write_run_outputs_and_report(dir, run, title, intrinsics && !one_stage, report_plots, err))
+      fail(err, 1);
+    std::printf(
+        "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
+        "report.html, residuals.csv\n",
+        dir.c_str());
     if (profiler)
       report_profile(*profiler,
                      "this host's monotonic clock, simulated data fed as fast as it is taken", dir);
-    if (!o.flag("no-plots")) {
-      const std::vector<ErrorSeries> series = {error_series(run.history, params)};
-      const auto pngs = plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params,
-                                    series, chi2_quantile(0.025, double(params.size())),
-                                    chi2_quantile(0.975, double(params.size())), err);
-      if (pngs.empty()) std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
-      for (const auto& p : pngs) std::printf("plot: %s\n", p.c_str());
-    }
   };
   if (intrinsics && o.flag("hold-skew"))
     report(one_stage ? run_one_stage_simulation<4>(s, seed, progress)

@@ -1,12 +1,15 @@
 // The estimate over time, as the loop publishes it: a sink that keeps every published estimate in
-// storage reserved before the loop starts, and the calibration parameters' names and units.
+// storage reserved before the loop starts (with each frame's residuals and normalised innovation
+// squared, for the report), and the calibration parameters' names and units.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <string>
 #include <vector>
 
 #include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/hal/frames.hpp"
 
 namespace mirrorcal::app {
 
@@ -30,6 +33,17 @@ struct HistoryRow {
   Eigen::Matrix<double, kCalib, 1> sigma = Eigen::Matrix<double, kCalib, 1>::Zero();
   Eigen::Matrix<double, kCalib, 1> error = Eigen::Matrix<double, kCalib, 1>::Zero();  // if truth
   double nees = 0.0;                                                                  // if truth
+  // The frame this estimate followed, against the estimate after its update (a posteriori
+  // residuals, measured minus predicted, px), for the markers the frame held and the estimate
+  // predicts; none in the final row. Needs the sink's FrameTap.
+  std::array<bool, State::kMarkers> residual_valid{};
+  std::array<Eigen::Vector2d, State::kMarkers> residual{};
+  int markers_seen = 0;
+  // This update's markers rejected by the gate, and their normalised innovation squared with its
+  // degrees of freedom (2 per marker used; 0 until the gate is on: see CalibrationConfig).
+  int markers_gated = 0;
+  double nis = 0.0;
+  int nis_dof = 0;
 };
 
 // The calibration block's error of an estimate against the truth (boxminus: the rotation error
@@ -46,10 +60,70 @@ void calibration_error(const Filter& f, const typename Filter::State& truth,
   row.nees = row.error.dot(p.ldlt().solve(row.error));
 }
 
+// Passes a marker source's frames to the loop and keeps the last one as the loop updates with it
+// (after relabelling, when the loop identifies markers), so that the estimate published after the
+// update can be compared with it. Keeps one frame: no allocation.
+template <int M>
+class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
+ public:
+  FrameTap(hal::MarkerSource<M>& source, hal::MarkerRelabeler<M>* relabeler)
+      : source_(source), relabeler_(relabeler) {}
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override {
+    const hal::SourceStatus st = source_.poll(frame);
+    if (st == hal::SourceStatus::kOk) {
+      last_ = frame;
+      fresh_ = true;
+    }
+    return st;
+  }
+  void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override {
+    if (relabeler_ != nullptr) relabeler_->relabel(prediction, frame);
+    last_ = frame;
+  }
+  const char* error() const override { return source_.error(); }
+  std::int64_t detection_ns() const override { return source_.detection_ns(); }
+  // The frame stamped t_ns the loop took last, once; nullptr if it was taken already or the
+  // estimate published at t_ns followed no frame (the final one).
+  const MarkerFrame<M>* take(std::int64_t t_ns) {
+    if (!fresh_ || last_.t_ns != t_ns) return nullptr;
+    fresh_ = false;
+    return &last_;
+  }
+
+ private:
+  hal::MarkerSource<M>& source_;
+  hal::MarkerRelabeler<M>* relabeler_;
+  MarkerFrame<M> last_{};
+  bool fresh_ = false;
+};
+
+// The frame's markers against the filter's estimate after its update: the filter's own measurement
+// model at the frame's exposure.
+template <class Filter>
+void record_residuals(const Filter& f, const MarkerFrame<Filter::State::kMarkers>& frame,
+                      HistoryRow<Filter>& row) {
+  using S = typename Filter::State::Scalar;
+  constexpr int M = Filter::State::kMarkers;
+  const Pinhole<S> fixed = f.config().intrinsics.template cast<S>();
+  std::array<bool, M> ok = frame.seen;
+  Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
+  predict_markers(f.state(), fixed, f.exposure(frame.t_ns), marker_readout_s(fixed, frame), z, ok);
+  for (int i = 0; i < M; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    row.markers_seen += frame.seen[k] ? 1 : 0;
+    row.residual_valid[k] = frame.seen[k] && ok[k];
+    if (row.residual_valid[k])
+      row.residual[k] = frame.uv[k] - z.template segment<2>(2 * i).template cast<double>();
+  }
+}
+
 template <class Filter>
 class HistorySink final : public firmware::EstimateSink<Filter> {
  public:
-  HistorySink(std::size_t capacity, const typename Filter::State* truth) : truth_(truth) {
+  // With tap (the loop's marker source, wrapped), each row has its frame's residuals.
+  HistorySink(std::size_t capacity, const typename Filter::State* truth,
+              FrameTap<Filter::State::kMarkers>* tap = nullptr)
+      : truth_(truth), tap_(tap) {
     rows_.reserve(capacity);
   }
   void publish(std::int64_t t_ns, const Filter& f) override {
@@ -61,11 +135,21 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     constexpr int B = Filter::State::kPbc, L = Filter::State::kDim - B;
     r.sigma = f.covariance().diagonal().template segment<L>(B).template cast<double>().cwiseSqrt();
     if (truth_ != nullptr) calibration_error(f, *truth_, r);
+    // This update's share of the filter's running counts.
+    const FilterCounters& c = f.counters();
+    r.nis = c.nis_sum - counted_.nis_sum;
+    r.nis_dof = static_cast<int>(c.nis_dof - counted_.nis_dof);
+    r.markers_gated = static_cast<int>(c.markers_gated - counted_.markers_gated);
+    counted_ = c;
+    if (tap_ != nullptr)
+      if (const auto* frame = tap_->take(t_ns)) record_residuals(f, *frame, r);
   }
   const std::vector<HistoryRow<Filter>>& rows() const { return rows_; }
 
  private:
   const typename Filter::State* truth_;
+  FrameTap<Filter::State::kMarkers>* tap_;
+  FilterCounters counted_{};
   std::vector<HistoryRow<Filter>> rows_;
 };
 

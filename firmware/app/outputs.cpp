@@ -215,6 +215,10 @@ std::string convergence_warning(const CalibrationResult& r) {
   return {};
 }
 
+bool consistent(const CalibrationResult& r) {
+  return convergence_warning(r).empty();
+}
+
 std::string skew_warning(const CalibrationResult& r) {
   if (r.estimated_intrinsics != 5) return {};
   double sigma = 0.0;
@@ -294,7 +298,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
                "above 1, sigma_ratio below 0.8, under half the markers used or a prior "
                "contradicted by 5 sigma: do not trust it\n",
-               convergence_warning(r).empty() ? "true" : "false");
+               consistent(r) ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);

@@ -95,6 +95,8 @@ bool prior_contradicted(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do (the first of these reasons;
 // result_warnings gives each).
 std::string convergence_warning(const CalibrationResult& r);
+// No reason not to trust the result (mirrorcal-result.yaml's `consistent`).
+bool consistent(const CalibrationResult& r);
 // Empty, or that the estimated skew is significant (beyond kSignificantSkewSigmas of its sigmas
 // from 0) and that Kalibr, OpenVINS and VINS-Fusion, which have no skew, will drop it.
 constexpr double kSignificantSkewSigmas = 3.0;

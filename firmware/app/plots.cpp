@@ -8,19 +8,13 @@
 
 namespace mirrorcal::app {
 
-namespace {
-
-struct Group {
-  std::string file, label;
-  std::vector<std::size_t> params;
-};
-
-std::vector<Group> groups_of(const std::vector<ParamInfo>& params) {
-  std::vector<Group> g = {{"error_p.png", "camera position in the IMU frame p_b_c", {}},
-                          {"error_rot.png", "camera rotation error log(R_true^T R_est)", {}},
-                          {"error_markers.png", "marker positions in the camera frame", {}},
-                          {"error_timeshift.png", "camera-IMU time offset timeshift_cam_imu", {}},
-                          {"error_intrinsics.png", "camera intrinsics", {}}};
+std::vector<PlotGroup> plot_groups(const std::vector<ParamInfo>& params) {
+  std::vector<PlotGroup> g = {
+      {"error_p.png", "camera position in the IMU frame p_b_c", {}},
+      {"error_rot.png", "camera rotation error log(R_true^T R_est)", {}},
+      {"error_markers.png", "marker positions in the camera frame", {}},
+      {"error_timeshift.png", "camera-IMU time offset timeshift_cam_imu", {}},
+      {"error_intrinsics.png", "camera intrinsics", {}}};
   for (std::size_t j = 0; j < params.size(); ++j) {
     const std::string& n = params[j].name;
     const std::size_t k =
@@ -31,14 +25,13 @@ std::vector<Group> groups_of(const std::vector<ParamInfo>& params) {
                                                                                         : 4;
     g[k].params.push_back(j);
   }
-  std::vector<Group> used;
+  std::vector<PlotGroup> used;
   for (auto& x : g)
     if (!x.params.empty()) used.push_back(x);
   return used;
 }
 
-// text as a gnuplot string: single-quoted, where only a doubled quote is special.
-std::string quoted(const std::string& text) {
+std::string gnuplot_quoted(const std::string& text) {
   std::string q = "'";
   for (char c : text) {
     if (c == '\n') c = ' ';
@@ -46,8 +39,6 @@ std::string quoted(const std::string& text) {
   }
   return q + "'";
 }
-
-}  // namespace
 
 std::vector<std::string> plot_errors(const std::string& dir, const std::string& title,
                                      const std::vector<ParamInfo>& params,
@@ -95,16 +86,16 @@ std::vector<std::string> plot_errors(const std::string& dir, const std::string& 
       << "set key off\nset xlabel 'time [s]'\n";
     const std::string line =
         runs.size() > 1 ? "lc rgb '#a0336699' lw 0.6" : "lc rgb '#336699' lw 1.2";
-    for (const Group& grp : groups_of(params)) {
+    for (const PlotGroup& grp : plot_groups(params)) {
       const std::size_t n = grp.params.size(), cols = 3, rows = (n + cols - 1) / cols;
       g << "set output '" << grp.file << "'\n"
         << "set multiplot layout " << rows << "," << cols << " title "
-        << quoted(title + ": " + grp.label + " error and +-3 sigma") << "\n";
+        << gnuplot_quoted(title + ": " + grp.label + " error and +-3 sigma") << "\n";
       for (std::size_t j : grp.params) {
         const std::size_t c = j + 2;  // 1-based column in both files
-        g << "set title " << quoted(params[j].name) << "\nset ylabel " << quoted(params[j].unit)
-          << "\nplot 'errors.dat' using 1:" << c << " with lines " << line
-          << ", 'band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
+        g << "set title " << gnuplot_quoted(params[j].name) << "\nset ylabel "
+          << gnuplot_quoted(params[j].unit) << "\nplot 'errors.dat' using 1:" << c << " with lines "
+          << line << ", 'band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
           << ", '' using 1:(-$" << c << ") with lines lc rgb '#cc2222' lw 1.5\n";
       }
       g << "unset multiplot\n";

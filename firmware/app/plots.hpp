@@ -34,6 +34,17 @@ ErrorSeries error_series(const std::vector<HistoryRow<Filter>>& rows,
   return s;
 }
 
+// The calibration parameters drawn together, one picture per group: p_b_c, the rotation, the
+// markers, the time offset, the intrinsics (file: the error plot's PNG name).
+struct PlotGroup {
+  std::string file, label;
+  std::vector<std::size_t> params;
+};
+std::vector<PlotGroup> plot_groups(const std::vector<ParamInfo>& params);
+
+// text as a gnuplot string: single-quoted, where only a doubled quote is special.
+std::string gnuplot_quoted(const std::string& text);
+
 // Writes DIR/errors.dat and one PNG per parameter group (error_p.png, error_rot.png,
 // error_markers.png, error_intrinsics.png). For several runs (Monte Carlo) every run is drawn and
 // the band is the root mean square of the runs' sigmas; nees_bounds gives the NEES plot's 95 %

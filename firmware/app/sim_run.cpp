@@ -79,6 +79,7 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   using Filter = typename Run::Filter;
   Run run;
   if (truth != nullptr) run.truth = *truth;
+  run.has_truth = truth != nullptr;
   Filter filter(config);
   filter.reset(x0, p0);
   if (along != nullptr)
@@ -86,13 +87,14 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
 
   sim::VectorImuSource imu(data.imu);
   sim::VectorMarkerSource<kMarkers> listed(data.frames);
-  hal::MarkerSource<kMarkers>& markers = input.source != nullptr ? *input.source : listed;
-  HistorySink<Filter> sink(data.frames.size() + 1, truth != nullptr ? &run.truth : nullptr);
+  FrameTap<kMarkers> markers(input.source != nullptr ? *input.source : listed, input.relabeler);
+  HistorySink<Filter> sink(data.frames.size() + 1, truth != nullptr ? &run.truth : nullptr,
+                           &markers);
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
   firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, imu, markers, lc, &sink);
-  if (input.relabeler != nullptr) loop.set_identifier(input.relabeler);
+  if (input.relabeler != nullptr) loop.set_identifier(&markers);
 
   const std::size_t report_every = data.imu.size() / 100 + 1;
   std::size_t n = 0;
@@ -321,6 +323,9 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   }
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<NK>(x0, p0, run);
+  for (int i = State::kPbc; i < State::kDim; ++i) run.prior_sigma.push_back(std::sqrt(p0(i, i)));
+  run.pixel_sigma = config.pixel_sigma;
+  run.gate_after_frames = config.gate_after_frames;
   return run;
 }
 

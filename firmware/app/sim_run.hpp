@@ -60,6 +60,12 @@ struct SimRun {
   std::uint64_t markers_out_of_image = 0;
   std::size_t imu_samples = 0, frames = 0;
   DetectionReport detection;  // --frames only
+  // For the report: the prior's 1-sigma of each calibration state (SI, calibration_params()
+  // order), against which the data's narrowing of it is judged, and the pixel noise assumed.
+  std::vector<double> prior_sigma;
+  double pixel_sigma = 0.0;
+  std::uint64_t gate_after_frames = 0;  // frames the estimate had to settle before the gate
+  bool has_truth = false;               // the history rows carry the error against truth
 };
 template <int NK>
 using CalibrationRun = SimRun<NK>;
@@ -222,13 +228,19 @@ sim::Scenario without_skew(sim::Scenario s);
 Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& data,
                                  std::uint64_t seed);
 
-// camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir.
+// camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir: added to out, or
+// written.
+template <int NK>
+bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun<NK>& run,
+                     std::string& error) {
+  return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
+         write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
+         write_estimates_csv(out, dir + "/estimates.csv", run.history, error);
+}
 template <int NK>
 bool write_run_outputs(const std::string& dir, const SimRun<NK>& run, std::string& error) {
   files::OutputSet out;
-  return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
-         write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) && out.commit(error);
+  return add_run_outputs(out, dir, run, error) && out.commit(error);
 }
 
 }  // namespace mirrorcal::app

@@ -1,6 +1,6 @@
 // No heap in the whole loop after start-up: a 60 s simulated calibration, with the timing budget
-// on, the estimate published after every frame and two IMU gaps (one crossed, one restarting the
-// motion states), must not allocate once the loop runs.
+// on, the estimate published after every frame with its residuals (the report's), and two IMU gaps
+// (one crossed, one restarting the motion states), must not allocate once the loop runs.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -50,8 +50,9 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   mc::initialise(prior, x0, p0);
   filter.reset(x0, p0);
   mc::sim::VectorImuSource imu(data.imu);
-  mc::sim::VectorMarkerSource<3> markers(data.frames);
-  mc::app::HistorySink<Filter> sink(data.frames.size() + 1, nullptr);
+  mc::sim::VectorMarkerSource<3> listed(data.frames);
+  mc::app::FrameTap<3> markers(listed, nullptr);
+  mc::app::HistorySink<Filter> sink(data.frames.size() + 1, nullptr, &markers);
   mc::firmware::MonotonicClock clock;
   const auto profiler = std::make_unique<mc::firmware::LoopProfiler>(clock, 5'000'000, 50'000'000);
   mc::firmware::LoopConfig lc;
@@ -67,6 +68,15 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   EXPECT_EQ(loop.counters().imu_restarts, 1u);
   EXPECT_GT(filter.counters().markers_used, 2000u);
   EXPECT_EQ(sink.rows().size(), loop.counters().frames + 1);
+  // Each marker the filter took has its residual, and the updates' NIS add up to the filter's.
+  std::uint64_t residuals = 0;
+  double nis = 0.0;
+  for (const auto& row : sink.rows()) {
+    for (bool valid : row.residual_valid) residuals += valid ? 1 : 0;
+    nis += row.nis;
+  }
+  EXPECT_EQ(residuals, filter.counters().markers_used + filter.counters().markers_gated);
+  EXPECT_NEAR(nis, filter.counters().nis_sum, 1e-6 * filter.counters().nis_sum);
   EXPECT_EQ(c.news, 0);
   EXPECT_EQ(c.mallocs, 0);
 }

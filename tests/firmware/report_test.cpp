@@ -1,9 +1,11 @@
 // What the tables print: the paper's Euler angles of the camera rotation, and chi-square
-// quantiles for the NEES intervals, against published values.
+// quantiles for the NEES intervals, against published values; the report's statistics and the
+// base64 of its embedded plots.
 #include <gtest/gtest.h>
 
 #include <cmath>
 
+#include "calibration_report.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 #include "report.hpp"
 
@@ -42,6 +44,31 @@ TEST(Report, ChiSquareQuantilesMatchTables) {
   EXPECT_NEAR(chi2_quantile(0.001, 100), 61.918, 0.01 * 61.918);
   EXPECT_NEAR(chi2_quantile(0.999, 100), 149.449, 0.01 * 149.449);
   EXPECT_NEAR(chi2_quantile(0.05, 50), 34.764, 0.01 * 34.764);
+}
+
+// RFC 4648, section 10.
+TEST(Report, Base64MatchesTheRfcsTestVectors) {
+  using mirrorcal::app::base64;
+  EXPECT_EQ(base64(""), "");
+  EXPECT_EQ(base64("f"), "Zg==");
+  EXPECT_EQ(base64("fo"), "Zm8=");
+  EXPECT_EQ(base64("foo"), "Zm9v");
+  EXPECT_EQ(base64("foob"), "Zm9vYg==");
+  EXPECT_EQ(base64("fooba"), "Zm9vYmE=");
+  EXPECT_EQ(base64("foobar"), "Zm9vYmFy");
+  EXPECT_EQ(base64(std::string("\xff\xfe\x00", 3)), "//4A");
+}
+
+TEST(Report, SampleStatisticsOfKnownSamples) {
+  using mirrorcal::app::sample_stats;
+  const auto s = sample_stats({4.0, 1.0, 3.0, 2.0});
+  EXPECT_EQ(s.n, 4u);
+  EXPECT_DOUBLE_EQ(s.mean, 2.5);
+  EXPECT_DOUBLE_EQ(s.median, 2.5);
+  EXPECT_DOUBLE_EQ(s.std, std::sqrt(1.25));
+  EXPECT_DOUBLE_EQ(s.max, 4.0);
+  EXPECT_DOUBLE_EQ(sample_stats({5.0, 1.0, 9.0}).median, 5.0);
+  EXPECT_EQ(sample_stats({}).n, 0u);
 }
 
 }  // namespace

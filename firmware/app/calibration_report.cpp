@@ -1,0 +1,731 @@
+#include "calibration_report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+#include "mirrorcal/estimator/so3.hpp"
+#include "plots.hpp"
+#include "process.hpp"
+#include "report.hpp"
+
+namespace mirrorcal::app {
+
+namespace {
+
+constexpr double kDeg = 180.0 / M_PI;
+
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+std::string format(const char* fmt, ...) {
+  va_list args, again;
+  va_start(args, fmt);
+  va_copy(again, args);
+  const int n = std::vsnprintf(nullptr, 0, fmt, args);
+  va_end(args);
+  std::string text(n > 0 ? std::size_t(n) : 0, '\0');
+  std::vsnprintf(text.data(), text.size() + 1, fmt, again);
+  va_end(again);
+  return text;
+}
+
+// A Euclidean calibration state's value (j in calibration_params() order; the rotation's are 0).
+template <class State>
+double euclidean_value(const State& x, int j) {
+  constexpr int B = State::kPbc;
+  const int i = B + j;
+  if (i < State::kPhi) return x.p_b_c(j);
+  if (i < State::kPi) return 0.0;
+  if (i < State::kTd) return x.markers(i - State::kPi);
+  if (i == State::kTd) return x.t_d;
+  return x.intrinsics(i - State::kK);
+}
+
+}  // namespace
+
+template <int NK>
+ReportData report_data(const SimRun<NK>& run, const std::string& title) {
+  using State = typename SimRun<NK>::State;
+  constexpr int B = State::kPbc, L = State::kDim - B;
+  ReportData d = report_data_without_history(run.result, title);
+  d.pixel_sigma = run.pixel_sigma;
+  d.prior_sigma = run.prior_sigma;
+  d.has_truth = run.has_truth;
+  if (run.history.empty()) return d;
+  d.final_nees = run.history.back().nees;
+  d.settled_from_s =
+      double(
+          run.history[std::min<std::size_t>(run.gate_after_frames, run.history.size() - 1)].t_ns) *
+      1e-9;
+  for (int i = 0; i < 3; ++i) {
+    d.accel_bias_sigma(i) = std::sqrt(run.covariance(State::kBa + i, State::kBa + i));
+    d.gyro_bias_sigma(i) = std::sqrt(run.covariance(State::kBg + i, State::kBg + i));
+  }
+  const std::vector<ParamInfo>& params = run.result.params;
+  const State& last = run.history.back().state;
+  const Eigen::Quaterniond q0 = run.history.front().state.q_n_b;
+  for (std::size_t k = 0; k < run.history.size(); ++k) {
+    const HistoryRow<typename SimRun<NK>::Filter>& row = run.history[k];
+    const double t = double(row.t_ns) * 1e-9;
+    d.t_s.push_back(t);
+    const Eigen::Matrix<double, L, 1> from_last = row.state.template boxminus_block<B, L>(last);
+    for (int j = 0; j < L && std::size_t(j) < params.size(); ++j) {
+      const bool rotation = B + j >= State::kPhi && B + j < State::kPi;
+      const double value = rotation ? from_last(j) : euclidean_value(row.state, j);
+      d.estimate[std::size_t(j)].push_back(value * params[std::size_t(j)].scale);
+      d.sigma[std::size_t(j)].push_back(row.sigma(j) * params[std::size_t(j)].scale);
+    }
+    d.accel_bias.push_back(row.state.b_a);
+    d.gyro_bias.push_back(row.state.b_g);
+    d.rotation.push_back(so3::boxminus<double>(row.state.q_n_b, q0));
+    d.normal_position.push_back(row.state.p.z());
+    d.normal_velocity.push_back(row.state.v.z());
+    const bool final_row = k + 1 == run.history.size();
+    d.markers_seen.push_back(final_row ? -1 : row.markers_seen);
+    d.nis.push_back(row.nis);
+    d.nis_dof.push_back(row.nis_dof);
+    for (int m = 0; m < State::kMarkers; ++m)
+      if (row.residual_valid[std::size_t(m)])
+        d.residuals.push_back({t, m, row.residual[std::size_t(m)].x(),
+                               row.residual[std::size_t(m)].y(), k >= run.gate_after_frames});
+  }
+  return d;
+}
+
+template ReportData report_data<0>(const SimRun<0>&, const std::string&);
+template ReportData report_data<4>(const SimRun<4>&, const std::string&);
+template ReportData report_data<5>(const SimRun<5>&, const std::string&);
+
+ReportData report_data_without_history(const CalibrationResult& r, const std::string& title) {
+  ReportData d;
+  d.title = title;
+  d.result = r;
+  d.estimate.resize(r.params.size());
+  d.sigma.resize(r.params.size());
+  return d;
+}
+
+SampleStats sample_stats(std::vector<double> values) {
+  SampleStats s;
+  s.n = values.size();
+  if (values.empty()) return s;
+  double sum = 0.0;
+  for (double v : values) sum += v;
+  s.mean = sum / double(s.n);
+  double squares = 0.0;
+  for (double v : values) squares += (v - s.mean) * (v - s.mean);
+  s.std = std::sqrt(squares / double(s.n));
+  std::sort(values.begin(), values.end());
+  s.median = s.n % 2 == 1 ? values[s.n / 2] : 0.5 * (values[s.n / 2 - 1] + values[s.n / 2]);
+  s.max = values.back();
+  return s;
+}
+
+namespace {
+
+int marker_count(const ReportData& d) {
+  return static_cast<int>(d.result.markers.size());
+}
+
+// The residual's length |(du, dv)| of each settled sample of marker m (all markers: m < 0; with
+// the samples before the estimate settled: all_frames).
+std::vector<double> residual_lengths(const ReportData& d, int m, bool all_frames = false) {
+  std::vector<double> v;
+  for (const ResidualSample& r : d.residuals)
+    if ((m < 0 || r.marker == m) && (r.settled || all_frames)) v.push_back(std::hypot(r.du, r.dv));
+  return v;
+}
+
+// The normalised innovation squared summed over windows of kNisWindowFrames frames with markers
+// used (the last window may be shorter).
+struct NisWindow {
+  double t_s = 0.0;  // its middle
+  double nis = 0.0;
+  int dof = 0;
+};
+std::vector<NisWindow> nis_windows(const ReportData& d) {
+  std::vector<NisWindow> windows;
+  NisWindow w;
+  int frames = 0;
+  double first_t = 0.0, last_t = 0.0;
+  const auto close = [&] {
+    w.t_s = 0.5 * (first_t + last_t);
+    windows.push_back(w);
+    w = NisWindow{};
+    frames = 0;
+  };
+  for (std::size_t k = 0; k < d.nis.size(); ++k) {
+    if (d.nis_dof[k] <= 0) continue;
+    if (frames == 0) first_t = d.t_s[k];
+    last_t = d.t_s[k];
+    w.nis += d.nis[k];
+    w.dof += d.nis_dof[k];
+    if (++frames == kNisWindowFrames) close();
+  }
+  if (frames > 0) close();
+  return windows;
+}
+
+// The acceleration along the mirror's normal, from the velocity estimates about 0.1 s apart.
+std::vector<double> normal_acceleration(const ReportData& d) {
+  std::vector<double> a;
+  std::size_t i = 0;
+  for (std::size_t j = 1; j < d.t_s.size(); ++j) {
+    const double dt = d.t_s[j] - d.t_s[i];
+    if (dt < 0.1) continue;
+    a.push_back((d.normal_velocity[j] - d.normal_velocity[i]) / dt);
+    i = j;
+  }
+  return a;
+}
+
+std::string verdict_line(const CalibrationResult& r) {
+  return consistent(r) ? "VERDICT: consistent -- the self-check found no reason to doubt this "
+                         "calibration: use it."
+                       : "VERDICT: NOT consistent -- do not trust this calibration (reasons "
+                         "below).";
+}
+
+void add_verdict(std::string& t, const ReportData& d) {
+  const CalibrationResult& r = d.result;
+  t += verdict_line(r) + "\n";
+  for (const std::string& w : result_warnings(r)) t += "  WARNING: " + w + "\n";
+  t += format(
+      "  self-check: %d pass(es); normalised innovation squared per dof %.3f over %llu dof (about "
+      "1: the markers fit as the covariance says); sigma_ratio %.3f (at least %.1f); markers "
+      "used %llu, gated %llu, not predictable %llu",
+      r.passes, r.nis_per_dof, static_cast<unsigned long long>(r.nis_dof), r.sigma_ratio,
+      kSigmaRatioLimit, static_cast<unsigned long long>(r.markers_used),
+      static_cast<unsigned long long>(r.markers_gated),
+      static_cast<unsigned long long>(r.markers_invalid));
+  if (r.markers_observed > 0)
+    t += format(" of %llu observed", static_cast<unsigned long long>(r.markers_observed));
+  if (!r.prior_offset_state.empty())
+    t += format("; furthest from its prior guess: %s, %.2f prior sigmas",
+                r.prior_offset_state.c_str(), r.prior_offset_sigmas);
+  t += "\n\n";
+}
+
+void add_calibration(std::string& t, const ReportData& d) {
+  const CalibrationResult& r = d.result;
+  const Eigen::Matrix3d r_c_b = r.q_b_c.toRotationMatrix().transpose();
+  const Eigen::Vector3d p_c_b = -r_c_b * r.p_b_c;
+  t += "CALIBRATION (SI; mirrorcal-result.yaml holds it in full precision)\n";
+  t += "T_cam_imu (maps IMU coordinates into the camera's):\n";
+  for (int i = 0; i < 3; ++i)
+    t += format("  [%12.9f, %12.9f, %12.9f, %12.9f]\n", r_c_b(i, 0), r_c_b(i, 1), r_c_b(i, 2),
+                p_c_b(i));
+  t += "  [ 0.000000000,  0.000000000,  0.000000000,  1.000000000]\n";
+  const Eigen::Vector3d angles = display_angles(r.q_b_c);
+  t += format("R_b_c as Rz(c) Ry(b) Rx(a): a %.4f, b %.4f, c %.4f deg\n", angles(0), angles(1),
+              angles(2));
+  t += format("\n%-17s %-5s %14s %12s %12s %12s\n", "state", "unit", "estimate", "1-sigma",
+              "prior sigma", "sigma/prior");
+  for (std::size_t j = 0; j < r.params.size(); ++j) {
+    const ParamInfo& p = r.params[j];
+    double value = 0.0;
+    if (j < 3)
+      value = r.p_b_c(int(j)) * p.scale;
+    else if (j < 6)
+      value = angles(int(j) - 3);
+    else if (j < 6 + 3 * r.markers.size())
+      value = r.markers[(j - 6) / 3](int((j - 6) % 3)) * p.scale;
+    else if (j == 6 + 3 * r.markers.size())
+      value = r.t_d * p.scale;
+    else {
+      const double k[5] = {r.intrinsics.fu, r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv,
+                           r.intrinsics.skew};
+      value = k[j - 7 - 3 * r.markers.size()];
+    }
+    t += format("%-17s %-5s %14.4f %12.4f", p.name.c_str(), p.unit.c_str(), value,
+                r.sigma[j] * p.scale);
+    if (j < d.prior_sigma.size())
+      t += format(" %12.4f %12.3f", d.prior_sigma[j] * p.scale, r.sigma[j] / d.prior_sigma[j]);
+    t += "\n";
+  }
+  t +=
+      "(rotations: the angles a, b, c; their sigma is of the rotation error vector's components)\n";
+  if (d.has_truth && !d.t_s.empty())
+    t += format(
+        "NEES of the %zu calibration states against the truth: %.2f (95 %% interval "
+        "%.2f..%.2f)\n",
+        r.params.size(), d.final_nees, chi2_quantile(0.025, double(r.params.size())),
+        chi2_quantile(0.975, double(r.params.size())));
+  t += "\n";
+}
+
+void add_residual_row(std::string& t, const char* label, const SampleStats& s, double sigma) {
+  t += format("%-10s %8zu %9.3f %9.3f %9.3f %9.3f   %9.3f %9.3f %9.3f %9.3f\n", label, s.n, s.mean,
+              s.median, s.std, s.max, s.mean / sigma, s.median / sigma, s.std / sigma,
+              s.max / sigma);
+}
+
+void add_residuals(std::string& t, const ReportData& d) {
+  const std::size_t settled = residual_lengths(d, -1).size();
+  const auto first_settled = std::find_if(d.residuals.begin(), d.residuals.end(),
+                                          [](const ResidualSample& r) { return r.settled; });
+  t += format(
+      "REPROJECTION RESIDUALS (|measured - predicted| of each marker in each frame of the final "
+      "pass, at the estimate after that frame's update; from %.2f s, once the estimate settled "
+      "and the gate is on; gated markers included; pixel sigma %.3f px; residuals.csv lists "
+      "them all)\n",
+      first_settled == d.residuals.end() ? 0.0 : first_settled->t_s, d.pixel_sigma);
+  t += format("%-10s %8s %9s %9s %9s %9s   %9s %9s %9s %9s\n", "marker", "n", "mean px", "median",
+              "std", "max", "mean sig", "median", "std", "max");
+  for (int m = 0; m < marker_count(d); ++m)
+    add_residual_row(t, format("f%d", m + 1).c_str(), sample_stats(residual_lengths(d, m)),
+                     d.pixel_sigma);
+  add_residual_row(t, "all", sample_stats(residual_lengths(d, -1)), d.pixel_sigma);
+  add_residual_row(t, "+settling", sample_stats(residual_lengths(d, -1, true)), d.pixel_sigma);
+  double squares = 0.0;
+  for (const ResidualSample& r : d.residuals)
+    if (r.settled) squares += r.du * r.du + r.dv * r.dv;
+  const double rms = settled == 0 ? 0.0 : std::sqrt(squares / (2.0 * double(settled)));
+  t += format(
+      "RMS per coordinate: %.4f px = %.4f sigma (about 1 when the pixel sigma is right: a 2-D "
+      "normal residual's length has median 1.18 sigma; '+settling' adds the first frames)\n\n",
+      rms, rms / d.pixel_sigma);
+}
+
+void add_nis(std::string& t, const ReportData& d) {
+  const std::vector<NisWindow> windows = nis_windows(d);
+  double nis = 0.0;
+  long dof = 0;
+  int outside = 0;
+  for (const NisWindow& w : windows) {
+    nis += w.nis;
+    dof += w.dof;
+    if (w.nis < chi2_quantile(0.025, w.dof) || w.nis > chi2_quantile(0.975, w.dof)) ++outside;
+  }
+  t += "NORMALISED INNOVATION SQUARED (markers used once the gate is on, final pass)\n";
+  if (dof == 0) {
+    t += "none: no frame was used with the gate on\n\n";
+    return;
+  }
+  t += format(
+      "per dof %.4f over %ld dof (95 %% band %.4f..%.4f); windows of %d frames outside their 95 "
+      "%% band: %d of %zu (about 5 %% for a consistent filter)\n\n",
+      nis / double(dof), dof, chi2_quantile(0.025, double(dof)) / double(dof),
+      chi2_quantile(0.975, double(dof)) / double(dof), kNisWindowFrames, outside, windows.size());
+}
+
+void add_biases(std::string& t, const ReportData& d) {
+  if (d.accel_bias.empty()) return;
+  const Eigen::Vector3d& a = d.accel_bias.back();
+  const Eigen::Vector3d g = d.gyro_bias.back() * kDeg;
+  const Eigen::Vector3d sg = d.gyro_bias_sigma * kDeg;
+  t += "IMU BIASES (final estimate +- 1-sigma)\n";
+  t += format("accelerometer [m/s^2]: x %.5f +- %.5f, y %.5f +- %.5f, z %.5f +- %.5f\n", a(0),
+              d.accel_bias_sigma(0), a(1), d.accel_bias_sigma(1), a(2), d.accel_bias_sigma(2));
+  t += format("gyro [deg/s]:          x %.5f +- %.5f, y %.5f +- %.5f, z %.5f +- %.5f\n\n", g(0),
+              sg(0), g(1), sg(1), g(2), sg(2));
+}
+
+void add_excitation(std::string& t, const ReportData& d) {
+  if (d.t_s.empty()) return;
+  t += "EXCITATION (what the motion offered the calibration)\n";
+  std::vector<int> per_count(std::size_t(marker_count(d)) + 1, 0);
+  int frames = 0, markers = 0;
+  for (int n : d.markers_seen) {
+    if (n < 0) continue;
+    ++frames;
+    markers += n;
+    if (std::size_t(n) < per_count.size()) ++per_count[std::size_t(n)];
+  }
+  t += format("%.2f s, %d frames, %.2f markers per frame (frames with", d.t_s.back() - d.t_s[0],
+              frames, frames > 0 ? double(markers) / frames : 0.0);
+  for (std::size_t n = 0; n < per_count.size(); ++n)
+    t += format(" %zu: %d%s", n, per_count[n], n + 1 < per_count.size() ? "," : ")\n");
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+  for (const Eigen::Vector3d& r : d.rotation) {
+    lo = lo.cwiseMin(r);
+    hi = hi.cwiseMax(r);
+  }
+  const Eigen::Vector3d range = (hi - lo) * kDeg;
+  t += format(
+      "rotation range about the IMU's axes (from the first pose): x %.1f, y %.1f, z %.1f deg\n",
+      range(0), range(1), range(2));
+  const auto [p_lo, p_hi] = std::minmax_element(d.normal_position.begin(), d.normal_position.end());
+  const std::vector<double> a = normal_acceleration(d);
+  double a_squares = 0.0, a_max = 0.0;
+  for (double x : a) {
+    a_squares += x * x;
+    a_max = std::max(a_max, std::abs(x));
+  }
+  t += format(
+      "along the mirror's normal: position range %.1f cm, acceleration RMS %.3f m/s^2, largest "
+      "%.3f m/s^2\n",
+      100.0 * (*p_hi - *p_lo), a.empty() ? 0.0 : std::sqrt(a_squares / double(a.size())), a_max);
+  std::string weak;
+  const std::vector<ParamInfo>& params = d.result.params;
+  const std::size_t from_earlier = d.from_earlier ? 7 + 3 * d.result.markers.size() : 0;
+  for (std::size_t j = 0; j < params.size() && j < d.prior_sigma.size(); ++j) {
+    const double ratio = d.result.sigma[j] / d.prior_sigma[j];
+    if (ratio > (j < from_earlier ? kWeaklyObservedFromEarlierRatio : kWeaklyObservedRatio))
+      weak += format("%s%s (%.2f)", weak.empty() ? "" : ", ", params[j].name.c_str(), ratio);
+  }
+  if (d.prior_sigma.empty()) {
+    t += "weakly observed states: unknown (no prior)\n\n";
+    return;
+  }
+  t += format(
+      "weakly observed (final sigma above %.1f of the prior's; more motion about the axes that "
+      "move them helps): %s\n",
+      kWeaklyObservedRatio, weak.empty() ? "none" : weak.c_str());
+  if (d.from_earlier)
+    t += format(
+        "(the camera pose, markers and time offset started from an earlier calibration, stage 1 "
+        "or --from: judged against it, above %.1f; at 0.71 these data held as much as that "
+        "one's)\n",
+        kWeaklyObservedFromEarlierRatio);
+  t += "\n";
+}
+
+}  // namespace
+
+std::string report_text(const ReportData& d) {
+  std::string t = "mirrorcal calibration report: " + d.title + "\n\n";
+  add_verdict(t, d);
+  add_calibration(t, d);
+  if (d.t_s.empty()) {
+    t += "No frame was calibrated from: no residuals, innovations or excitation to report.\n";
+    return t;
+  }
+  add_residuals(t, d);
+  add_nis(t, d);
+  add_biases(t, d);
+  add_excitation(t, d);
+  return t;
+}
+
+std::string base64(const std::string& bytes) {
+  static const char* const kAlphabet =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    const std::size_t n = std::min<std::size_t>(3, bytes.size() - i);
+    std::uint32_t v = 0;
+    for (std::size_t k = 0; k < 3; ++k)
+      v = (v << 8) | (k < n ? static_cast<unsigned char>(bytes[i + k]) : 0u);
+    for (std::size_t k = 0; k < 4; ++k) out += k <= n ? kAlphabet[(v >> (18 - 6 * k)) & 63u] : '=';
+  }
+  return out;
+}
+
+namespace {
+
+// A temporary folder for the plots, removed with it.
+struct PlotFolder {
+  PlotFolder() {
+    std::string pattern =
+        (std::filesystem::temp_directory_path() / "mirrorcal-report-XXXXXX").string();
+    if (mkdtemp(pattern.data()) != nullptr) path = pattern;
+  }
+  ~PlotFolder() {
+    std::error_code ec;
+    if (!path.empty()) std::filesystem::remove_all(path, ec);
+  }
+  PlotFolder(const PlotFolder&) = delete;
+  PlotFolder& operator=(const PlotFolder&) = delete;
+  std::string path;
+};
+
+struct Figure {
+  std::string file, caption;
+};
+
+constexpr double kHistogramBin = 0.25;  // sigmas
+constexpr int kHistogramBins = 40;      // over +-5 sigma
+
+// The density of the settled residuals' u and v components in pixel sigmas, per bin.
+void write_histogram(std::ostream& h, const ReportData& d) {
+  std::vector<double> u(kHistogramBins, 0.0), v(kHistogramBins, 0.0);
+  double n = 0.0;
+  const auto add = [](std::vector<double>& bins, double x) {
+    const double at = std::floor(x / kHistogramBin) + kHistogramBins / 2;
+    if (at >= 0.0 && at < kHistogramBins) bins[std::size_t(at)] += 1.0;
+  };
+  for (const ResidualSample& r : d.residuals) {
+    if (!r.settled) continue;
+    n += 1.0;
+    add(u, r.du / d.pixel_sigma);
+    add(v, r.dv / d.pixel_sigma);
+  }
+  for (int b = 0; b < kHistogramBins; ++b)
+    h << (b - kHistogramBins / 2 + 0.5) * kHistogramBin << ' '
+      << u[std::size_t(b)] / (std::max(n, 1.0) * kHistogramBin) << ' '
+      << v[std::size_t(b)] / (std::max(n, 1.0) * kHistogramBin) << '\n';
+}
+
+void write_plot_data(const std::string& dir, const ReportData& d) {
+  // residuals.dat: one block per marker (gnuplot's "index"), its settled residuals.
+  std::ofstream r(dir + "/residuals.dat");
+  for (int m = 0; m < marker_count(d); ++m) {
+    for (const ResidualSample& s : d.residuals)
+      if (s.marker == m && s.settled)
+        r << s.t_s << ' ' << s.du << ' ' << s.dv << ' ' << std::hypot(s.du, s.dv) << '\n';
+    r << "\n\n";
+  }
+  std::ofstream h(dir + "/histogram.dat");
+  write_histogram(h, d);
+  // series.dat: t, then estimate and sigma of each state, accel bias xyz, gyro bias xyz (deg/s),
+  // rotation from the first pose xyz (deg), position along the normal (cm), markers seen.
+  std::ofstream s(dir + "/series.dat");
+  for (std::size_t k = 0; k < d.t_s.size(); ++k) {
+    s << d.t_s[k];
+    for (std::size_t j = 0; j < d.estimate.size(); ++j)
+      s << ' ' << d.estimate[j][k] << ' ' << d.sigma[j][k];
+    for (int i = 0; i < 3; ++i) s << ' ' << d.accel_bias[k](i);
+    for (int i = 0; i < 3; ++i) s << ' ' << d.gyro_bias[k](i) * kDeg;
+    for (int i = 0; i < 3; ++i) s << ' ' << d.rotation[k](i) * kDeg;
+    s << ' ' << 100.0 * d.normal_position[k] << ' ';
+    if (d.markers_seen[k] >= 0)
+      s << d.markers_seen[k];
+    else
+      s << "NaN";
+    s << '\n';
+  }
+  std::ofstream n(dir + "/nis.dat");
+  for (const NisWindow& w : nis_windows(d))
+    n << w.t_s << ' ' << w.nis / w.dof << ' ' << chi2_quantile(0.025, w.dof) / w.dof << ' '
+      << chi2_quantile(0.975, w.dof) / w.dof << '\n';
+}
+
+// The range of state j's +-3 sigma band once the estimate settled, with a margin: the first
+// frames' wide band would hide the rest.
+std::pair<double, double> settled_band(const ReportData& d, std::size_t j) {
+  double lo = INFINITY, hi = -INFINITY;
+  for (std::size_t k = 0; k < d.t_s.size(); ++k) {
+    if (d.t_s[k] < d.settled_from_s) continue;
+    lo = std::min(lo, d.estimate[j][k] - 3.0 * d.sigma[j][k]);
+    hi = std::max(hi, d.estimate[j][k] + 3.0 * d.sigma[j][k]);
+  }
+  if (!(lo < hi)) return {-1.0, 1.0};
+  const double margin = 0.1 * (hi - lo);
+  return {lo - margin, hi + margin};
+}
+
+// The gnuplot script, and the figures it draws.
+std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
+  std::vector<Figure> figures;
+  const double sigma = d.pixel_sigma;
+  const int count = marker_count(d);
+  // Titles hold names such as p_b_c: no subscripts.
+  g << "set terminal pngcairo size 1200,700 font 'DejaVu Sans,10' noenhanced\nset grid\n";
+  g << "set output 'residual_scatter.png'\nset size ratio -1\nset key outside right\n"
+    << "set title 'Reprojection residuals (measured - predicted) once the estimate settled, with "
+       "the 3-sigma circle'\nset xlabel 'u [px]'\nset ylabel 'v [px]'\nset parametric\nplot ";
+  for (int m = 0; m < count; ++m)
+    g << "'residuals.dat' index " << m << " using 2:3 with points pt 7 ps 0.3 title 'f" << m + 1
+      << "', ";
+  g << 3.0 * sigma << "*cos(t), " << 3.0 * sigma << "*sin(t) lc rgb '#cc2222' lw 2 title "
+    << "'3 sigma'\nunset parametric\nset size noratio\n";
+  figures.push_back({"residual_scatter.png", "Reprojection residuals of every marker"});
+
+  g << "set output 'residual_histogram.png'\nset title 'Residual components in pixel sigmas, "
+       "against the standard normal density'\nset xlabel 'residual / pixel sigma'\n"
+    << "set ylabel 'density'\nset style fill transparent solid 0.4\nset boxwidth " << kHistogramBin
+    << "\nset xrange [-5:5]\n"
+    << "plot 'histogram.dat' using 1:2 with boxes lc rgb '#336699' title 'u', '' using 1:3 with "
+       "boxes lc rgb '#66aa66' title 'v', exp(-x * x / 2) / sqrt(2 * pi) lw 2 lc rgb '#cc2222' "
+       "title 'N(0, 1)'\nset style fill empty\nset autoscale x\n";
+  figures.push_back({"residual_histogram.png", "Histogram of the residuals' components"});
+
+  g << "set output 'residual_time.png'\nset title 'Residual length over time, once the estimate "
+       "settled'\n"
+    << "set xlabel 'time [s]'\nset ylabel '|residual| [px]'\nset logscale y\nplot ";
+  for (int m = 0; m < count; ++m)
+    g << (m > 0 ? ", " : "") << "'residuals.dat' index " << m
+      << " using 1:4 with points pt 7 ps 0.2 title 'f" << m + 1 << "'";
+  g << "\nunset logscale y\n";
+  figures.push_back({"residual_time.png", "Residuals over time"});
+
+  g << "set output 'nis.png'\nset title 'Normalised innovation squared per dof over windows of "
+    << kNisWindowFrames << " frames, with its 95 % chi-square band'\nset ylabel 'NIS / dof'\n"
+    << "plot 'nis.dat' using 1:2 with linespoints pt 7 ps 0.5 lc rgb '#336699' title 'NIS / dof', "
+       "'' using 1:3 with lines dt 2 lc rgb '#cc2222' title '2.5 %', '' using 1:4 with lines dt "
+       "2 lc rgb '#cc2222' title '97.5 %'\n";
+  figures.push_back({"nis.png", "Normalised innovation squared against its chi-square band"});
+
+  g << "set key off\n";
+  const std::vector<ParamInfo>& params = d.result.params;
+  for (const PlotGroup& grp : plot_groups(params)) {
+    const std::string file = "estimate_" + grp.file.substr(grp.file.find('_') + 1);
+    const std::size_t rows = (grp.params.size() + 2) / 3;
+    const bool rotation = params[grp.params[0]].name.rfind("rot_", 0) == 0;
+    g << "set output '" << file << "'\nset multiplot layout " << rows << ",3 title "
+      << gnuplot_quoted(rotation ? "camera rotation relative to the final estimate, "
+                                   "log(R_final^T R), with +-3 sigma"
+                                 : grp.label.substr(0, grp.label.find(" error")) +
+                                       ": estimate with +-3 sigma")
+      << "\n";
+    for (std::size_t j : grp.params) {
+      const std::size_t c = 2 + 2 * j;  // estimate's column; sigma's is c + 1
+      const auto [lo, hi] = settled_band(d, j);
+      g << "set title " << gnuplot_quoted(params[j].name) << "\nset ylabel "
+        << gnuplot_quoted(params[j].unit) << "\nset yrange [" << lo << ":" << hi << "]\n"
+        << "plot 'series.dat' using 1:" << c << " with lines lc rgb '#336699' lw 1.2, '' using 1:($"
+        << c << " + 3 * $" << c + 1 << ") with lines dt 2 lc rgb '#cc2222', '' using 1:($" << c
+        << " - 3 * $" << c + 1 << ") with lines dt 2 lc rgb '#cc2222'\n";
+    }
+    g << "unset multiplot\nset autoscale y\n";
+    figures.push_back({file, grp.label.substr(0, grp.label.find(" error")) +
+                                 " over time (the first seconds, before the estimate settled, "
+                                 "may run off the scale)"});
+  }
+
+  const std::size_t extra = 2 + 2 * params.size();  // first column after the states'
+  g << "set output 'imu_bias.png'\nset key on\nset multiplot layout 1,2 title 'IMU bias "
+       "estimates'\n";
+  const char* axes[3] = {"x", "y", "z"};
+  for (int part = 0; part < 2; ++part) {
+    g << "set title '" << (part == 0 ? "accelerometer" : "gyro") << "'\nset ylabel '"
+      << (part == 0 ? "m/s^2" : "deg/s") << "'\nplot ";
+    for (int i = 0; i < 3; ++i)
+      g << (i > 0 ? ", " : "") << "'series.dat' using 1:" << extra + std::size_t(3 * part + i)
+        << " with lines title '" << axes[i] << "'";
+    g << "\n";
+  }
+  g << "unset multiplot\n";
+  figures.push_back({"imu_bias.png", "IMU bias estimates"});
+
+  g << "set output 'excitation.png'\nset multiplot layout 3,1 title 'Excitation'\n"
+    << "set title 'rotation from the first pose, about the IMU axes'\nset ylabel 'deg'\nplot ";
+  for (int i = 0; i < 3; ++i)
+    g << (i > 0 ? ", " : "") << "'series.dat' using 1:" << extra + 6 + std::size_t(i)
+      << " with lines title '" << axes[i] << "'";
+  g << "\nset key off\nset title 'position along the mirror normal'\nset ylabel 'cm'\n"
+    << "plot 'series.dat' using 1:" << extra + 9 << " with lines lc rgb '#336699'\n"
+    << "set title 'markers per frame'\nset ylabel 'markers'\nset yrange [-0.5:" << count + 0.5
+    << "]\nplot 'series.dat' using 1:" << extra + 10
+    << " with points pt 7 ps 0.2 lc rgb '#336699'\nunset multiplot\n";
+  figures.push_back({"excitation.png", "Motion and markers seen"});
+  return figures;
+}
+
+// The report's plots as PNG bytes with their captions; empty, with a reason, if none.
+std::vector<std::pair<Figure, std::string>> draw_plots(const ReportData& d, std::string& why) {
+  std::vector<std::pair<Figure, std::string>> drawn;
+  if (d.t_s.empty()) {
+    why = "no frame was calibrated from";
+    return drawn;
+  }
+  const PlotFolder folder;
+  if (folder.path.empty()) {
+    why = "cannot create a temporary folder";
+    return drawn;
+  }
+  write_plot_data(folder.path, d);
+  std::vector<Figure> figures;
+  {
+    std::ofstream g(folder.path + "/report.gp");
+    figures = write_plot_script(g, d);
+    if (!g.flush()) {
+      why = "cannot write the plot script";
+      return drawn;
+    }
+  }
+  const ProgramExit gnuplot =
+      run_program({"gnuplot", "report.gp"}, folder.path, folder.path + "/gnuplot.log");
+  if (gnuplot.status != 0) {
+    std::string log, ignored;
+    files::read_file(folder.path + "/gnuplot.log", log, ignored);
+    why = gnuplot.error + (gnuplot.status < 0 ? " (Debian: apt-get install gnuplot-nox)"
+                                              : ": " + log.substr(0, 500));
+    return drawn;
+  }
+  for (const Figure& f : figures) {
+    std::string png, error;
+    if (files::read_file(folder.path + "/" + f.file, png, error)) drawn.push_back({f, png});
+  }
+  return drawn;
+}
+
+std::string html_escaped(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+std::string figure_html(const std::string& caption, const std::string& png) {
+  return "<figure><img alt=\"" + html_escaped(caption) + "\" src=\"data:image/png;base64," +
+         base64(png) + "\"/><figcaption>" + html_escaped(caption) + "</figcaption></figure>\n";
+}
+
+std::string report_html(const ReportData& d, const std::string& text, const ReportPlots& plots) {
+  std::string h =
+      "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\"/>\n<title>" +
+      html_escaped("mirrorcal report: " + d.title) +
+      "</title>\n<style>\nbody { font-family: sans-serif; margin: 1em auto; max-width: 1250px; "
+      "padding: 0 1em; }\npre { background: #f4f4f4; padding: 1em; overflow-x: auto; }\n"
+      ".ok { color: #176b2c; }\n.bad { color: #b3261e; }\nimg { max-width: 100%; }\n"
+      "figure { margin: 1.5em 0; }\n</style>\n</head>\n<body>\n<h1>" +
+      html_escaped("mirrorcal calibration report: " + d.title) + "</h1>\n<p class=\"" +
+      (consistent(d.result) ? "ok" : "bad") + "\"><strong>" + html_escaped(verdict_line(d.result)) +
+      "</strong></p>\n<pre>" + html_escaped(text) + "</pre>\n<h2>Plots</h2>\n";
+  if (!plots.draw)
+    return h + "<p>Plots unavailable: not drawn (--no-plots).</p>\n</body>\n</html>\n";
+  std::string why;
+  const auto drawn = draw_plots(d, why);
+  if (drawn.empty()) h += "<p>Plots unavailable: " + html_escaped(why) + ".</p>\n";
+  for (const auto& [figure, png] : drawn) h += figure_html(figure.caption, png);
+  for (const std::string& path : plots.extra_pngs) {
+    std::string png, error;
+    if (files::read_file(path, png, error))
+      h += figure_html("Error against the truth with +-3 sigma: " +
+                           std::filesystem::path(path).filename().string(),
+                       png);
+  }
+  return h + "</body>\n</html>\n";
+}
+
+bool write_residuals_csv(files::OutputSet& out, const std::string& path, const ReportData& d,
+                         std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  std::fprintf(o, "#time [s],marker,du [px],dv [px],settled\n");
+  for (const ResidualSample& r : d.residuals)
+    std::fprintf(o, "%.9f,%d,%.17g,%.17g,%d\n", r.t_s, r.marker + 1, r.du, r.dv, r.settled ? 1 : 0);
+  return true;
+}
+
+bool write_text(files::OutputSet& out, const std::string& path, const std::string& text,
+                std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  std::fputs(text.c_str(), o);
+  return true;
+}
+
+}  // namespace
+
+bool write_report(files::OutputSet& out, const std::string& dir, const ReportData& d,
+                  const ReportPlots& plots, std::string& error) {
+  const std::string text = report_text(d);
+  return write_residuals_csv(out, dir + "/residuals.csv", d, error) &&
+         write_text(out, dir + "/report.txt", text, error) &&
+         write_text(out, dir + "/report.html", report_html(d, text, plots), error);
+}
+
+}  // namespace mirrorcal::app

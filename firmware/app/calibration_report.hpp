@@ -1,0 +1,108 @@
+// The report a user judges a calibration by, without ground truth. report.txt opens with the
+// verdict (the calibration, its sigmas, and whether the self-check of outputs.hpp trusts it), then
+// the reprojection residuals, the normalised innovation squared against its chi-square band, the
+// IMU biases and the excitation the data had; report.html holds the same text and its plots
+// (base64 PNG: one self-contained file); residuals.csv the residuals the statistics are of.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "mirrorcal/sim_host/files.hpp"
+#include "outputs.hpp"
+#include "sim_run.hpp"
+
+namespace mirrorcal::app {
+
+// A calibration state whose final sigma is still above this fraction of its prior's is reported as
+// weakly observed: the motion left it mostly to the prior.
+constexpr double kWeaklyObservedRatio = 0.5;
+// The same for a state that started from an earlier calibration's estimate and covariance (stage
+// 1, --from): data as informative as the earlier ones bring it to 0.71 of that.
+constexpr double kWeaklyObservedFromEarlierRatio = 0.9;
+// The normalised innovation squared is judged over windows of this many frames with markers used.
+constexpr int kNisWindowFrames = 60;
+
+// One marker's residual in one frame: measured minus predicted at the estimate after the frame's
+// update (px).
+struct ResidualSample {
+  double t_s = 0.0;
+  int marker = 0;  // 0-based
+  double du = 0.0, dv = 0.0;
+  // After the frames the estimate needs to settle from the prior's guesses (the gate's start,
+  // CalibrationConfig::gate_after_frames): the statistics are of these.
+  bool settled = true;
+};
+
+// What the report shows, in SI units unless said otherwise; the series have one entry per history
+// row (each frame, and the final estimate).
+struct ReportData {
+  std::string title;  // the command and what it ran on
+  CalibrationResult result;
+  double pixel_sigma = 1.0;         // px, what the filter assumed
+  std::vector<double> prior_sigma;  // calibration_params() order; empty if unknown
+  // The camera pose, markers and time offset started from an earlier calibration (stage 1,
+  // calibrate --from): their prior sigmas are its.
+  bool from_earlier = false;
+  bool has_truth = false;
+  double final_nees = 0.0;  // against the truth, if any
+  std::vector<ResidualSample> residuals;
+  std::vector<double> t_s;
+  double settled_from_s = 0.0;  // the first frame after those the estimate needed to settle
+  // Each calibration state in display units (ParamInfo::scale); the rotation as the components of
+  // log(R_final^T R), deg.
+  std::vector<std::vector<double>> estimate, sigma;  // [param][row]
+  std::vector<Eigen::Vector3d> accel_bias, gyro_bias;
+  Eigen::Vector3d accel_bias_sigma = Eigen::Vector3d::Zero(),
+                  gyro_bias_sigma = Eigen::Vector3d::Zero();  // final
+  std::vector<Eigen::Vector3d> rotation;  // log(R_n_b(0)^T R_n_b(t)), rad: from the first pose
+  std::vector<double> normal_position, normal_velocity;  // along the mirror's normal (z of n)
+  std::vector<int> markers_seen;  // in the row's frame; -1: the final row, no frame
+  std::vector<double> nis;
+  std::vector<int> nis_dof;
+};
+
+template <int NK>
+ReportData report_data(const SimRun<NK>& run, const std::string& title);
+
+// Mean, median, standard deviation and maximum of a sample (all 0 when it is empty).
+struct SampleStats {
+  std::size_t n = 0;
+  double mean = 0.0, median = 0.0, std = 0.0, max = 0.0;
+};
+SampleStats sample_stats(std::vector<double> values);
+
+// Whether report.html gets plots (gnuplot), and PNGs drawn already (sim's error plots) to embed.
+struct ReportPlots {
+  bool draw = true;
+  std::vector<std::string> extra_pngs;
+};
+
+// report.txt's text.
+std::string report_text(const ReportData& d);
+// report.txt, report.html and residuals.csv in dir, added to out (written when it commits). The
+// plots are drawn in a temporary folder; without gnuplot the page says so and the text is whole.
+bool write_report(files::OutputSet& out, const std::string& dir, const ReportData& d,
+                  const ReportPlots& plots, std::string& error);
+// For a run without data (`run` without frames): the verdict and the calibration only.
+ReportData report_data_without_history(const CalibrationResult& r, const std::string& title);
+
+// camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
+// a run, in dir, written as one set.
+template <int NK>
+bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
+                                  const std::string& title, bool from_earlier,
+                                  const ReportPlots& plots, std::string& error) {
+  ReportData report = report_data(run, title);
+  report.from_earlier = from_earlier;
+  files::OutputSet out;
+  return add_run_outputs(out, dir, run, error) && write_report(out, dir, report, plots, error) &&
+         out.commit(error);
+}
+
+// RFC 4648 base64 of bytes, for data: URIs.
+std::string base64(const std::string& bytes);
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,460 @@
+// The report the commands write beside a calibration (report.txt, report.html, residuals.csv),
+// checked against the other files: the verdict against mirrorcal-result.yaml's self-check, the
+// residual statistics recomputed from residuals.csv, the page parsed for its structure and, where
+// Debian's chromium is installed, rendered by a real browser.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <sstream>
+#include <vector>
+
+#include <unistd.h>
+
+#include "process.hpp"
+#include "test_support.hpp"
+
+using namespace rectest;
+
+namespace {
+
+// mirrorcal with the arguments (split at spaces) run without a shell; its exit status, and its
+// output in scratch/command.log.
+int run_mirrorcal(const std::string& args, const std::string& scratch) {
+  std::vector<std::string> argv = {MIRRORCAL_BIN};
+  std::istringstream words(args);
+  for (std::string w; words >> w;) argv.push_back(w);
+  return mc::app::run_program(argv, "", scratch + "/command.log").status;
+}
+
+// The line of text that starts with prefix ("" if none).
+std::string line_starting(const std::string& text, const std::string& prefix) {
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);)
+    if (line.rfind(prefix, 0) == 0) return line;
+  return "";
+}
+
+struct Row {
+  std::size_t n = 0;
+  double mean = -1, median = -1, std = -1, max = -1;  // px
+  double mean_sigma = -1, max_sigma = -1;             // in pixel sigmas
+};
+
+// A row of the residual table: "f1", "all", "+settling".
+Row residual_row(const std::string& report, const std::string& label) {
+  Row r;
+  const std::string line = line_starting(report, label + " ");
+  double median_sigma = 0, std_sigma = 0;
+  std::sscanf(line.c_str() + label.size(), "%zu %lf %lf %lf %lf %lf %lf %lf %lf", &r.n, &r.mean,
+              &r.median, &r.std, &r.max, &r.mean_sigma, &median_sigma, &std_sigma, &r.max_sigma);
+  return r;
+}
+
+struct CsvResidual {
+  int marker = 0;
+  double length = 0;
+  double du = 0, dv = 0;
+  bool settled = false;
+};
+
+std::vector<CsvResidual> read_residuals_csv(const std::string& path) {
+  std::vector<CsvResidual> v;
+  std::istringstream lines(slurp(path));
+  std::string line;
+  std::getline(lines, line);  // header
+  while (std::getline(lines, line)) {
+    CsvResidual r;
+    double t = 0;
+    int settled = 0;
+    if (std::sscanf(line.c_str(), "%lf,%d,%lf,%lf,%d", &t, &r.marker, &r.du, &r.dv, &settled) != 5)
+      continue;
+    r.length = std::sqrt(r.du * r.du + r.dv * r.dv);
+    r.settled = settled == 1;
+    v.push_back(r);
+  }
+  return v;
+}
+
+// The statistics of a sample, computed here from its definition.
+Row stats_of(std::vector<double> x) {
+  Row r;
+  r.n = x.size();
+  if (x.empty()) return r;
+  double sum = 0;
+  for (double v : x) sum += v;
+  r.mean = sum / double(x.size());
+  double var = 0;
+  for (double v : x) var += (v - r.mean) * (v - r.mean);
+  r.std = std::sqrt(var / double(x.size()));
+  std::sort(x.begin(), x.end());
+  r.median = x.size() % 2 ? x[x.size() / 2] : 0.5 * (x[x.size() / 2 - 1] + x[x.size() / 2]);
+  r.max = x.back();
+  return r;
+}
+
+void expect_row_matches(const Row& printed, const Row& computed, const std::string& what) {
+  EXPECT_EQ(printed.n, computed.n) << what;
+  // Printed with three decimals.
+  EXPECT_NEAR(printed.mean, computed.mean, 6e-4) << what;
+  EXPECT_NEAR(printed.median, computed.median, 6e-4) << what;
+  EXPECT_NEAR(printed.std, computed.std, 6e-4) << what;
+  EXPECT_NEAR(printed.max, computed.max, 6e-4) << what;
+}
+
+// base64 decoded here, independently of the program's encoder; false on a character outside it.
+bool decode_base64(const std::string& in, std::string& out) {
+  static const std::string alphabet =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::uint32_t bits = 0;
+  int count = 0;
+  for (char c : in) {
+    if (c == '=') break;
+    const std::size_t v = alphabet.find(c);
+    if (v == std::string::npos) return false;
+    bits = (bits << 6) | std::uint32_t(v);
+    count += 6;
+    if (count >= 8) {
+      count -= 8;
+      out += char((bits >> count) & 0xffu);
+    }
+  }
+  return true;
+}
+
+const std::string kPngSignature = "\x89PNG\r\n\x1a\n";
+
+// Every start and end tag of html, checked to nest; the void elements have none. Empty, or what
+// is wrong.
+std::string tag_nesting_error(const std::string& html) {
+  const std::vector<std::string> void_elements = {"meta", "img", "br", "link", "hr"};
+  std::vector<std::string> open;
+  for (std::size_t at = html.find('<'); at != std::string::npos; at = html.find('<', at + 1)) {
+    const std::size_t end = html.find('>', at);
+    if (end == std::string::npos) return "a tag is not closed at " + std::to_string(at);
+    const std::string tag = html.substr(at + 1, end - at - 1);
+    if (tag.rfind("!DOCTYPE", 0) == 0) continue;
+    const bool closing = tag[0] == '/';
+    const std::string name =
+        tag.substr(closing ? 1 : 0, tag.find_first_of(" />", closing ? 1 : 0) - (closing ? 1 : 0));
+    if (closing) {
+      if (open.empty() || open.back() != name) return "</" + name + "> closes nothing open";
+      open.pop_back();
+    } else if (std::find(void_elements.begin(), void_elements.end(), name) == void_elements.end()) {
+      open.push_back(name);
+    }
+  }
+  return open.empty() ? "" : "<" + open.back() + "> is never closed";
+}
+
+// The values of every attribute named name (src, href) in html.
+std::vector<std::string> attribute_values(const std::string& html, const std::string& name) {
+  std::vector<std::string> values;
+  const std::string key = " " + name + "=\"";
+  for (std::size_t at = html.find(key); at != std::string::npos; at = html.find(key, at + 1)) {
+    const std::size_t begin = at + key.size();
+    values.push_back(html.substr(begin, html.find('"', begin) - begin));
+  }
+  return values;
+}
+
+// A PNG's pixels (8-bit RGB or RGBA, not interlaced, as Chromium writes its screenshots).
+struct Image {
+  int width = 0, height = 0, channels = 0;
+  std::vector<unsigned char> pixels;
+};
+
+std::uint32_t big_endian(const std::string& s, std::size_t at) {
+  return std::uint32_t(static_cast<unsigned char>(s[at])) << 24 |
+         std::uint32_t(static_cast<unsigned char>(s[at + 1])) << 16 |
+         std::uint32_t(static_cast<unsigned char>(s[at + 2])) << 8 |
+         std::uint32_t(static_cast<unsigned char>(s[at + 3]));
+}
+
+int paeth(int a, int b, int c) {
+  const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+  return pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+}
+
+bool decode_png(const std::string& png, Image& image, std::string& why) {
+  if (png.compare(0, 8, kPngSignature) != 0) {
+    why = "not a PNG";
+    return false;
+  }
+  std::string compressed;
+  for (std::size_t at = 8; at + 8 <= png.size();) {
+    const std::uint32_t length = big_endian(png, at);
+    const std::string type = png.substr(at + 4, 4);
+    if (type == "IHDR") {
+      image.width = int(big_endian(png, at + 8));
+      image.height = int(big_endian(png, at + 12));
+      const int depth = static_cast<unsigned char>(png[at + 16]);
+      const int colour = static_cast<unsigned char>(png[at + 17]);
+      image.channels = colour == 6 ? 4 : colour == 2 ? 3 : 0;
+      if (depth != 8 || image.channels == 0 || png[at + 20] != 0) {
+        why = "not 8-bit RGB(A) without interlace";
+        return false;
+      }
+    } else if (type == "IDAT") {
+      compressed += png.substr(at + 8, length);
+    }
+    at += 12 + length;
+  }
+  const std::size_t stride = std::size_t(image.width) * std::size_t(image.channels);
+  std::vector<unsigned char> raw((stride + 1) * std::size_t(image.height));
+  uLongf raw_size = raw.size();
+  if (uncompress(raw.data(), &raw_size, reinterpret_cast<const Bytef*>(compressed.data()),
+                 compressed.size()) != Z_OK ||
+      raw_size != raw.size()) {
+    why = "its image data do not inflate to its size";
+    return false;
+  }
+  image.pixels.assign(stride * std::size_t(image.height), 0);
+  const int bpp = image.channels;
+  for (std::size_t y = 0; y < std::size_t(image.height); ++y) {
+    const unsigned char filter = raw[y * (stride + 1)];
+    const unsigned char* in = &raw[y * (stride + 1) + 1];
+    unsigned char* out = &image.pixels[y * stride];
+    const unsigned char* up = y > 0 ? &image.pixels[(y - 1) * stride] : nullptr;
+    for (std::size_t x = 0; x < stride; ++x) {
+      const int a = x >= std::size_t(bpp) ? out[x - std::size_t(bpp)] : 0;
+      const int b = up != nullptr ? up[x] : 0;
+      const int c = up != nullptr && x >= std::size_t(bpp) ? up[x - std::size_t(bpp)] : 0;
+      const int predicted = filter == 0   ? 0
+                            : filter == 1 ? a
+                            : filter == 2 ? b
+                            : filter == 3 ? (a + b) / 2
+                                          : paeth(a, b, c);
+      out[x] = static_cast<unsigned char>(in[x] + predicted);
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+// The verdict is mirrorcal-result.yaml's self-check, said first; the calibration beside it is the
+// result file's, with its sigmas.
+TEST(ReportFiles, OpensWithTheVerdictAndTheCalibrationOfTheResultFile) {
+  TempDir dir("report-verdict");
+  const std::string& d = dir.path;
+  // A first pass locked onto a wrong solution (see cli_test), and a good run; each command's
+  // output in its own folder.
+  const std::vector<std::pair<std::string, std::string>> runs = {
+      {"bad", "sim --passes 1 --seed 15511521831510435013 --no-plots"},
+      {"good", "sim --seed 3 --no-plots"}};
+  for (const auto& [run, args] : runs) {
+    const std::string out = d + "/" + run, log = d + "/" + run + "-log";
+    fs::create_directories(log);
+    ASSERT_EQ(run_mirrorcal(args + " --out " + out, log), 0) << slurp(log + "/command.log");
+    const YAML::Node result = YAML::LoadFile(out + "/mirrorcal-result.yaml");
+    const std::string report = slurp(out + "/report.txt");
+    std::istringstream lines(report);
+    std::string title, blank, verdict;
+    std::getline(lines, title);
+    std::getline(lines, blank);
+    std::getline(lines, verdict);
+    const bool consistent = result["consistent"].as<bool>();
+    EXPECT_EQ(consistent, run == "good");
+    EXPECT_EQ(verdict.rfind(consistent ? "VERDICT: consistent" : "VERDICT: NOT consistent", 0), 0u)
+        << run << ": " << verdict;
+    // Below it, every warning the command printed.
+    std::istringstream printed(slurp(log + "/command.log"));
+    int warnings = 0;
+    for (std::string line; std::getline(printed, line);) {
+      const std::string prefix = "mirrorcal: WARNING: ";
+      if (line.rfind(prefix, 0) != 0) continue;
+      ++warnings;
+      EXPECT_NE(report.find("\n  WARNING: " + line.substr(prefix.size()) + "\n"), std::string::npos)
+          << line;
+    }
+    EXPECT_EQ(warnings > 0, !consistent);
+    // Each state's estimate and sigma as the result file has them (cm, printed to 1e-4).
+    for (const char* axis : {"x", "y", "z"}) {
+      const std::string name = std::string("p_") + axis;
+      double estimate = 0, sigma = 0;
+      const std::string line = line_starting(report, name + " ");
+      ASSERT_EQ(std::sscanf(line.c_str() + name.size(), " cm %lf %lf", &estimate, &sigma), 2)
+          << line;
+      const int i = axis[0] - 'x';
+      EXPECT_NEAR(estimate, 100.0 * result["p_b_c"][i].as<double>(), 6e-5) << name;
+      EXPECT_NEAR(sigma, 100.0 * result["sigma"][name].as<double>(), 6e-5) << name;
+    }
+    // The page says the same, and that plots were not asked for.
+    const std::string html = slurp(out + "/report.html");
+    EXPECT_NE(html.find(consistent ? "class=\"ok\"" : "class=\"bad\""), std::string::npos);
+    EXPECT_NE(html.find("Plots unavailable: not drawn (--no-plots)"), std::string::npos);
+  }
+}
+
+// calibrate on a recording without truth: the residual statistics are those of residuals.csv
+// recomputed here, cover every marker the filter took (used or gated), fit the pixel sigma the
+// filter assumed, and the normalised innovation squared is the result file's.
+TEST(ReportFiles, ResidualStatisticsAreThoseOfTheResidualsFile) {
+  TempDir dir("report-residuals");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 4 --out " + d + "/rec", d), 0);
+  ASSERT_TRUE(fs::remove(d + "/rec/truth.yaml"));  // a user's recording has none
+  ASSERT_EQ(run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d), 0)
+      << slurp(d + "/command.log");
+  const std::string report = slurp(d + "/cal/report.txt");
+  const YAML::Node result = YAML::LoadFile(d + "/cal/mirrorcal-result.yaml");
+  EXPECT_EQ(report.find("NEES"), std::string::npos) << "no truth, no NEES";
+  const std::vector<CsvResidual> csv = read_residuals_csv(d + "/cal/residuals.csv");
+  ASSERT_GT(csv.size(), 1000u);
+
+  const auto lengths = [&](int marker, bool all_frames) {
+    std::vector<double> v;
+    for (const CsvResidual& r : csv)
+      if ((marker == 0 || r.marker == marker) && (r.settled || all_frames)) v.push_back(r.length);
+    return v;
+  };
+  for (int m = 1; m <= 3; ++m)
+    expect_row_matches(residual_row(report, "f" + std::to_string(m)), stats_of(lengths(m, false)),
+                       "f" + std::to_string(m));
+  const Row all = residual_row(report, "all");
+  expect_row_matches(all, stats_of(lengths(0, false)), "all");
+  const Row with_settling = residual_row(report, "+settling");
+  expect_row_matches(with_settling, stats_of(lengths(0, true)), "+settling");
+  // Every marker the final pass took, used or gated, has its residual.
+  EXPECT_EQ(with_settling.n,
+            result["markers_used"].as<std::size_t>() + result["markers_gated"].as<std::size_t>());
+  // In pixel sigmas: the recording's sigma is 1 px.
+  EXPECT_NEAR(all.mean_sigma, all.mean, 6e-4);
+  // Residuals of markers whose noise is the assumed sigma: a 2-D normal's length has mean
+  // sqrt(pi / 2) sigma.
+  EXPECT_NEAR(all.mean, std::sqrt(M_PI / 2.0), 0.1);
+  double squares = 0;
+  std::size_t settled = 0;
+  for (const CsvResidual& r : csv)
+    if (r.settled) {
+      squares += r.du * r.du + r.dv * r.dv;
+      ++settled;
+    }
+  double rms = -1;
+  std::sscanf(line_starting(report, "RMS per coordinate: ").c_str(), "RMS per coordinate: %lf",
+              &rms);
+  EXPECT_NEAR(rms, std::sqrt(squares / (2.0 * double(settled))), 6e-5);
+  EXPECT_NEAR(rms, 1.0, 0.1);
+  // The normalised innovation squared per degree of freedom is the self-check's.
+  double nis = -1;
+  long dof = -1;
+  std::sscanf(line_starting(report, "per dof ").c_str(), "per dof %lf over %ld dof", &nis, &dof);
+  EXPECT_NEAR(nis, result["nis_per_dof"].as<double>(), 1e-4);
+  EXPECT_GT(dof, 10000);
+}
+
+// The page stands alone: every tag nests, nothing is fetched from elsewhere, each image is a PNG
+// held in the page.
+TEST(ReportFiles, HtmlIsWellFormedAndSelfContained) {
+  TempDir dir("report-html");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 3 --out " + d + "/sim", d), 0) << slurp(d + "/command.log");
+  const std::string html = slurp(d + "/sim/report.html");
+  ASSERT_EQ(html.rfind("<!DOCTYPE html>", 0), 0u);
+  EXPECT_EQ(tag_nesting_error(html), "");
+  EXPECT_TRUE(attribute_values(html, "href").empty());
+  const std::vector<std::string> sources = attribute_values(html, "src");
+  if (mc::app::run_program({"gnuplot", "--version"}, "", d + "/gnuplot.log").status != 0) {
+    EXPECT_TRUE(sources.empty());
+    EXPECT_NE(html.find("Plots unavailable: "), std::string::npos);
+    GTEST_SKIP() << "gnuplot is not installed: the page without plots was checked";
+  }
+  // The report's own plots and sim's error plots against the truth.
+  EXPECT_GE(sources.size(), 12u);
+  for (const std::string& src : sources) {
+    const std::string prefix = "data:image/png;base64,";
+    ASSERT_EQ(src.rfind(prefix, 0), 0u) << src.substr(0, 80);
+    std::string png;
+    ASSERT_TRUE(decode_base64(src.substr(prefix.size()), png));
+    Image image;
+    std::string why;
+    EXPECT_TRUE(decode_png(png, image, why)) << why;
+    EXPECT_GT(image.width, 100);
+  }
+}
+
+// A real browser renders the page (Debian's chromium, headless): the screenshot is a PNG of the
+// window's size that is far from blank.
+TEST(ReportFiles, ChromiumRendersTheReport) {
+  if (access("/usr/bin/chromium", X_OK) != 0)
+    GTEST_SKIP() << "chromium is not installed (Debian: apt-get install chromium)";
+  TempDir dir("report-chromium");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 3 --out " + d + "/sim", d), 0) << slurp(d + "/command.log");
+  const std::string shot = d + "/screenshot.png";
+  // As root (a container, CI) chromium runs only without its sandbox; timeout ends a hung one.
+  const mc::app::ProgramExit chromium = mc::app::run_program(
+      {"timeout", "300", "chromium", "--headless", "--no-sandbox", "--disable-gpu",
+       "--hide-scrollbars", "--user-data-dir=" + d + "/profile", "--window-size=1200,2400",
+       "--screenshot=" + shot, "file://" + d + "/sim/report.html"},
+      d, d + "/chromium.log");
+  ASSERT_EQ(chromium.status, 0) << chromium.error << "\n" << slurp(d + "/chromium.log");
+  Image image;
+  std::string why;
+  ASSERT_TRUE(decode_png(slurp(shot), image, why)) << why;
+  EXPECT_EQ(image.width, 1200);
+  EXPECT_EQ(image.height, 2400);
+  // Pixels unlike the page's background (its top-left corner): text, the verdict, plots.
+  const std::size_t n = std::size_t(image.width) * std::size_t(image.height);
+  const int ch = image.channels;
+  std::size_t drawn = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    if (std::memcmp(&image.pixels[i * std::size_t(ch)], &image.pixels[0], std::size_t(ch)) != 0)
+      ++drawn;
+  EXPECT_GT(double(drawn), 0.05 * double(n)) << drawn << " of " << n << " pixels drawn";
+  // The verdict in its colour (#176b2c for a consistent run) is on the page.
+  bool green = false;
+  for (std::size_t i = 0; i < n && !green; ++i) {
+    const unsigned char* p = &image.pixels[i * std::size_t(ch)];
+    green = p[0] == 0x17 && p[1] == 0x6b && p[2] == 0x2c;
+  }
+  EXPECT_TRUE(green) << "the verdict's colour is not on the screenshot";
+}
+
+// The paper's motion observes every state: none is left weakly observed, whether judged against
+// the user's guesses (stage 1) or against stage 1's calibration (stage 2, whose data bring the
+// camera pose and markers to about 0.71 of stage 1's sigmas).
+TEST(ReportFiles, ThePapersMotionLeavesNoStateWeaklyObserved) {
+  TempDir dir("report-observed");
+  const std::string& d = dir.path;
+  for (const std::string args :
+       {"sim --seed 2 --no-plots", "sim --seed 2 --intrinsics --no-plots"}) {
+    ASSERT_EQ(run_mirrorcal(args + " --out " + d + "/out", d), 0) << slurp(d + "/command.log");
+    const std::string report = slurp(d + "/out/report.txt");
+    EXPECT_NE(line_starting(report, "weakly observed").find("helps): none"), std::string::npos)
+        << args << "\n"
+        << report;
+    const bool stage2 = args.find("--intrinsics") != std::string::npos;
+    EXPECT_EQ(report.find("started from an earlier calibration") != std::string::npos, stage2);
+    if (!stage2) continue;
+    // Stage 2's sigma of p_y against stage 1's, as the table prints it.
+    double estimate = 0, sigma = 0, prior = 0, ratio = 0;
+    std::sscanf(line_starting(report, "p_y ").c_str(), "p_y cm %lf %lf %lf %lf", &estimate, &sigma,
+                &prior, &ratio);
+    EXPECT_GT(ratio, 0.5);
+    EXPECT_LT(ratio, 0.9);
+  }
+}
+
+// Without gnuplot the page says the plots are unavailable and why; the text is the same.
+TEST(ReportFiles, WithoutGnuplotThePageSaysSoAndTheTextIsWhole) {
+  TempDir dir("report-no-gnuplot");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 3 --no-plots --out " + d + "/plain", d), 0);
+  const std::string path = getenv("PATH") != nullptr ? getenv("PATH") : "";
+  setenv("PATH", (d + "/no-programs-here").c_str(), 1);  // mirrorcal finds no gnuplot
+  const int status = run_mirrorcal("sim --seed 3 --out " + d + "/sim", d);
+  setenv("PATH", path.c_str(), 1);
+  ASSERT_EQ(status, 0) << slurp(d + "/command.log");
+  const std::string html = slurp(d + "/sim/report.html");
+  EXPECT_NE(html.find("<p>Plots unavailable: cannot run gnuplot"), std::string::npos);
+  EXPECT_TRUE(attribute_values(html, "src").empty());
+  EXPECT_EQ(tag_nesting_error(html), "");
+  EXPECT_EQ(slurp(d + "/sim/report.txt"), slurp(d + "/plain/report.txt"));
+}
