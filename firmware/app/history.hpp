@@ -117,6 +117,14 @@ void record_residuals(const Filter& f, const MarkerFrame<Filter::State::kMarkers
   }
 }
 
+// What the filter kept for a smoother at one published estimate (CalibrationFilter::MotionStep,
+// and the motion block's covariance after the update).
+template <class Filter>
+struct MotionRow {
+  typename Filter::MotionStep step;
+  Eigen::Matrix<double, 15, 15> covariance;
+};
+
 template <class Filter>
 class HistorySink final : public firmware::EstimateSink<Filter> {
  public:
@@ -143,14 +151,20 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     counted_ = c;
     if (tap_ != nullptr)
       if (const auto* frame = tap_->take(t_ns)) record_residuals(f, *frame, r);
+    if (motion_.size() < motion_.capacity())
+      motion_.push_back({f.motion_step(), f.covariance().template topLeftCorner<15, 15>()});
   }
   const std::vector<HistoryRow<Filter>>& rows() const { return rows_; }
+  // A MotionRow beside each row, for a smoother (the filter keeping its motion steps).
+  void keep_motion() { motion_.reserve(rows_.capacity()); }
+  const std::vector<MotionRow<Filter>>& motion() const { return motion_; }
 
  private:
   const typename Filter::State* truth_;
   FrameTap<Filter::State::kMarkers>* tap_;
   FilterCounters counted_{};
   std::vector<HistoryRow<Filter>> rows_;
+  std::vector<MotionRow<Filter>> motion_;
 };
 
 }  // namespace mirrorcal::app

@@ -64,8 +64,9 @@ struct SimRun {
   // order), against which the data's narrowing of it is judged, and the pixel noise assumed.
   std::vector<double> prior_sigma;
   double pixel_sigma = 0.0;
-  std::uint64_t gate_after_frames = 0;  // frames the estimate had to settle before the gate
-  bool has_truth = false;               // the history rows carry the error against truth
+  std::uint64_t gate_after_frames = 0;    // frames the estimate had to settle before the gate
+  bool has_truth = false;                 // the history rows carry the error against truth
+  std::vector<MotionRow<Filter>> motion;  // beside history, when a smoother asked for them
 };
 template <int NK>
 using CalibrationRun = SimRun<NK>;

@@ -98,14 +98,16 @@ namespace {
 
 // The random family (20 rigs, a rig of its own per run, both mirrors, the priors a user has, time
 // offsets in +-30 ms): not yet consistent over 200 rigs (docs/campaign/random), so the bounds hold
-// today's figures (16 states: average NEES 19.0, median 17.5, no run beyond 4 sigma; the runs that
-// said consistent: true within 1.17, 1.21, 1.50 and 0.78 times what their data hold, RMS, for
+// today's figures (16 states: average NEES 18.2, median 17.2, no run beyond 4 sigma; the runs that
+// said consistent: true within 1.17, 1.17, 1.16 and 0.82 times what their data hold, RMS, for
 // p_b_c, rotation, markers and time offset) with room for sampling noise, and fail on a
 // regression: the transform that dropped every marker a sigma point put behind the mirror (markers
 // at their prior, 10s of times the limit), the per-frame curvature shift of the prediction (median
 // NEES 21-36 over the same rigs), the free passes' own estimate and covariance reported (average
-// 33, 2 of 3 runs beyond 4 sigma not flagged), or the refinement linearised after each frame's
-// update instead of before it (average 23.9, median 18.1, a run beyond 4 sigma). Runs that said
+// 33, 2 of 3 runs beyond 4 sigma not flagged), or the refinement linearised at the tracking pass's
+// estimate after each frame's update (average 23.9, median 18.1, a run beyond 4 sigma, markers
+// 1.50 times their limit) or before it (19.0, 17.5, markers 1.50) instead of along the smoothed
+// track. Runs that said
 // consistent: false are judged by being flagged, not by their errors.
 TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
   const std::filesystem::path dir =
@@ -140,13 +142,13 @@ TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
       "consistent runs' RMS over the limit: p %.2f, rotation %.2f, markers %.2f, time offset "
       "%.2f\n",
       mean, med, beyond, missed, over[0], over[1], over[2], over[3]);
-  EXPECT_LT(med, 20.5);
-  EXPECT_LT(mean, 23.0);
+  EXPECT_LT(med, 20.0);
+  EXPECT_LT(mean, 22.0);
   EXPECT_LE(beyond, 2);
   EXPECT_LE(missed, 1);
   for (int k = 0; k < 4; ++k) {
     EXPECT_GT(over[k], 0.0) << k;
-    EXPECT_LT(over[k], 1.8) << k;
+    EXPECT_LT(over[k], 1.45) << k;
   }
   std::filesystem::remove_all(dir);
 }

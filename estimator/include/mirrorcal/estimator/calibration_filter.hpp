@@ -97,6 +97,21 @@ class CalibrationFilter {
   // The estimate the latest update started from: the state before its frame, which holds none of
   // that frame's noise (the point to linearise that frame at again: sim_run.cpp).
   const State& predicted() const { return predicted_; }
+
+  // What a smoother over a pass needs (sim_run.cpp), kept when keep_motion_steps(true): from the
+  // update before the latest to the latest, the motion block's transition (the product of the
+  // predicts' F; zero across a restart) and its covariance before the latest update. Off by
+  // default: the board's loop does not pay the 15x15 product per predict.
+  struct MotionStep {
+    Eigen::Matrix<S, 15, 15> transition = Eigen::Matrix<S, 15, 15>::Identity();
+    Eigen::Matrix<S, 15, 15> predicted_covariance = Eigen::Matrix<S, 15, 15>::Zero();
+    std::uint64_t update = 0;  // how many updates the filter had made, the latest included
+  };
+  void keep_motion_steps(bool on) {
+    keep_steps_ = on;
+    since_update_.setIdentity();
+  }
+  const MotionStep& motion_step() const { return step_; }
   // A frame stamped t_cam_ns against the filter's time and the IMU signal there.
   Exposure<S> exposure(std::int64_t t_cam_ns) const;
   const Covariance& covariance() const { return filter_.covariance(); }
@@ -129,6 +144,9 @@ class CalibrationFilter {
   const std::int64_t* along_stamps_ = nullptr;
   std::size_t along_count_ = 0, along_next_ = 0;
   State predicted_{};
+  bool keep_steps_ = false;
+  Eigen::Matrix<S, 15, 15> since_update_ = Eigen::Matrix<S, 15, 15>::Identity();
+  MotionStep step_{};
   ImuSample now_{};  // the IMU signal at the filter's time, if timed_
   // The gyro signal's derivative there: over the last predict's interval, whose end the signal's
   // parabola gave (imu_signal_at), so a short interval does not amplify the noise.
@@ -204,6 +222,11 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
     return FilterStatus::kNonFinite;
   }
   filter_.reset(x, next);
+  if (keep_steps_) {
+    Eigen::Matrix<S, D, D> moved;
+    f.left_multiply(since_update_, moved);
+    since_update_ = moved;
+  }
   now_ = s1;
   timed_ = true;
   if (dt > 0.0) gyro_rate_ = ((s1.gyro - s0.gyro) / dt).template cast<S>();
@@ -226,12 +249,19 @@ void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
   restart(State::kV, r.velocity);
   restart(State::kTheta, r.attitude);
   filter_.reset(x, p);
+  since_update_.setZero();  // the motion before the gap says nothing of the motion after it
   start_at(s);
 }
 
 template <typename S, int M, int NK>
 UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
   predicted_ = filter_.mean();
+  if (keep_steps_) {
+    step_.transition = since_update_;
+    step_.predicted_covariance = filter_.covariance().template topLeftCorner<15, 15>();
+    ++step_.update;
+    since_update_.setIdentity();
+  }
   Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
   for (int i = 0; i < M; ++i)
     if (frame.seen[i]) z.template segment<2>(2 * i) = frame.uv[i].template cast<S>();
