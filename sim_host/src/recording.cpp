@@ -111,12 +111,40 @@ bool gather_stats(const CsvFiles& f, int markers, RecordingStats& stats,
   return true;
 }
 
+// A recording that `record` did not complete (killed while writing it) is refused, saying so: its
+// temporary folder, or a folder it never renamed into place (of a --two-stage recording too).
+bool check_not_cut(const std::string& dir, std::vector<std::string>& notes, std::string& error) {
+  if (files::is_staging_folder(dir)) {
+    error = dir +
+            ": a recording cut off before it was complete (record was stopped while writing "
+            "it): record it again";
+    return false;
+  }
+  std::error_code ec;
+  const std::filesystem::path parent = std::filesystem::path(dir).parent_path();
+  for (const std::string& target : {dir, parent.empty() ? std::string() : parent.string()}) {
+    const std::vector<std::string> cut =
+        target.empty() ? std::vector<std::string>{} : files::cut_folders(target);
+    if (cut.empty()) continue;
+    if (!std::filesystem::exists(dir, ec)) {
+      error = dir + ": no recording: record was stopped before it completed it (what it wrote " +
+              "lies in " + cut.back() + "): record it again";
+      return false;
+    }
+    notes.push_back(target + ": a later record into it was stopped before it completed (" +
+                    cut.back() + "); this is the recording before it");
+    break;
+  }
+  return true;
+}
+
 // The YAML files of dir, the statistics of its streams, and the input checks; keep_* receive the
 // streams (read_recording).
 bool read_checked(const std::string& dir, int markers, Recording& out,
                   const std::function<void(const ImuSample&)>& keep_imu,
                   const std::function<void(const ObservedFrame&)>& keep_frame, std::string& error) {
   out = Recording{};
+  if (!check_not_cut(dir, out.notes, error)) return false;
   std::string text;
   const CsvFiles csv = csv_files(dir);
   const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
