@@ -148,19 +148,27 @@ bool OutputSet::discard(const std::string& path, std::string& error) {
   return false;
 }
 
-bool read_file(const std::string& path, std::string& text, std::string& error) {
+int open_regular_file(const std::string& path, std::string& error) {
   // O_NONBLOCK: opening a FIFO must not wait for a writer (it changes nothing for a file).
   const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
   if (fd < 0) {
     error = path + ": cannot open: " + reason(errno);
-    return false;
+    return -1;
   }
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
     error = path + ": not a regular file (" + kind_of(st.st_mode) + ")";
-    return false;
+    return -1;
   }
+  return fd;
+}
+
+bool read_file(const std::string& path, std::string& text, std::string& error) {
+  const int fd = open_regular_file(path, error);
+  if (fd < 0) return false;
+  struct stat st {};
+  ::fstat(fd, &st);
   text.clear();
   text.reserve(static_cast<std::size_t>(st.st_size));
   char buffer[1 << 16];

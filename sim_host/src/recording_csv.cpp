@@ -5,8 +5,6 @@
 #include <cmath>
 #include <cstring>
 
-#include <fcntl.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/files.hpp"
@@ -104,19 +102,8 @@ LineInput::~LineInput() {
 
 bool LineInput::open(const std::string& path, std::string& error) {
   path_ = path;
-  // O_NONBLOCK: opening a FIFO must not wait for a writer (it changes nothing for a file).
-  fd_ = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
-  if (fd_ < 0) {
-    error = path + ": cannot open: " + std::strerror(errno);
-    return false;
-  }
-  struct stat st {};
-  if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
-    // files::read_file's message, for the same refusal.
-    std::string text;
-    files::read_file(path, text, error);
-    return false;
-  }
+  fd_ = files::open_regular_file(path, error);
+  if (fd_ < 0) return false;
   buffer_.resize(kMaxLine);
   text_ = std::string_view(buffer_.data(), 0);
   eof_ = false;
@@ -172,10 +159,8 @@ bool LineInput::next_chunk(std::string_view& chunk) {
 }
 
 bool LineInput::at_end() {
-  if (!text_.empty()) return false;
-  // The line returned last lies at the front of the buffer; filling would move over it.
-  if (eof_) return true;
-  return false;
+  // Bytes not yet read may follow in the file; this only tells a cut last line apart.
+  return text_.empty() && eof_;
 }
 
 // --- the rows of each file ---------------------------------------------------------------------

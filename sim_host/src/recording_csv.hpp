@@ -37,7 +37,7 @@ class LineInput {
   bool next(std::string_view& line);
   // The bytes as they come instead of lines (for a fingerprint); false at the end or on error.
   bool next_chunk(std::string_view& chunk);
-  // Nothing follows the last line returned.
+  // Nothing follows the last line returned (as far as read: a hint for messages).
   bool at_end();
   const std::string& error() const { return error_; }
   std::size_t line_no() const { return line_no_; }

@@ -37,6 +37,10 @@ class OutputSet {
   std::vector<std::unique_ptr<File>> files_;
 };
 
+// The regular file path opened for reading (a descriptor the caller closes); -1 with read_file's
+// message otherwise.
+int open_regular_file(const std::string& path, std::string& error);
+
 // The whole of the regular file path into text; false with a message naming path otherwise
 // ("PATH: cannot open: reason", "PATH: not a regular file").
 bool read_file(const std::string& path, std::string& text, std::string& error);
