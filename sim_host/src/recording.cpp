@@ -74,7 +74,7 @@ bool fingerprint_of(const CsvFiles& f, std::string& hex, std::string& error) {
 }
 
 // One pass over the CSV files: every row checked, the statistics of the checks gathered, each
-// frame within the IMU data handed to keep (read_recording holds them).
+// sample and frame handed to keep_* (read_recording holds them).
 bool gather_stats(const CsvFiles& f, int markers, RecordingStats& stats,
                   const std::function<void(const ImuSample&)>& keep_imu,
                   const std::function<void(const ObservedFrame&)>& keep_frame, std::string& error) {
