@@ -18,16 +18,17 @@ template <int NK>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
               const sim::CalibrationStart* from) {
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
-              rec.imu.size(), rec.sensors.imu_rate_hz, rec.frames.size(),
+              std::size_t(rec.stats.imu_samples), rec.sensors.imu_rate_hz,
+              std::size_t(rec.stats.frames),
               NK == 5   ? "camera intrinsics estimated too"
               : NK == 4 ? "camera intrinsics estimated too, skew held at camchain.yaml's"
                         : "camera intrinsics from camchain.yaml");
   const std::uint64_t burn_in = recording_config(rec).gate_after_frames;
-  if (rec.frames.size() < burn_in)
+  if (rec.stats.frames < burn_in)
     std::fprintf(stderr,
                  "mirrorcal: note: only %zu frames; the filter gates markers only after %llu, and "
                  "the calibration will hardly have converged\n",
-                 rec.frames.size(), static_cast<unsigned long long>(burn_in));
+                 std::size_t(rec.stats.frames), static_cast<unsigned long long>(burn_in));
   std::string err;
   SimRun<NK> run;
   const auto t0 = std::chrono::steady_clock::now();
@@ -109,7 +110,8 @@ int cmd_calibrate(int argc, char** argv) {
   const std::string in = o.positional[0];
   sim::Recording rec;
   std::string err;
-  if (!sim::read_recording(in, kMarkers, rec, err)) fail(err, 1);
+  // Streamed from its files in each pass: memory does not grow with the recording.
+  if (!sim::open_recording(in, kMarkers, rec, err)) fail(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
   for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier

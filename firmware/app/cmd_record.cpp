@@ -15,6 +15,32 @@ namespace mirrorcal::app {
 
 namespace {
 
+// A recording's folder, written whole or not at all: into a temporary folder beside it that
+// replaces it when complete. fail() exits without unwinding, so the temporary folder goes first.
+class RecordingFolder {
+ public:
+  RecordingFolder(const std::string& dir, bool replace) {
+    std::string err;
+    if (!staged_.begin(dir, replace, err)) fail(err, 1);
+  }
+  // Where the files go until commit().
+  const std::string& path() const { return staged_.path(); }
+  // A path within path() as the user will find it.
+  std::string as_target(const std::string& path) const { return staged_.as_target(path); }
+  [[noreturn]] void fail_with(const std::string& err) {
+    const std::string message = staged_.as_target(err);
+    staged_.discard();
+    fail(message, 1);
+  }
+  void commit() {
+    std::string err;
+    if (!staged_.commit(err)) fail_with(err);
+  }
+
+ private:
+  files::StagedFolder staged_;
+};
+
 // The board's devices into dir until --duration or Ctrl-C. With --sensors, its imu.yaml,
 // camchain.yaml and mirrorcal.yaml are copied beside the streams (the camera's size is
 // camchain.yaml's), so `mirrorcal calibrate DIR` takes the recording as it is; else the camera
@@ -26,10 +52,11 @@ int record_devices(const Options& o, const std::string& dir) {
   const double imu_rate_hz = s.sensors.empty() ? s.rate_hz : sensors.sensors.imu_rate_hz;
   const Devices devices =
       open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz);
+  RecordingFolder folder(dir, o.flag("force"));
 
   std::string err;
   sim::RecordingWriter writer;
-  if (!writer.open(dir, err)) fail(err, 1);
+  if (!writer.open(folder.path(), err)) folder.fail_with(err);
   std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
               describe_camera(s, devices).c_str(),
               describe_trigger(s, devices, imu_rate_hz).c_str(),
@@ -61,16 +88,17 @@ int record_devices(const Options& o, const std::string& dir) {
               static_cast<unsigned long long>(imu.samples()), imu.seconds(),
               static_cast<unsigned long long>(frames));
   print_device_counters(devices);
-  if (!written) fail(err, 1);
-  if (imu_status == hal::SourceStatus::kError) fail(imu.error(), 1);
-  if (frame_status == hal::SourceStatus::kError) fail(devices.camera->markers->error(), 1);
+  if (!written) folder.fail_with(err);
+  if (imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
+  if (frame_status == hal::SourceStatus::kError) folder.fail_with(devices.camera->markers->error());
   if (!s.sensors.empty()) {
     std::string text;
     for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
       if (!files::read_file(s.sensors + "/" + f, text, err) ||
-          !files::write_file(dir + "/" + f, text, err))
-        fail(err, 1);
+          !files::write_file(folder.path() + "/" + f, text, err))
+        folder.fail_with(err);
   }
+  folder.commit();
   std::printf("wrote %s/mav0%s\n", dir.c_str(),
               s.sensors.empty() ? "" : " and the sensor files of --sensors");
   return 0;
@@ -78,19 +106,21 @@ int record_devices(const Options& o, const std::string& dir) {
 
 // The simulated rig's streams of one run (data and prior from seed) and its priors, as `sim` with
 // that seed hands them to the loop, and its truth, into dir.
+// dir lies within folder's temporary folder; failures name the folder the user asked for.
 void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
-                               bool hold_skew, const std::string& dir) {
+                               bool hold_skew, RecordingFolder& folder, const std::string& sub) {
+  const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
 
   std::string err;
   sim::RecordingWriter writer;
-  if (!writer.open(dir, err)) fail(err, 1);
+  if (!writer.open(dir, err)) folder.fail_with(err);
   for (const ImuSample& smp : data.imu)
     if (!writer.add_imu(smp)) break;
   for (const sim::ObservedFrame& f : data.frames)
     if (!writer.add_frame(f)) break;
-  if (!writer.close(err)) fail(err, 1);
+  if (!writer.close(err)) folder.fail_with(err);
 
   sim::SensorInfo sensors;
   sensors.imu = s.imu;
@@ -110,13 +140,13 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   truth.t_d = s.truth.t_d;
   if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
-    fail(err, 1);
+    folder.fail_with(err);
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
       "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv, imu.yaml, "
       "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
-      s.duration_s, dir.c_str());
+      s.duration_s, folder.as_target(dir).c_str());
 }
 
 }  // namespace
@@ -126,9 +156,11 @@ int cmd_record(int argc, char** argv) {
                                          "timeshift", "distortion", "line-delay"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
-  const Options o = parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage"});
+  const Options o =
+      parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage", "force"});
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
-  if (o.flag("imu") || o.flag("config")) return record_devices(o, make_out_dir(o, ""));
+  const std::string dir = o.get("out", "");
+  if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
   const bool two_stage = o.flag("two-stage"), hold_skew = o.flag("hold-skew");
   if (hold_skew && !o.flag("intrinsics") && !two_stage)
     fail("--hold-skew applies with --intrinsics or --two-stage");
@@ -138,15 +170,19 @@ int cmd_record(int argc, char** argv) {
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const sim::Scenario s =
       hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
-  const std::string dir = make_out_dir(o, "");
+  RecordingFolder folder(dir, o.flag("force"));
   if (!two_stage) {
-    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, dir);
+    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, folder, "");
+    folder.commit();
     return 0;
   }
-  // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds).
+  // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
+  // together.
   const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  write_simulated_recording(s, seed, false, false, stage1);
-  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, stage2);
+  write_simulated_recording(s, seed, false, false, folder, "/stage1");
+  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, folder,
+                            "/stage2");
+  folder.commit();
   std::printf(
       "calibrate them as `sim --intrinsics%s --seed %llu` does (the same bytes):\n"
       "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",

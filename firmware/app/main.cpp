@@ -54,7 +54,8 @@ const std::vector<Command>& commands() {
        "--intrinsics)\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV] [--sensors DIR]\n"
        "              [--duration S] [--drdy CHIP:LINE] [--trigger CHIP:LINE [--trigger-every N]]\n"
-       "              [--config FILE]\n",
+       "              [--config FILE]\n"
+       "              written whole into DIR when complete; --force replaces a recording there\n",
        cmd_record},
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "

@@ -15,6 +15,8 @@ LoopData recording_loop_data(const sim::Recording& r) {
   LoopData d;
   d.imu = r.imu;
   d.frames = r.frames;
+  d.streams = r.streams;
+  d.stats = r.stats;
   d.imu_period_ns = imu_period_ns(r.sensors.imu_rate_hz);
   d.width = r.sensors.width;
   d.height = r.sensors.height;
@@ -52,6 +54,10 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
   }
   run = run_loop<NK>(recording_config(r), x0, p0, recording_loop_data(r),
                      r.has_truth ? &truth : nullptr, progress);
+  if (r.streams && !r.streams->error().empty()) {
+    error = r.streams->error();
+    return false;
+  }
   run.result.rostopic = r.sensors.rostopic;
   run.result.recording_fingerprint = r.fingerprint;
   return true;

@@ -29,6 +29,16 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
+std::unique_ptr<hal::ImuSource> LoopData::open_imu() const {
+  if (streams) return streams->open_imu();
+  return std::make_unique<sim::VectorImuSource>(imu);
+}
+
+std::unique_ptr<hal::MarkerSource<kMarkers>> LoopData::open_markers() const {
+  if (streams) return std::make_unique<sim::StreamedMarkerSource<kMarkers>>(streams->open_frames());
+  return std::make_unique<sim::VectorMarkerSource<kMarkers>>(frames);
+}
+
 Prior<kMarkers> simulation_prior(const sim::Scenario& s, const sim::SimData& data,
                                  std::uint64_t seed) {
   return sim::draw_prior<kMarkers>(s, data, sim::derive_seed(seed, 100));
@@ -85,10 +95,10 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   if (along != nullptr)
     filter.linearise_along(along->states.data(), along->stamps_ns.data(), along->states.size());
 
-  sim::VectorImuSource imu(data.imu);
-  sim::VectorMarkerSource<kMarkers> listed(data.frames);
-  FrameTap<kMarkers> markers(input.source != nullptr ? *input.source : listed, input.relabeler);
-  HistorySink<Filter> sink(data.frames.size() + 1, truth != nullptr ? &run.truth : nullptr,
+  const std::unique_ptr<hal::ImuSource> imu = data.open_imu();
+  const std::unique_ptr<hal::MarkerSource<kMarkers>> listed = data.open_markers();
+  FrameTap<kMarkers> markers(input.source != nullptr ? *input.source : *listed, input.relabeler);
+  HistorySink<Filter> sink(data.frame_count() + 1, truth != nullptr ? &run.truth : nullptr,
                            &markers);
   if (keep_motion) {
     filter.keep_motion_steps(true);
@@ -97,14 +107,14 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
-  firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, imu, markers, lc, &sink);
+  firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, *imu, markers, lc, &sink);
   if (input.relabeler != nullptr) loop.set_identifier(&markers);
 
-  const std::size_t report_every = data.imu.size() / 100 + 1;
+  const std::size_t report_every = data.imu_samples() / 100 + 1;
   std::size_t n = 0;
   while (loop.step()) {
     if (progress && ++n % report_every == 0)
-      progress(static_cast<double>(n) / static_cast<double>(data.imu.size()));
+      progress(static_cast<double>(n) / static_cast<double>(data.imu_samples()));
   }
   loop.finish();
 
@@ -114,8 +124,8 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   run.result = make_result(filter, data.width, data.height);
   run.filter_counters = filter.counters();
   run.loop_counters = loop.counters();
-  run.imu_samples = data.imu.size();
-  run.frames = data.frames.size();
+  run.imu_samples = data.imu_samples();
+  run.frames = data.frame_count();
   return run;
 }
 
@@ -166,24 +176,29 @@ Trajectory<NK> smoothed_trajectory(const SimRun<NK>& track) {
 // than two such frames.
 LoopData first_stretch(const LoopData& data) {
   LoopData out;
-  if (data.imu.empty()) return out;
-  const std::int64_t t0 = data.imu.front().t_ns;
-  const std::int64_t latest = t0 + static_cast<std::int64_t>(kImuStartMaxS * 1e9);
+  const std::unique_ptr<hal::ImuSource> imu = data.open_imu();
+  const std::unique_ptr<hal::MarkerSource<kMarkers>> markers = data.open_markers();
+  ImuSample s;
+  if (imu->next(s) != hal::SourceStatus::kOk) return out;
+  const std::int64_t latest = s.t_ns + static_cast<std::int64_t>(kImuStartMaxS * 1e9);
   int with_markers = 0;
   std::int64_t end = latest;
-  for (const sim::ObservedFrame& f : data.frames) {
+  MarkerFrame<kMarkers> f;
+  while (markers->poll(f) == hal::SourceStatus::kOk) {
     if (f.t_ns > latest) break;
-    out.frames.push_back(f);
-    if (!f.markers.empty() && ++with_markers == kImuStartFrames) {
+    sim::ObservedFrame& kept = out.frames.emplace_back(sim::ObservedFrame{f.t_ns, {}});
+    for (int i = 0; i < kMarkers; ++i)
+      if (f.seen[std::size_t(i)])
+        kept.markers.push_back({i, f.uv[std::size_t(i)].x(), f.uv[std::size_t(i)].y()});
+    if (!kept.markers.empty() && ++with_markers == kImuStartFrames) {
       end = f.t_ns;
       break;
     }
   }
   if (with_markers < 2) return {};
-  for (const ImuSample& s : data.imu) {
+  do {
     out.imu.push_back(s);
-    if (s.t_ns > end) break;
-  }
+  } while (s.t_ns <= end && imu->next(s) == hal::SourceStatus::kOk);
   out.imu_period_ns = data.imu_period_ns;
   out.width = data.width;
   out.height = data.height;
@@ -235,6 +250,7 @@ bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
 }
 
 std::uint64_t markers_in(const LoopData& data) {
+  if (data.streams) return data.stats.markers;
   std::uint64_t n = 0;
   for (const auto& f : data.frames) n += f.markers.size();
   return n;

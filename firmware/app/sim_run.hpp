@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -71,12 +72,22 @@ struct SimRun {
 template <int NK>
 using CalibrationRun = SimRun<NK>;
 
-// What the loop consumes, filled before it starts (the loop itself never allocates).
+// What the loop consumes, filled before it starts (the loop itself never allocates): the streams
+// held in memory, or read from a recording's files again in each pass (calibrate), so that memory
+// does not grow with the recording.
 struct LoopData {
   std::vector<ImuSample> imu;              // timestamp order
   std::vector<sim::ObservedFrame> frames;  // timestamp order; any subset of markers each
-  std::int64_t imu_period_ns = 5'000'000;  // nominal IMU period
-  int width = 640, height = 480;           // image size, for the result files
+  std::shared_ptr<const sim::RecordingStreams> streams;  // instead of imu and frames
+  sim::RecordingStats stats;                             // of the streams
+  std::int64_t imu_period_ns = 5'000'000;                // nominal IMU period
+  int width = 640, height = 480;                         // image size, for the result files
+
+  std::size_t imu_samples() const { return streams ? stats.imu_samples : imu.size(); }
+  std::size_t frame_count() const { return streams ? stats.frames : frames.size(); }
+  // A pass's sources, from the start of the streams.
+  std::unique_ptr<hal::ImuSource> open_imu() const;
+  std::unique_ptr<hal::MarkerSource<kMarkers>> open_markers() const;
 };
 
 // The nominal period of an IMU sampled at rate_hz.

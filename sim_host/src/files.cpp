@@ -5,10 +5,12 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 
 #include <dirent.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <stdio.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -146,19 +148,27 @@ bool OutputSet::discard(const std::string& path, std::string& error) {
   return false;
 }
 
-bool read_file(const std::string& path, std::string& text, std::string& error) {
+int open_regular_file(const std::string& path, std::string& error) {
   // O_NONBLOCK: opening a FIFO must not wait for a writer (it changes nothing for a file).
   const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
   if (fd < 0) {
     error = path + ": cannot open: " + reason(errno);
-    return false;
+    return -1;
   }
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
     error = path + ": not a regular file (" + kind_of(st.st_mode) + ")";
-    return false;
+    return -1;
   }
+  return fd;
+}
+
+bool read_file(const std::string& path, std::string& text, std::string& error) {
+  const int fd = open_regular_file(path, error);
+  if (fd < 0) return false;
+  struct stat st {};
+  ::fstat(fd, &st);
   text.clear();
   text.reserve(static_cast<std::size_t>(st.st_size));
   char buffer[1 << 16];
@@ -208,6 +218,139 @@ bool lock_folder(const std::string& dir, std::string& error) {
                                  path + "); wait for it to finish or choose another --out"
                            : path + ": cannot lock: " + reason(e);
   return false;
+}
+
+// --- StagedFolder ------------------------------------------------------------------------------
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string without_slashes(std::string dir) {
+  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+  return dir;
+}
+
+// Whether dir holds anything other than a lock file.
+bool holds_files(const std::string& dir) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec))
+    if (e.path().filename() != kLockFile) return true;
+  return false;
+}
+
+// Whether the process that wrote a temporary name (its pid follows prefix) is gone.
+bool writer_gone(const std::string& name, std::size_t prefix) {
+  const long pid = std::strtol(name.c_str() + prefix, nullptr, 10);
+  return pid > 0 && pid != getpid() && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+}
+
+}  // namespace
+
+StagedFolder::~StagedFolder() {
+  discard();
+}
+
+bool StagedFolder::begin(const std::string& dir, bool replace, std::string& error) {
+  dir_ = without_slashes(dir);
+  replace_ = replace;
+  std::error_code ec;
+  if (fs::exists(dir_, ec)) {
+    if (!fs::is_directory(dir_, ec)) {
+      error = dir_ + ": exists and is not a folder";
+      return false;
+    }
+    if (!lock_folder(dir_, error)) return false;
+    if (!replace && holds_files(dir_)) {
+      error = dir_ + ": holds a recording already; give --force to replace it (the new one " +
+              "replaces it whole, once complete), or choose another --out";
+      return false;
+    }
+  }
+  const std::string parent = folder_of(dir_);
+  fs::create_directories(parent, ec);
+  // The temporary folders of writers killed before (cut recordings this one replaces).
+  for (const std::string& cut : cut_folders(dir_)) fs::remove_all(cut, ec);
+  temporary_ = temporary_name(dir_);
+  if (::mkdir(temporary_.c_str(), 0777) != 0) {
+    error = dir_ + ": cannot create its temporary folder " + temporary_ + ": " + reason(errno);
+    temporary_.clear();
+    return false;
+  }
+  return lock_folder(temporary_, error);
+}
+
+bool StagedFolder::commit(std::string& error) {
+  // Every file on disk first: the rename must not publish a folder whose files are still in cache.
+  std::error_code ec;
+  for (const auto& e : fs::recursive_directory_iterator(temporary_, ec)) {
+    const int fd = ::open(e.path().c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+      ::fsync(fd);
+      ::close(fd);
+    }
+  }
+  sync_folder(temporary_);
+  const bool exists = fs::exists(dir_, ec);
+  if (exists && !replace_ && holds_files(dir_)) {
+    error = dir_ + ": a recording appeared there while this one was written; give --force to " +
+            "replace it";
+    discard();
+    return false;
+  }
+  // The old folder and the new swap places in one step; the old is then removed.
+  if (exists &&
+      ::renameat2(AT_FDCWD, temporary_.c_str(), AT_FDCWD, dir_.c_str(), RENAME_EXCHANGE) != 0) {
+    error = dir_ + ": cannot replace it with " + temporary_ + ": " + reason(errno);
+    discard();
+    return false;
+  }
+  if (!exists &&
+      ::renameat2(AT_FDCWD, temporary_.c_str(), AT_FDCWD, dir_.c_str(), RENAME_NOREPLACE) != 0) {
+    error = dir_ + ": cannot rename " + temporary_ + " to it: " + reason(errno);
+    discard();
+    return false;
+  }
+  sync_folder(folder_of(dir_));
+  if (exists) fs::remove_all(temporary_, ec);  // the old folder, now under the temporary name
+  temporary_.clear();
+  return true;
+}
+
+void StagedFolder::discard() {
+  if (temporary_.empty()) return;
+  std::error_code ec;
+  fs::remove_all(temporary_, ec);
+  temporary_.clear();
+}
+
+std::string StagedFolder::as_target(std::string message) const {
+  if (temporary_.empty()) return message;
+  for (std::size_t at; (at = message.find(temporary_)) != std::string::npos;)
+    message.replace(at, temporary_.size(), dir_);
+  return message;
+}
+
+std::vector<std::string> cut_folders(const std::string& dir) {
+  const std::string target = without_slashes(dir);
+  const std::string prefix = temporary_prefix(target);
+  const std::string folder = folder_of(target), name_prefix = prefix.substr(prefix.rfind('/') + 1);
+  std::vector<std::string> cut;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(folder, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(name_prefix, 0) == 0 && e.is_directory(ec) &&
+        writer_gone(name, name_prefix.size()))
+      cut.push_back(folder + "/" + name);
+  }
+  std::sort(cut.begin(), cut.end());
+  return cut;
+}
+
+bool is_staging_folder(const std::string& dir) {
+  const std::string target = without_slashes(dir);
+  const std::string name = target.substr(target.rfind('/') + 1);
+  return name.size() > 1 && name[0] == '.' && name.find(".tmp-") != std::string::npos;
 }
 
 }  // namespace mirrorcal::files

@@ -8,189 +8,17 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 
 #include <fcntl.h>
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/files.hpp"
 #include "recording_checks.hpp"
+#include "recording_csv.hpp"
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
-
-namespace {
-
-constexpr const char* kImuHeader =
-    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
-    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]";
-constexpr const char* kFramesHeader = "#timestamp [ns],filename";
-constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
-
-// A CSV file's lines with their numbers, after a header that must be exactly EuRoC's.
-class CsvReader {
- public:
-  CsvReader(std::string_view text, const std::string& file, std::string& error)
-      : text_(text), file_(file), error_(error) {}
-
-  bool header(const char* expected) {
-    std::string_view line;
-    if (!next_line(line))
-      return fail(1, "empty file; expected the header '" + std::string(expected) + "'");
-    if (text::trim(line) != expected)
-      return fail(line_no_, "header " + text::quoted(text::trim(line)) + " is not EuRoC's '" +
-                                std::string(expected) + "'");
-    return true;
-  }
-
-  // The next non-blank line split at commas into exactly n fields; false at the end (error empty)
-  // or on a line with another number of fields (error set).
-  bool row(std::size_t n, std::string_view* fields) {
-    std::string_view line;
-    do {
-      if (!next_line(line)) return false;
-    } while (text::trim(line).empty());
-    std::size_t count = 0;
-    for (;;) {
-      const std::size_t comma = line.find(',');
-      if (count < n) fields[count] = line.substr(0, comma);
-      ++count;
-      if (comma == std::string_view::npos) break;
-      line.remove_prefix(comma + 1);
-    }
-    if (count != n)
-      return fail(line_no_, "expected " + std::to_string(n) + " comma-separated fields, found " +
-                                std::to_string(count) + (at_end() ? " (truncated file?)" : ""));
-    return true;
-  }
-
-  bool number(std::string_view field, const char* what, double& v) {
-    if (!text::parse(field, v))
-      return fail(line_no_, std::string(what) + ": " + text::quoted(field) + " is not a number");
-    if (!std::isfinite(v))
-      return fail(line_no_, std::string(what) + ": " + text::quoted(field) + " is not finite");
-    return true;
-  }
-
-  bool integer(std::string_view field, const char* what, std::int64_t& v) {
-    if (!text::parse(field, v))
-      return fail(line_no_,
-                  std::string(what) + ": " + text::quoted(field) + " is not an integer (int64)");
-    return true;
-  }
-
-  bool fail(std::size_t line, const std::string& what) {
-    error_ = file_ + ":" + std::to_string(line) + ": " + what;
-    return false;
-  }
-  std::size_t line_no() const { return line_no_; }
-  bool failed() const { return !error_.empty(); }
-
- private:
-  bool at_end() const { return pos_ >= text_.size(); }
-  bool next_line(std::string_view& line) {
-    if (at_end()) return false;
-    const std::size_t nl = text_.find('\n', pos_);
-    const std::size_t end = nl == std::string_view::npos ? text_.size() : nl;
-    line = text_.substr(pos_, end - pos_);
-    pos_ = end + 1;
-    ++line_no_;
-    return true;
-  }
-
-  std::string_view text_;
-  const std::string& file_;
-  std::string& error_;
-  std::size_t pos_ = 0, line_no_ = 0;
-};
-
-}  // namespace
-
-bool parse_imu_csv(std::string_view text, const std::string& file, std::vector<ImuSample>& out,
-                   std::string& error) {
-  error.clear();
-  out.clear();
-  CsvReader csv(text, file, error);
-  if (!csv.header(kImuHeader)) return false;
-  std::string_view f[7];
-  static const char* const names[7] = {"timestamp", "w_RS_S_x", "w_RS_S_y", "w_RS_S_z",
-                                       "a_RS_S_x",  "a_RS_S_y", "a_RS_S_z"};
-  while (csv.row(7, f)) {
-    ImuSample s;
-    double v[6];
-    if (!csv.integer(f[0], names[0], s.t_ns)) return false;
-    for (int j = 0; j < 6; ++j)
-      if (!csv.number(f[j + 1], names[j + 1], v[j])) return false;
-    s.gyro = Eigen::Vector3d(v[0], v[1], v[2]);
-    s.accel = Eigen::Vector3d(v[3], v[4], v[5]);
-    if (!out.empty() && s.t_ns <= out.back().t_ns)
-      return csv.fail(csv.line_no(),
-                      "timestamp " + std::to_string(s.t_ns) +
-                          (s.t_ns == out.back().t_ns ? " repeats" : " goes backwards") +
-                          " (previous " + std::to_string(out.back().t_ns) + ")");
-    out.push_back(s);
-  }
-  return !csv.failed();
-}
-
-bool parse_frames_csv(std::string_view text, const std::string& file,
-                      std::vector<ObservedFrame>& out, std::string& error) {
-  error.clear();
-  out.clear();
-  CsvReader csv(text, file, error);
-  if (!csv.header(kFramesHeader)) return false;
-  std::string_view f[2];
-  while (csv.row(2, f)) {
-    ObservedFrame frame;
-    if (!csv.integer(f[0], "timestamp", frame.t_ns)) return false;
-    if (text::trim(f[1]).empty()) return csv.fail(csv.line_no(), "empty filename");
-    if (!out.empty() && frame.t_ns <= out.back().t_ns)
-      return csv.fail(csv.line_no(),
-                      "timestamp " + std::to_string(frame.t_ns) +
-                          (frame.t_ns == out.back().t_ns ? " repeats" : " goes backwards") +
-                          " (previous " + std::to_string(out.back().t_ns) + ")");
-    out.push_back(std::move(frame));
-  }
-  return !csv.failed();
-}
-
-bool parse_features_csv(std::string_view text, const std::string& file, int markers,
-                        std::vector<ObservedFrame>& frames, std::string& error) {
-  error.clear();
-  CsvReader csv(text, file, error);
-  if (!csv.header(kFeaturesHeader)) return false;
-  std::string_view f[4];
-  std::size_t frame = 0;
-  bool any = false;
-  std::int64_t last_t = 0;
-  while (csv.row(4, f)) {
-    std::int64_t t = 0, id = 0;
-    double u = 0.0, v = 0.0;
-    if (!csv.integer(f[0], "timestamp", t) || !csv.integer(f[1], "feature_id", id) ||
-        !csv.number(f[2], "u", u) || !csv.number(f[3], "v", v))
-      return false;
-    if (any && t < last_t)
-      return csv.fail(csv.line_no(), "timestamp " + std::to_string(t) +
-                                         " goes backwards (previous " + std::to_string(last_t) +
-                                         ")");
-    if (id < 0 || id >= markers)
-      return csv.fail(csv.line_no(), "feature_id " + std::to_string(id) +
-                                         " is not a marker of this calibration (ids 0.." +
-                                         std::to_string(markers - 1) +
-                                         ", M = " + std::to_string(markers) + ")");
-    while (frame < frames.size() && frames[frame].t_ns < t) ++frame;
-    if (frame == frames.size() || frames[frame].t_ns != t)
-      return csv.fail(csv.line_no(),
-                      "timestamp " + std::to_string(t) + " is not a frame of cam0/data.csv");
-    auto& seen = frames[frame].markers;
-    if (std::any_of(seen.begin(), seen.end(), [&](const ObservedMarker& m) { return m.id == id; }))
-      return csv.fail(csv.line_no(), "feature_id " + std::to_string(id) +
-                                         " repeats in the frame at " + std::to_string(t));
-    seen.push_back({static_cast<int>(id), u, v});
-    any = true;
-    last_t = t;
-  }
-  return !csv.failed();
-}
 
 namespace {
 
@@ -216,12 +44,109 @@ class Fingerprint {
 
 }  // namespace
 
-bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
+namespace {
+
+// The paths of a recording's CSV files.
+struct CsvFiles {
+  std::string imu_csv, frames_csv, features_csv;
+};
+
+CsvFiles csv_files(const std::string& dir) {
+  return {dir + "/mav0/imu0/data.csv", dir + "/mav0/cam0/data.csv",
+          dir + "/mav0/cam0/features.csv"};
+}
+
+// The fingerprint of the CSV files' bytes, read in chunks.
+bool fingerprint_of(const CsvFiles& f, std::string& hex, std::string& error) {
+  Fingerprint fingerprint;
+  for (const std::string* path : {&f.imu_csv, &f.frames_csv, &f.features_csv}) {
+    LineInput input;
+    if (!input.open(*path, error)) return false;
+    std::string_view chunk;
+    while (input.next_chunk(chunk)) fingerprint.add(chunk);
+    if (!input.error().empty()) {
+      error = input.error();
+      return false;
+    }
+  }
+  hex = fingerprint.hex();
+  return true;
+}
+
+// One pass over the CSV files: every row checked, the statistics of the checks gathered, each
+// sample and frame handed to keep_* (read_recording holds them).
+bool gather_stats(const CsvFiles& f, int markers, RecordingStats& stats,
+                  const std::function<void(const ImuSample&)>& keep_imu,
+                  const std::function<void(const ObservedFrame&)>& keep_frame, std::string& error) {
+  StatsGatherer gatherer(markers);
+  {
+    LineInput input;
+    if (!input.open(f.imu_csv, error)) return false;
+    ImuRows rows(input, f.imu_csv);
+    ImuSample s;
+    if (rows.header())
+      while (rows.next(s)) {
+        gatherer.add(s);
+        if (keep_imu) keep_imu(s);
+      }
+    if (!rows.error().empty()) {
+      error = rows.error();
+      return false;
+    }
+  }
+  LineInput frames, features;
+  if (!frames.open(f.frames_csv, error) || !features.open(f.features_csv, error)) return false;
+  FrameReader reader(frames, f.frames_csv, features, f.features_csv, markers);
+  ObservedFrame frame;
+  if (reader.headers())
+    while (reader.next(frame)) {
+      gatherer.add(frame);
+      if (keep_frame) keep_frame(frame);
+    }
+  if (!reader.error().empty()) {
+    error = reader.error();
+    return false;
+  }
+  stats = gatherer.finish();
+  return true;
+}
+
+// A recording that `record` did not complete (killed while writing it) is refused, saying so: its
+// temporary folder, or a folder it never renamed into place (of a --two-stage recording too).
+bool check_not_cut(const std::string& dir, std::vector<std::string>& notes, std::string& error) {
+  if (files::is_staging_folder(dir)) {
+    error = dir +
+            ": a recording cut off before it was complete (record was stopped while writing "
+            "it): record it again";
+    return false;
+  }
+  std::error_code ec;
+  const std::filesystem::path parent = std::filesystem::path(dir).parent_path();
+  for (const std::string& target : {dir, parent.empty() ? std::string() : parent.string()}) {
+    const std::vector<std::string> cut =
+        target.empty() ? std::vector<std::string>{} : files::cut_folders(target);
+    if (cut.empty()) continue;
+    if (!std::filesystem::exists(dir, ec)) {
+      error = dir + ": no recording: record was stopped before it completed it (what it wrote " +
+              "lies in " + cut.back() + "): record it again";
+      return false;
+    }
+    notes.push_back(target + ": a later record into it was stopped before it completed (" +
+                    cut.back() + "); this is the recording before it");
+    break;
+  }
+  return true;
+}
+
+// The YAML files of dir, the statistics of its streams, and the input checks; keep_* receive the
+// streams (read_recording).
+bool read_checked(const std::string& dir, int markers, Recording& out,
+                  const std::function<void(const ImuSample&)>& keep_imu,
+                  const std::function<void(const ObservedFrame&)>& keep_frame, std::string& error) {
   out = Recording{};
+  if (!check_not_cut(dir, out.notes, error)) return false;
   std::string text;
-  const std::string imu_csv = dir + "/mav0/imu0/data.csv";
-  const std::string frames_csv = dir + "/mav0/cam0/data.csv";
-  const std::string features_csv = dir + "/mav0/cam0/features.csv";
+  const CsvFiles csv = csv_files(dir);
   const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
   const std::string priors_yaml = dir + "/mirrorcal.yaml";
   if (!files::read_file(imu_yaml, text, error) ||
@@ -238,57 +163,157 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
   if (out.has_truth && (!files::read_file(truth_yaml, text, error) ||
                         !parse_truth_yaml(text, truth_yaml, out.truth, error)))
     return false;
-  Fingerprint fingerprint;
-  if (!files::read_file(imu_csv, text, error) || !parse_imu_csv(text, imu_csv, out.imu, error))
+  if (!gather_stats(csv, markers, out.stats, keep_imu, keep_frame, error) ||
+      !fingerprint_of(csv, out.fingerprint, error))
     return false;
-  fingerprint.add(text);
-  if (!files::read_file(frames_csv, text, error) ||
-      !parse_frames_csv(text, frames_csv, out.frames, error))
-    return false;
-  fingerprint.add(text);
-  if (!files::read_file(features_csv, text, error) ||
-      !parse_features_csv(text, features_csv, markers, out.frames, error))
-    return false;
-  fingerprint.add(text);
-  out.fingerprint = fingerprint.hex();
+  const RecordingStats& st = out.stats;
 
   // The filter starts at the first IMU sample and ends at the last: frames outside are skipped.
-  if (out.imu.size() < 2) {
-    error = imu_csv + ": " + std::to_string(out.imu.size()) +
+  if (st.imu_samples < 2) {
+    error = csv.imu_csv + ": " + std::to_string(st.imu_samples) +
             " IMU samples; the filter needs at least 2 (it propagates between samples)";
     return false;
   }
   // An IMU-only recording (record without a camera) says so before anything about its data.
-  if (out.frames.empty()) {
-    error = frames_csv + ": no frame within the IMU data; the filter needs at least one";
+  if (st.frames_listed == 0) {
+    error = csv.frames_csv + ": no frame within the IMU data; the filter needs at least one";
     return false;
   }
-  const RecordingFiles named{imu_csv, frames_csv, imu_yaml};
+  const RecordingFiles named{csv.imu_csv, csv.frames_csv, imu_yaml};
   if (!check_imu_rate(out, named, error) || !check_frames_against_imu(out, named, error) ||
       !check_imu_units(out, named, error))
     return false;
   check_noise_densities(out, named, out.warnings);
-  const std::int64_t t0 = out.imu.front().t_ns, t1 = out.imu.back().t_ns;
-  const auto outside = [&](const ObservedFrame& f) { return f.t_ns < t0 || f.t_ns > t1; };
-  const std::size_t before = out.frames.size();
-  out.frames.erase(std::remove_if(out.frames.begin(), out.frames.end(), outside), out.frames.end());
-  out.frames_outside_imu = before - out.frames.size();
+  out.frames_outside_imu = st.frames_listed - st.frames;
   if (out.frames_outside_imu > 0)
-    out.notes.push_back(frames_csv + ": " + std::to_string(out.frames_outside_imu) +
-                        " frames outside the IMU data (" + std::to_string(t0) + ".." +
-                        std::to_string(t1) + " ns) skipped");
-  for (int id = 0; id < markers; ++id) {
-    const bool seen =
-        std::any_of(out.frames.begin(), out.frames.end(), [&](const ObservedFrame& f) {
-          return std::any_of(f.markers.begin(), f.markers.end(),
-                             [&](const ObservedMarker& m) { return m.id == id; });
-        });
-    if (!seen) {
-      error = features_csv + ": marker " + std::to_string(id) +
+    out.notes.push_back(csv.frames_csv + ": " + std::to_string(out.frames_outside_imu) +
+                        " frames outside the IMU data (" + std::to_string(st.imu_first_ns) + ".." +
+                        std::to_string(st.imu_last_ns) + " ns) skipped");
+  for (int id = 0; id < markers; ++id)
+    if (!st.marker_seen[static_cast<std::size_t>(id)]) {
+      error = csv.features_csv + ": marker " + std::to_string(id) +
               " is seen in no frame within the IMU data; the filter cannot locate it";
       return false;
     }
+  return true;
+}
+
+}  // namespace
+
+bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
+  // The frames within the IMU data only; its span is known once all of it has been read.
+  std::vector<ImuSample> imu;
+  std::vector<ObservedFrame> frames;
+  if (!read_checked(
+          dir, markers, out, [&](const ImuSample& s) { imu.push_back(s); },
+          [&](const ObservedFrame& f) { frames.push_back(f); }, error))
+    return false;
+  const auto outside = [&](const ObservedFrame& f) {
+    return f.t_ns < out.stats.imu_first_ns || f.t_ns > out.stats.imu_last_ns;
+  };
+  frames.erase(std::remove_if(frames.begin(), frames.end(), outside), frames.end());
+  out.imu = std::move(imu);
+  out.frames = std::move(frames);
+  return true;
+}
+
+// --- FileStreams --------------------------------------------------------------------------
+
+namespace {
+
+class FileImuSource final : public hal::ImuSource {
+ public:
+  FileImuSource(const std::string& path, std::string& first_error)
+      : rows_(input_, path), first_error_(first_error) {
+    std::string error;
+    if (!input_.open(path, error) || !rows_.header()) fail(error);
   }
+  hal::SourceStatus next(ImuSample& sample) override {
+    if (!error_.empty()) return hal::SourceStatus::kError;
+    if (rows_.next(sample)) return hal::SourceStatus::kOk;
+    if (rows_.error().empty()) return hal::SourceStatus::kEndOfStream;
+    fail(rows_.error());
+    return hal::SourceStatus::kError;
+  }
+  const char* error() const override { return error_.c_str(); }
+
+ private:
+  void fail(const std::string& error) {
+    error_ = !error.empty() ? error : rows_.error();
+    if (first_error_.empty()) first_error_ = error_ + " (the file changed while calibrating?)";
+  }
+  LineInput input_;
+  ImuRows rows_;
+  std::string error_;
+  std::string& first_error_;
+};
+
+class FileFrameStream final : public FrameStream {
+ public:
+  FileFrameStream(const CsvFiles& f, int markers, std::int64_t first_ns, std::int64_t last_ns,
+                  std::string& first_error)
+      : reader_(frames_, f.frames_csv, features_, f.features_csv, markers),
+        first_ns_(first_ns),
+        last_ns_(last_ns),
+        first_error_(first_error) {
+    std::string error;
+    if (!frames_.open(f.frames_csv, error) || !features_.open(f.features_csv, error) ||
+        !reader_.headers())
+      fail(error);
+  }
+  hal::SourceStatus next(ObservedFrame& frame) override {
+    while (error_.empty()) {
+      if (!reader_.next(frame)) {
+        if (reader_.error().empty()) return hal::SourceStatus::kEndOfStream;
+        fail(reader_.error());
+        break;
+      }
+      if (frame.t_ns < first_ns_) continue;
+      if (frame.t_ns > last_ns_) return hal::SourceStatus::kEndOfStream;
+      return hal::SourceStatus::kOk;
+    }
+    return hal::SourceStatus::kError;
+  }
+
+ private:
+  void fail(const std::string& error) {
+    error_ = !error.empty() ? error : reader_.error();
+    if (first_error_.empty()) first_error_ = error_ + " (the file changed while calibrating?)";
+  }
+  LineInput frames_, features_;
+  FrameReader reader_;
+  std::int64_t first_ns_, last_ns_;
+  std::string error_;
+  std::string& first_error_;
+};
+
+// The streams read from the files again for each pass.
+class FileStreams final : public RecordingStreams {
+ public:
+  // Frames before first_ns or after last_ns (the IMU data's span) are skipped.
+  FileStreams(CsvFiles files, int markers, std::int64_t first_ns, std::int64_t last_ns)
+      : files_(std::move(files)), markers_(markers), first_ns_(first_ns), last_ns_(last_ns) {}
+  std::unique_ptr<hal::ImuSource> open_imu() const override {
+    return std::make_unique<FileImuSource>(files_.imu_csv, *error_);
+  }
+  std::unique_ptr<FrameStream> open_frames() const override {
+    return std::make_unique<FileFrameStream>(files_, markers_, first_ns_, last_ns_, *error_);
+  }
+  const std::string& error() const override { return *error_; }
+
+ private:
+  CsvFiles files_;
+  int markers_;
+  std::int64_t first_ns_, last_ns_;
+  std::unique_ptr<std::string> error_ = std::make_unique<std::string>();  // the sources write it
+};
+
+}  // namespace
+
+bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
+  if (!read_checked(dir, markers, out, {}, {}, error)) return false;
+  out.streams = std::make_shared<const FileStreams>(csv_files(dir), markers, out.stats.imu_first_ns,
+                                                    out.stats.imu_last_ns);
   return true;
 }
 

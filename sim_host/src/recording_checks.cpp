@@ -37,35 +37,6 @@ std::string unit_hint(double factor) {
   return "timestamps in another unit than nanoseconds, or another clock?";
 }
 
-template <class Value>
-double median_of(std::vector<Value> v) {
-  std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
-  return double(v[v.size() / 2]);
-}
-
-double median_step_ns(const std::vector<ImuSample>& imu) {
-  std::vector<std::int64_t> steps;
-  for (std::size_t i = 1; i < imu.size(); ++i) steps.push_back(imu[i].t_ns - imu[i - 1].t_ns);
-  return median_of(steps);
-}
-
-// The discrete sigma of white noise on one sensor (gyro or accelerometer) from the second
-// differences of its samples, whose variance is 6 sigma^2; smooth motion adds little at IMU rates.
-// Steps of unequal length (gaps) are left out. 0 when there is nothing to measure.
-double high_frequency_sigma(const std::vector<ImuSample>& imu, bool gyro) {
-  double sum = 0.0;
-  std::size_t n = 0;
-  for (std::size_t i = 2; i < imu.size(); ++i) {
-    const double a = double(imu[i - 1].t_ns - imu[i - 2].t_ns);
-    const double b = double(imu[i].t_ns - imu[i - 1].t_ns);
-    if (std::abs(a - b) > 0.1 * std::max(a, b)) continue;
-    const auto& x = [&](std::size_t k) { return gyro ? imu[k].gyro : imu[k].accel; };
-    sum += (x(i) - 2.0 * x(i - 1) + x(i - 2)).squaredNorm();
-    n += 3;
-  }
-  return n == 0 ? 0.0 : std::sqrt(sum / (6.0 * double(n)));
-}
-
 // The densities and random walks of real MEMS parts, generously (units of imu.yaml's keys).
 struct NoiseRange {
   const char* key;
@@ -86,7 +57,7 @@ void compare_density(const Recording& r, const RecordingFiles& files, bool gyro,
   const double density =
       gyro ? r.sensors.imu.gyro_noise_density : r.sensors.imu.accel_noise_density;
   const double stated = density * std::sqrt(r.sensors.imu_rate_hz);
-  const double seen = high_frequency_sigma(r.imu, gyro);
+  const double seen = gyro ? r.stats.gyro_noise_seen : r.stats.accel_noise_seen;
   if (seen <= 0.0) return;
   const double factor = stated / seen;
   if (factor <= kNoiseFactor && factor >= 1.0 / kNoiseFactor) return;
@@ -105,38 +76,107 @@ void compare_density(const Recording& r, const RecordingFiles& files, bool gyro,
 
 }  // namespace
 
+void StreamMedian::add(double v) {
+  if (seen_++ % stride_ != 0) return;
+  if (kept_.size() == kKept) {  // keep every other value, and every other from now on
+    for (std::size_t i = 0; i < kKept / 2; ++i) kept_[i] = kept_[2 * i];
+    kept_.resize(kKept / 2);
+    stride_ *= 2;
+    if ((seen_ - 1) % stride_ != 0) return;
+  }
+  kept_.push_back(v);
+}
+
+double StreamMedian::median() const {
+  if (kept_.empty()) return 0.0;
+  std::vector<double> v = kept_;
+  std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+StatsGatherer::StatsGatherer(int markers) {
+  stats_.marker_seen.assign(static_cast<std::size_t>(std::max(markers, 0)), false);
+}
+
+// The white noise's discrete sigma from the second differences of the samples, whose variance is
+// 6 sigma^2; smooth motion adds little at IMU rates. Steps of unequal length (gaps) are left out.
+void StatsGatherer::add(const ImuSample& s) {
+  RecordingStats& st = stats_;
+  if (st.imu_samples == 0) st.imu_first_ns = s.t_ns;
+  if (st.imu_samples >= 1) steps_.add(double(s.t_ns - previous_[0].t_ns));
+  if (st.imu_samples >= 2) {
+    const double a = double(previous_[0].t_ns - previous_[1].t_ns);
+    const double b = double(s.t_ns - previous_[0].t_ns);
+    if (std::abs(a - b) <= 0.1 * std::max(a, b)) {
+      noise_sum_[0] += (s.gyro - 2.0 * previous_[0].gyro + previous_[1].gyro).squaredNorm();
+      noise_sum_[1] += (s.accel - 2.0 * previous_[0].accel + previous_[1].accel).squaredNorm();
+      noise_n_ += 3;
+    }
+  }
+  gyro_.add(s.gyro.norm());
+  accel_.add(s.accel.norm());
+  previous_[1] = previous_[0];
+  previous_[0] = s;
+  st.imu_last_ns = s.t_ns;
+  ++st.imu_samples;
+}
+
+void StatsGatherer::add(const ObservedFrame& f) {
+  RecordingStats& st = stats_;
+  if (st.frames_listed++ == 0) st.frames_first_ns = f.t_ns;
+  st.frames_last_ns = f.t_ns;
+  if (st.imu_samples == 0 || f.t_ns < st.imu_first_ns || f.t_ns > st.imu_last_ns) return;
+  if (st.frames++ == 0) st.frames_inside_first_ns = f.t_ns;
+  st.frames_inside_last_ns = f.t_ns;
+  st.markers += f.markers.size();
+  for (const ObservedMarker& m : f.markers)
+    if (m.id >= 0 && std::size_t(m.id) < st.marker_seen.size())
+      st.marker_seen[std::size_t(m.id)] = true;
+}
+
+RecordingStats StatsGatherer::finish() {
+  stats_.imu_step_median_ns = steps_.median();
+  stats_.gyro_norm_median = gyro_.median();
+  stats_.accel_norm_median = accel_.median();
+  const auto sigma = [&](double sum) {
+    return noise_n_ == 0 ? 0.0 : std::sqrt(sum / (6.0 * double(noise_n_)));
+  };
+  stats_.gyro_noise_seen = sigma(noise_sum_[0]);
+  stats_.accel_noise_seen = sigma(noise_sum_[1]);
+  return stats_;
+}
+
 bool check_imu_rate(const Recording& r, const RecordingFiles& files, std::string& error) {
-  const double rate = 1e9 / median_step_ns(r.imu);
+  const double rate = 1e9 / r.stats.imu_step_median_ns;
   const double factor = rate / r.sensors.imu_rate_hz;
   if (factor <= kImuRateTolerance && factor >= 1.0 / kImuRateTolerance) return true;
-  error = files.imu_csv + ": its timestamps step by " + number(median_step_ns(r.imu)) +
+  error = files.imu_csv + ": its timestamps step by " + number(r.stats.imu_step_median_ns) +
           " ns (median), " + number(rate) + " Hz, but " + files.imu_yaml + "'s update_rate is " +
           number(r.sensors.imu_rate_hz) + " Hz: " + unit_hint(factor);
   return false;
 }
 
 bool check_frames_against_imu(const Recording& r, const RecordingFiles& files, std::string& error) {
-  const std::int64_t t0 = r.imu.front().t_ns, t1 = r.imu.back().t_ns;
-  std::vector<std::int64_t> inside;
-  for (const ObservedFrame& f : r.frames)
-    if (f.t_ns >= t0 && f.t_ns <= t1) inside.push_back(f.t_ns);
+  const RecordingStats& st = r.stats;
+  const std::int64_t t0 = st.imu_first_ns, t1 = st.imu_last_ns;
   const std::string imu_span = std::to_string(t0) + ".." + std::to_string(t1) + " ns";
-  if (inside.empty() || 2 * inside.size() < r.frames.size()) {
-    const double cam_mid = 0.5 * (double(r.frames.front().t_ns) + double(r.frames.back().t_ns));
+  if (st.frames == 0 || 2 * st.frames < st.frames_listed) {
+    const double cam_mid = 0.5 * (double(st.frames_first_ns) + double(st.frames_last_ns));
     const double imu_mid = 0.5 * (double(t0) + double(t1));
     error =
         files.frames_csv + ": " +
-        (inside.empty() ? std::string("no frame within the IMU data")
-                        : std::to_string(r.frames.size() - inside.size()) + " of " +
-                              std::to_string(r.frames.size()) + " frames outside the IMU data") +
+        (st.frames == 0 ? std::string("no frame within the IMU data")
+                        : std::to_string(st.frames_listed - st.frames) + " of " +
+                              std::to_string(st.frames_listed) + " frames outside the IMU data") +
         " (" + imu_span + " in " + files.imu_csv + "; the frames " +
-        std::to_string(r.frames.front().t_ns) + ".." + std::to_string(r.frames.back().t_ns) +
+        std::to_string(st.frames_first_ns) + ".." + std::to_string(st.frames_last_ns) +
         " ns); the filter needs them within: " +
         unit_hint(cam_mid > 0.0 && imu_mid > 0.0 ? imu_mid / cam_mid : 0.0);
     return false;
   }
-  if (inside.size() < 2) return true;
-  const double imu_ns = double(t1 - t0), cam_ns = double(inside.back() - inside.front());
+  if (st.frames < 2) return true;
+  const double imu_ns = double(t1 - t0);
+  const double cam_ns = double(st.frames_inside_last_ns - st.frames_inside_first_ns);
   if (cam_ns * kFrameSpanFactor >= imu_ns) return true;
   error = files.frames_csv + ": the frames within the IMU data span " + number(cam_ns) +
           " ns, the IMU data " + number(imu_ns) + " ns (" + files.imu_csv + "), " +
@@ -145,12 +185,7 @@ bool check_frames_against_imu(const Recording& r, const RecordingFiles& files, s
 }
 
 bool check_imu_units(const Recording& r, const RecordingFiles& files, std::string& error) {
-  std::vector<double> gyro, accel;
-  for (const ImuSample& s : r.imu) {
-    gyro.push_back(s.gyro.norm());
-    accel.push_back(s.accel.norm());
-  }
-  const double g = median_of(gyro), a = median_of(accel);
+  const double g = r.stats.gyro_norm_median, a = r.stats.accel_norm_median;
   if (g > kMaxGyroNorm) {
     error = files.imu_csv + ": the gyro's median rate is " + number(g) +
             " rad/s, beyond any part's range (" + number(kMaxGyroNorm) +

@@ -3,6 +3,7 @@
 // for m/s^2, noise densities that are not the data's).
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,36 @@ namespace mirrorcal::sim {
 // The file names the messages give.
 struct RecordingFiles {
   std::string imu_csv, frames_csv, imu_yaml;
+};
+
+// A median over a stream of any length in bounded memory: exact over up to kKept values; beyond,
+// over every 2^k-th value (k the smallest that keeps at most kKept).
+class StreamMedian {
+ public:
+  static constexpr std::size_t kKept = 1 << 16;
+  void add(double v);
+  double median() const;  // 0 without values
+
+ private:
+  std::vector<double> kept_;
+  std::uint64_t seen_ = 0, stride_ = 1;
+};
+
+// RecordingStats from the IMU samples, then the frames, fed in timestamp order.
+class StatsGatherer {
+ public:
+  explicit StatsGatherer(int markers);
+  void add(const ImuSample& s);
+  // After the last IMU sample: the frames are judged against the IMU data's span.
+  void add(const ObservedFrame& f);
+  RecordingStats finish();
+
+ private:
+  RecordingStats stats_;
+  StreamMedian steps_, gyro_, accel_;
+  ImuSample previous_[2];             // the last two samples, newest first
+  double noise_sum_[2] = {0.0, 0.0};  // gyro, accelerometer
+  std::uint64_t noise_n_ = 0;
 };
 
 // The IMU's sample rate in its timestamps against imu.yaml's update_rate (false: beyond

@@ -1,5 +1,7 @@
 // libFuzzer target: the YAML beside a recording (mirrorcal.yaml, imu.yaml, camchain.yaml,
-// truth.yaml) and a result to start from (calibrate --from), each parser on the same input. Any input gives values or a message, never a crash.
+// truth.yaml) and a result to start from (calibrate --from), each parser on the same input. Any
+// input gives values or a message, never a crash. fuzz_priors_yaml and fuzz_result_yaml go deeper
+// into the two files users write or edit most.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -42,7 +44,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   error.clear();
   ok = sim::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
   if (ok != error.empty()) std::abort();
-  const long n = 6 + 3 * static_cast<long>(start.features_c.size());
+  const long n = 6 + 3 * static_cast<long>(start.features_c.size()) + (start.has_t_d ? 1 : 0);
   if (ok && (start.covariance.rows() != n || start.covariance.cols() != n)) std::abort();
   return 0;
 }

@@ -123,6 +123,13 @@ TEST_F(BadInput, TruncatedLastLine) {
                 "expected 7 comma-separated fields, found 2 (truncated file?)"});
 }
 
+// A file without line ends (a binary file, /dev/zero copied) is refused at its first long line:
+// the reader's memory is bounded, not the file's size.
+TEST_F(BadInput, ALineLongerThanAnyRowIsRefused) {
+  set_line(features(), 4, line(features(), 4) + std::string(70000, '0'));
+  expect_error({features() + ":4:", "a line longer than 65536 characters"});
+}
+
 TEST_F(BadInput, LineWithTooManyFields) {
   set_line(features(), 4, line(features(), 4) + ",7");
   expect_error({features() + ":4:", "expected 4 comma-separated fields, found 5"});

@@ -8,11 +8,13 @@
 #include <cstdio>
 #include <cstring>
 #include <map>
+#include <random>
 #include <sstream>
 #include <vector>
 
 #include <fcntl.h>
 #include <sys/mount.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/files.hpp"
@@ -211,7 +213,7 @@ TEST(Cli, TwoStagesOnRecordingsGiveTheBytesOfSimWithIntrinsics) {
     Result r =
         run_mirrorcal("sim --intrinsics" + hold + " --seed 5 --no-plots --out " + d + "/sim", d);
     ASSERT_EQ(r.code, 0) << r.output;
-    r = run_mirrorcal("record --two-stage" + hold + " --seed 5 --out " + d + "/rec", d);
+    r = run_mirrorcal("record --two-stage" + hold + " --seed 5 --force --out " + d + "/rec", d);
     ASSERT_EQ(r.code, 0) << r.output;
     r = run_mirrorcal("calibrate " + d + "/rec/stage1 --out " + d + "/c1", d);
     ASSERT_EQ(r.code, 0) << r.output;
@@ -545,7 +547,7 @@ TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
   const std::vector<std::vector<std::string>> commands = {
       {"sim", "--seed", "2", "--no-plots", "--out", sim},
       {"montecarlo", "--runs", "2", "--jobs", "1", "--no-plots", "--out", mc_out},
-      {"record", "--seed", "2", "--out", rec}};
+      {"record", "--seed", "2", "--force", "--out", rec}};
   for (const auto& c : commands) ASSERT_EQ(run_mirrorcal(c, dir.path).code, 0) << c[0];
   const auto snapshot = [&] {
     std::map<std::string, std::string> bytes;
@@ -662,4 +664,144 @@ TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
             std::string::npos)
       << w;
   ASSERT_EQ(mc::app::result_warnings(r).size(), 1u);
+}
+
+namespace {
+
+// The regular files under dir by path relative to it, leaving out hidden ones (lock files) and
+// hidden folders (temporary ones).
+std::map<std::string, std::string> recording_files(const std::string& dir) {
+  std::map<std::string, std::string> bytes;
+  if (!fs::exists(dir)) return bytes;
+  for (auto it = fs::recursive_directory_iterator(dir); it != fs::recursive_directory_iterator();
+       ++it) {
+    const std::string name = it->path().filename().string();
+    if (name[0] == '.') {
+      if (it->is_directory()) it.disable_recursion_pending();
+      continue;
+    }
+    if (it->is_regular_file())
+      bytes[fs::relative(it->path(), dir).string()] = slurp(it->path().string());
+  }
+  return bytes;
+}
+
+// mirrorcal with args, stopped by signal after delay_us (or ended before).
+void run_and_kill(const std::vector<std::string>& args, int signal, long delay_us,
+                  const std::string& log) {
+  std::vector<std::string> words = {MIRRORCAL_BIN};
+  words.insert(words.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(w.data());
+  argv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    if (!freopen(log.c_str(), "w", stdout) || dup2(fileno(stdout), 2) < 0) _exit(126);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  usleep(static_cast<useconds_t>(delay_us));
+  kill(pid, signal);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+}
+
+}  // namespace
+
+// record writes a whole recording or none: over an existing one only with --force, which it
+// replaces whole once the new one is complete.
+TEST(Cli, RecordReplacesARecordingOnlyWithForceAndWhole) {
+  TempDir dir("cli-record-force");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 1 --out " + d + "/rec", d).code, 0);
+  ASSERT_EQ(run_mirrorcal("record --seed 2 --out " + d + "/two", d).code, 0);
+  const auto one = recording_files(d + "/rec"), two = recording_files(d + "/two");
+  ASSERT_GE(one.size(), 7u);
+  ASSERT_NE(one, two);
+  Result r = run_mirrorcal("record --seed 2 --out " + d + "/rec", d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(d + "/rec: holds a recording already; give --force"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(recording_files(d + "/rec"), one);
+  r = run_mirrorcal("record --seed 2 --force --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(recording_files(d + "/rec"), two);
+  for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+// Stopped at random moments (SIGKILL, SIGTERM, SIGINT) while replacing a recording, record leaves
+// the recording before it or the new one, whole; calibrate names the temporary folder a kill left.
+// Only the moments are random (a fixed seed): whatever they hit, the property holds.
+TEST(Cli, RecordStoppedAtRandomMomentsLeavesTheOldRecordingOrTheNewWhole) {
+  TempDir dir("cli-record-killed");
+  const std::string& d = dir.path;
+  const std::string rec = d + "/rec";
+  std::map<std::string, std::string> seeds[2];
+  for (int k = 0; k < 2; ++k) {
+    const std::string ref = d + "/ref" + std::to_string(k);
+    ASSERT_EQ(run_mirrorcal({"record", "--seed", std::to_string(k + 1), "--out", ref}, d).code, 0);
+    seeds[k] = recording_files(ref);
+  }
+  ASSERT_EQ(run_mirrorcal({"record", "--seed", "1", "--out", rec}, d).code, 0);
+  std::mt19937 random(16);
+  const int signals[3] = {SIGKILL, SIGTERM, SIGINT};
+  int cut = 0, replaced = 0;
+  for (int i = 0; i < 24; ++i) {
+    const auto now = recording_files(rec);
+    const int current = now == seeds[0] ? 0 : now == seeds[1] ? 1 : -1;
+    ASSERT_NE(current, -1) << "after stop " << i << ", " << rec << " is neither recording";
+    const std::string seed = std::to_string(2 - current);  // the other one
+    run_and_kill({"record", "--seed", seed, "--force", "--out", rec}, signals[i % 3],
+                 std::uniform_int_distribution<long>(0, 150000)(random), d + "/killed.log");
+    replaced += recording_files(rec) != now;
+    cut += !mc::files::cut_folders(rec).empty();
+    if (!mc::files::cut_folders(rec).empty() && cut == 1) {
+      // The recording there is whole and calibrates, with a note about the one cut off.
+      const Result r = run_mirrorcal("calibrate " + rec + " --out " + d + "/cal", d);
+      EXPECT_EQ(r.code, 0) << r.output;
+      EXPECT_NE(r.output.find("a later record into it was stopped before it completed"),
+                std::string::npos)
+          << r.output;
+      // The temporary folder itself is refused as cut.
+      const std::string tmp = mc::files::cut_folders(rec).front();
+      const Result t = run_mirrorcal({"calibrate", tmp, "--out", d + "/cal-tmp"}, d);
+      EXPECT_EQ(t.code, 1) << t.output;
+      EXPECT_NE(t.output.find("a recording cut off before it was complete"), std::string::npos)
+          << t.output;
+    }
+  }
+  const auto last = recording_files(rec);
+  EXPECT_TRUE(last == seeds[0] || last == seeds[1]);
+  std::printf("%d of 24 stops replaced the recording, %d left a temporary folder\n", replaced, cut);
+  // A record that completes clears what earlier ones left.
+  ASSERT_EQ(run_mirrorcal({"record", "--seed", "1", "--force", "--out", rec}, d).code, 0);
+  EXPECT_TRUE(mc::files::cut_folders(rec).empty());
+  EXPECT_EQ(recording_files(rec), seeds[0]);
+}
+
+// record --two-stage commits its two subfolders together: stopped at any moment, there are both
+// or neither, and calibrate says that the recording was cut off.
+TEST(Cli, RecordTwoStageStoppedAtRandomMomentsLeavesBothStagesOrNone) {
+  TempDir dir("cli-two-stage-killed");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --two-stage --seed 3 --out " + d + "/ref", d).code, 0);
+  const auto whole = recording_files(d + "/ref");
+  std::mt19937 random(17);
+  bool refused = false;
+  for (int i = 0; i < 12; ++i) {
+    const std::string rec = d + "/rec" + std::to_string(i);
+    run_and_kill({"record", "--two-stage", "--seed", "3", "--out", rec}, SIGKILL,
+                 std::uniform_int_distribution<long>(0, 300000)(random), d + "/killed.log");
+    const auto now = recording_files(rec);
+    EXPECT_TRUE(now.empty() || now == whole) << rec << " holds " << now.size() << " files";
+    if (now.empty() && !refused && !mc::files::cut_folders(rec).empty()) {
+      const Result r = run_mirrorcal("calibrate " + rec + "/stage1 --out " + d + "/cal", d);
+      EXPECT_EQ(r.code, 1) << r.output;
+      EXPECT_NE(r.output.find("record was stopped before it completed it"), std::string::npos)
+          << r.output;
+      refused = true;
+    }
+  }
 }

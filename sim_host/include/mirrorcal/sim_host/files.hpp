@@ -37,6 +37,10 @@ class OutputSet {
   std::vector<std::unique_ptr<File>> files_;
 };
 
+// The regular file path opened for reading (a descriptor the caller closes); -1 with read_file's
+// message otherwise.
+int open_regular_file(const std::string& path, std::string& error);
+
 // The whole of the regular file path into text; false with a message naming path otherwise
 // ("PATH: cannot open: reason", "PATH: not a regular file").
 bool read_file(const std::string& path, std::string& text, std::string& error);
@@ -50,5 +54,38 @@ constexpr const char* kLockFile = ".mirrorcal.lock";
 // Takes that lock on dir for the rest of the process; false, with a message naming the folder,
 // if another process holds it.
 bool lock_folder(const std::string& dir, std::string& error);
+
+// A folder written whole or not at all (a recording): its files go into a fresh hidden folder
+// beside it (.NAME.tmp-PID-N), which replaces the folder only when complete. A kill leaves that
+// temporary folder (cut_folders() finds it) and the folder as it was.
+class StagedFolder {
+ public:
+  StagedFolder() = default;
+  ~StagedFolder();  // removes the temporary folder if never committed
+  StagedFolder(const StagedFolder&) = delete;
+  StagedFolder& operator=(const StagedFolder&) = delete;
+
+  // Creates the temporary folder for dir. Refused (false, with a message naming dir) if dir holds
+  // anything but a lock file and replace is false, or another mirrorcal writes into it.
+  bool begin(const std::string& dir, bool replace, std::string& error);
+  // Where the files go until commit().
+  const std::string& path() const { return temporary_; }
+  // Syncs the temporary folder and renames it over dir; false with a message if it cannot (or,
+  // without replace, if a folder with files appeared at dir meanwhile).
+  bool commit(std::string& error);
+  // Removes the temporary folder.
+  void discard();
+  // message with the temporary folder's path given as dir's: what the user asked to write.
+  std::string as_target(std::string message) const;
+
+ private:
+  std::string dir_, temporary_;
+  bool replace_ = false;
+};
+
+// The temporary folders beside dir of StagedFolders whose writer was killed before committing.
+std::vector<std::string> cut_folders(const std::string& dir);
+// Whether dir is such a temporary folder (by its name).
+bool is_staging_folder(const std::string& dir);
 
 }  // namespace mirrorcal::files

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "mirrorcal/estimator/prior.hpp"
+#include "mirrorcal/hal/sources.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 
@@ -83,10 +84,79 @@ struct RecordingTruth {
   Pinhole<double> intrinsics{};
 };
 
+// What the input checks and the loop need to know of a recording's streams, gathered in one
+// pass over its files (recording_checks.hpp).
+struct RecordingStats {
+  std::uint64_t imu_samples = 0;
+  std::int64_t imu_first_ns = 0, imu_last_ns = 0;
+  // Medians over every sample (over an evenly spaced subset of at most 65536 in longer data).
+  double imu_step_median_ns = 0.0, gyro_norm_median = 0.0, accel_norm_median = 0.0;
+  // The discrete white noise the data show in their second differences (0: nothing to measure).
+  double gyro_noise_seen = 0.0, accel_noise_seen = 0.0;
+  std::uint64_t frames_listed = 0;  // every frame of cam0/data.csv
+  std::int64_t frames_first_ns = 0, frames_last_ns = 0;
+  std::uint64_t frames = 0;  // within the IMU data: those the filter gets
+  std::int64_t frames_inside_first_ns = 0, frames_inside_last_ns = 0;
+  std::uint64_t markers = 0;      // observations in those frames
+  std::vector<bool> marker_seen;  // by id, in those frames
+};
+
+class FrameStream;
+
+// A recording's streams, opened afresh for each pass of a calibration (open_recording reads them
+// from the files again each time, so that memory stays bounded whatever their size).
+class RecordingStreams {
+ public:
+  virtual ~RecordingStreams() = default;
+  // A pass's sources from the start of the streams: the IMU samples, and the frames within the
+  // IMU data. A file that no longer reads as it did ends its stream with an error.
+  virtual std::unique_ptr<hal::ImuSource> open_imu() const = 0;
+  virtual std::unique_ptr<FrameStream> open_frames() const = 0;
+  // The first error any pass met (the files changed while calibrating); empty if none.
+  virtual const std::string& error() const = 0;
+};
+
+// The frames within the IMU data, with their markers, in timestamp order.
+class FrameStream {
+ public:
+  virtual ~FrameStream() = default;
+  // kOk with the next frame (its marker list reused), kEndOfStream, or kError.
+  virtual hal::SourceStatus next(ObservedFrame& frame) = 0;
+};
+
+// A FrameStream as the loop's marker source; markers with an id at or above M are ignored.
+template <int M>
+class StreamedMarkerSource final : public hal::MarkerSource<M> {
+ public:
+  explicit StreamedMarkerSource(std::unique_ptr<FrameStream> frames) : frames_(std::move(frames)) {
+    frame_.markers.reserve(M);  // the loop allocates nothing once it runs
+  }
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override {
+    const hal::SourceStatus status = frames_->next(frame_);
+    if (status != hal::SourceStatus::kOk) return status;
+    frame.t_ns = frame_.t_ns;
+    frame.seen.fill(false);
+    for (const ObservedMarker& m : frame_.markers) {
+      if (m.id < 0 || m.id >= M) continue;
+      frame.seen[static_cast<std::size_t>(m.id)] = true;
+      frame.uv[static_cast<std::size_t>(m.id)] = Eigen::Vector2d(m.u, m.v);
+    }
+    return hal::SourceStatus::kOk;
+  }
+
+ private:
+  std::unique_ptr<FrameStream> frames_;
+  ObservedFrame frame_;
+};
+
 // A recording read back: the streams in timestamp order and the descriptions beside them.
 struct Recording {
+  // The streams, held whole by read_recording; empty after open_recording, whose streams read
+  // them from the files.
   std::vector<ImuSample> imu;
   std::vector<ObservedFrame> frames;  // only frames within the IMU data
+  std::shared_ptr<const RecordingStreams> streams;
+  RecordingStats stats;
   SensorInfo sensors;
   RecordingPriors priors;
   std::uint64_t frames_outside_imu = 0;  // skipped: before the first or after the last IMU sample
@@ -101,6 +171,10 @@ struct Recording {
 // names the file, the line and what is wrong; data that contradict their descriptions (timestamps
 // in another unit than ns, deg/s for rad/s, g for m/s^2) are bad input too.
 bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error);
+// The same checks without holding the streams: they are read from the files in passes of bounded
+// memory (out.streams), whatever their size. A recording that changes on disk after this gives
+// errors through out.streams->error().
+bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error);
 
 // The parsers behind read_recording, on a file's text; file names the file in messages.
 bool parse_imu_csv(std::string_view text, const std::string& file, std::vector<ImuSample>& out,
