@@ -86,8 +86,12 @@ TEST(StreamedInput, A110MBRecordingCalibratesInBoundedMemoryToTheSameBytes) {
   const long bytes_kib = static_cast<long>(bytes >> 10);
   std::printf("calibrate's peak memory: %ld KiB for %ld KiB of files, %ld KiB unpadded\n",
               large.peak_rss_kib, bytes_kib, small.peak_rss_kib);
+  // Under AddressSanitizer the program's shadow memory and quarantine alone take about 85 MB,
+  // padded or not: there only the comparison with the unpadded run below says something.
+#if !defined(__SANITIZE_ADDRESS__)
   EXPECT_LT(large.peak_rss_kib, bytes_kib / 4)
       << "peak " << large.peak_rss_kib << " KiB for " << bytes_kib << " KiB of files";
+#endif
   EXPECT_LT(large.peak_rss_kib, small.peak_rss_kib + 8 * 1024)
       << "padded " << large.peak_rss_kib << " KiB, plain " << small.peak_rss_kib << " KiB";
   for (const char* file : {"/camchain-imucam.yaml", "/estimates.csv"})
