@@ -195,10 +195,12 @@ void add_verdict(std::string& t, const ReportData& d) {
   for (const std::string& w : result_warnings(r)) t += "  WARNING: " + w + "\n";
   t += format(
       "  self-check: %d pass(es); normalised innovation squared per dof %.3f over %llu dof (about "
-      "1: the markers fit as the covariance says); sigma_ratio %.3f (at least %.1f); markers "
-      "used %llu, gated %llu, not predictable %llu",
+      "1: the markers fit as the covariance says); sigma_ratio %.3f (at least %.1f); last "
+      "refinement step %.2f sigmas (at most %.0f); markers used %llu, gated %llu, not "
+      "predictable %llu",
       r.passes, r.nis_per_dof, static_cast<unsigned long long>(r.nis_dof), r.sigma_ratio,
-      kSigmaRatioLimit, static_cast<unsigned long long>(r.markers_used),
+      kSigmaRatioLimit, r.refinement_step_sigmas, kRefinementStepLimit,
+      static_cast<unsigned long long>(r.markers_used),
       static_cast<unsigned long long>(r.markers_gated),
       static_cast<unsigned long long>(r.markers_invalid));
   if (r.markers_observed > 0)

@@ -29,7 +29,7 @@ struct Outcome {
   double nees = 0, wall_s = 0;
   std::uint64_t gated = 0, failures = 0;
   int passes = 0;  // passes over the data (more than the default after a bad one)
-  double nis_per_dof = 0, sigma_ratio = 1;
+  double nis_per_dof = 0, sigma_ratio = 1, refinement_step = 0;
   bool suspect = false;  // convergence_warning() would warn a user of this run
   ErrorSeries series;
   DetectionReport detection;  // --frames only
@@ -253,6 +253,7 @@ int cmd_montecarlo(int argc, char** argv) {
         oc.passes = r.result.passes;
         oc.nis_per_dof = r.result.nis_per_dof;
         oc.sigma_ratio = r.result.sigma_ratio;
+        oc.refinement_step = r.result.refinement_step_sigmas;
         oc.failures = r.filter_counters.failures;
         oc.series = error_series(r.history, r.result.params);
         if (family) {
@@ -396,7 +397,9 @@ int cmd_montecarlo(int argc, char** argv) {
   std::fprintf(f, "run,seed");
   for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
-  std::fprintf(f, ",nees,markers_gated,filter_failures,wall_s,passes,nis_per_dof,sigma_ratio");
+  std::fprintf(f,
+               ",nees,markers_gated,filter_failures,wall_s,passes,nis_per_dof,sigma_ratio,"
+               "refinement_step");
   std::fprintf(f,
                ",mirror,motion,camera_hz,pixel_sigma,imu_noise_scale,prior_marker [cm],"
                "prior_p_b_c [cm],prior_rot_b_c [deg]");
@@ -407,9 +410,10 @@ int cmd_montecarlo(int argc, char** argv) {
     std::fprintf(f, "%zu,%llu", i, (unsigned long long)out[i].seed);
     for (double e : out[i].error) std::fprintf(f, ",%.6g", e);
     for (double e : out[i].sigma) std::fprintf(f, ",%.6g", e);
-    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d,%.4f,%.4f", out[i].nees,
+    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d,%.4f,%.4f,%.4f", out[i].nees,
                  (unsigned long long)out[i].gated, (unsigned long long)out[i].failures,
-                 out[i].wall_s, out[i].passes, out[i].nis_per_dof, out[i].sigma_ratio);
+                 out[i].wall_s, out[i].passes, out[i].nis_per_dof, out[i].sigma_ratio,
+                 out[i].refinement_step);
     const sim::Scenario& rs = out[i].scenario;
     std::fprintf(f, ",%s,%s,%.2f,%.3f,%.2f,%.2f,%.2f,%.2f", rs.mirror.c_str(),
                  rs.motion_kind.c_str(), rs.camera_rate_hz, rs.pixel_sigma, rs.imu_noise_scale,

@@ -128,6 +128,10 @@ bool path_gained_false_information(const CalibrationResult& r) {
   return r.sigma_ratio < kSigmaRatioLimit;
 }
 
+bool refinement_unconverged(const CalibrationResult& r) {
+  return r.refinement_step_sigmas > kRefinementStepLimit;
+}
+
 bool used_too_few(const CalibrationResult& r) {
   return r.markers_observed > 0 &&
          double(r.markers_used) < kMinUsedFraction * double(r.markers_observed);
@@ -152,6 +156,16 @@ std::string fit_warning(const CalibrationResult& r) {
     return text;
   }
   if (!gated_too_many(r) && !innovations_too_large(r)) {
+    if (refinement_unconverged(r)) {
+      std::snprintf(text, sizeof text,
+                    "the last Gauss-Newton step of the refinement still moved the calibration by "
+                    "%.1f of its sigmas (a converged one moves well under 1): the linearisation "
+                    "does not hold where the estimate is, and neither the estimate nor its "
+                    "sigmas can be trusted. Move the rig more (tilts and moves toward the "
+                    "mirror), start from better guesses, and check the recording.",
+                    r.refinement_step_sigmas);
+      return text;
+    }
     if (!path_gained_false_information(r)) return {};
     std::snprintf(text, sizeof text,
                   "the filter's own sigmas came down to %.2f of what the data hold along its "
@@ -292,11 +306,14 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                  r.prior_offset_sigmas, r.prior_offset_state.c_str());
   std::fprintf(o,
                "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
-               "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n",
-               r.nis_per_dof, r.sigma_ratio);
+               "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n"
+               "refinement_step: %.4f  # the last Gauss-Newton step, in sigmas: well under 1 "
+               "when converged\n",
+               r.nis_per_dof, r.sigma_ratio, r.refinement_step_sigmas);
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
-               "above 1, sigma_ratio below 0.8, under half the markers used or a prior "
+               "above 1, sigma_ratio below 0.5, refinement_step above 8, under half the markers "
+               "used or a prior "
                "contradicted by 5 sigma: do not trust it\n",
                consistent(r) ? "true" : "false");
   std::fprintf(o, "sigma:\n");

@@ -274,6 +274,18 @@ void record_prior_offset(const typename SimRun<NK>::State& x0,
   }
 }
 
+// How far a refinement step moved the calibration from the estimate it started at, in the step's
+// own sigmas (Mahalanobis distance under its covariance): the self-check's convergence test.
+template <int NK>
+double step_sigmas(const SimRun<NK>& after, const SimRun<NK>& before) {
+  using State = typename SimRun<NK>::State;
+  constexpr int B = State::kPbc, L = State::kDim - B;
+  const Eigen::Matrix<double, L, 1> d =
+      after.history.back().state.template boxminus_block<B, L>(before.history.back().state);
+  const Eigen::Matrix<double, L, L> p = after.covariance.template block<L, L>(B, B);
+  return std::sqrt(d.dot(p.ldlt().solve(d)));
+}
+
 }  // namespace
 
 template <int NK>
@@ -338,7 +350,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
     // sim --frames): hooks numbered on from the passes'.
     int hook = free_passes;
     const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks{}; };
-    for (int it = 0; it < kRefinements; ++it) {
+    for (int it = 0; it < kMaxRefinements; ++it) {
       State from = run.history.back().state;
       from.p = start.p;
       from.v = start.v;
@@ -371,10 +383,12 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
       // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
       if (suspect(refined.result) && !suspect(run.result)) break;
+      refined.result.refinement_step_sigmas = step_sigmas<NK>(refined, run);
       refined.first_frame = run.first_frame;
       refined.result.passes = free_passes;
       run = std::move(refined);
       imu_start_from<NK>(config, run, p0, data, start);
+      if (run.result.refinement_step_sigmas < kConvergedStepSigmas) break;
     }
     double lowest = INFINITY;
     for (int i = B; i < State::kDim; ++i)
