@@ -689,17 +689,7 @@ std::map<std::string, std::string> recording_files(const std::string& dir) {
 // mirrorcal with args, stopped by signal after delay_us (or ended before).
 void run_and_kill(const std::vector<std::string>& args, int signal, long delay_us,
                   const std::string& log) {
-  std::vector<std::string> words = {MIRRORCAL_BIN};
-  words.insert(words.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (std::string& w : words) argv.push_back(w.data());
-  argv.push_back(nullptr);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    if (!freopen(log.c_str(), "w", stdout) || dup2(fileno(stdout), 2) < 0) _exit(126);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
+  const pid_t pid = spawn_mirrorcal(args, log);
   ASSERT_GT(pid, 0);
   usleep(static_cast<useconds_t>(delay_us));
   kill(pid, signal);

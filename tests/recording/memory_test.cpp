@@ -23,20 +23,13 @@ struct Measured {
   long peak_rss_kib = 0;  // the child's largest resident set (ru_maxrss)
 };
 
-// mirrorcal with args, its output into log; the child's own peak memory from wait4.
-Measured run_measured(const std::vector<std::string>& args, const std::string& log) {
-  std::vector<std::string> words = {MIRRORCAL_BIN};
-  words.insert(words.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (std::string& w : words) argv.push_back(w.data());
-  argv.push_back(nullptr);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    if (!freopen(log.c_str(), "w", stdout) || dup2(fileno(stdout), 2) < 0) _exit(126);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
+// mirrorcal with args, its output into log, env added to its environment; the child's own peak
+// memory from wait4 (or its children's, gnuplot's, if larger: wait4 counts the children it
+// waited for).
+Measured run_measured(const std::vector<std::string>& args, const std::string& log,
+                      const std::vector<std::string>& env = {}) {
   Measured r;
+  const pid_t pid = spawn_mirrorcal(args, log, env);
   int status = 0;
   rusage usage{};
   if (pid < 0 || wait4(pid, &status, 0, &usage) != pid) return r;
