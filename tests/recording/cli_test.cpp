@@ -536,6 +536,31 @@ struct SmallFilesystem {
 
 }  // namespace
 
+// calibrate's temporary stores (what it keeps per frame, record_store.hpp) in a $TMPDIR with no
+// room left: code 1 and a message naming the store and why, never a crash, and no result written.
+TEST(Cli, AFullTemporaryFolderFailsNamingTheStore) {
+  TempDir dir("cli-store-full");
+  const std::string& d = dir.path;
+  const SmallFilesystem disk(d + "/tmp", "size=1m");
+  if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
+  const auto s = short_scenario(10.0);
+  write_recording(d + "/rec", s, mc::sim::simulate(s, 5), 5);
+  ASSERT_TRUE(disk.fill("filler", 0));
+  const pid_t pid = spawn_mirrorcal({"calibrate", d + "/rec", "--out", d + "/out"},
+                                    d + "/calibrate.log", {"TMPDIR=" + disk.path});
+  ASSERT_GT(pid, 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  const std::string output = slurp(d + "/calibrate.log");
+  ASSERT_TRUE(WIFEXITED(status)) << "ended by signal " << WTERMSIG(status) << ": " << output;
+  EXPECT_EQ(WEXITSTATUS(status), 1) << output;
+  EXPECT_NE(output.find("mirrorcal: " + disk.path + "/mirrorcal-store-"), std::string::npos)
+      << output;
+  EXPECT_NE(output.find(": cannot write the temporary store of "), std::string::npos) << output;
+  EXPECT_NE(output.find(std::strerror(ENOSPC)), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(d + "/out/mirrorcal-result.yaml"));
+}
+
 // A full disk: each command fails with a non-zero exit naming the file it could not write, and the
 // results of its earlier run stay byte for byte. With room for camchain-imucam.yaml and
 // mirrorcal-result.yaml but not estimates.csv, none of the three is replaced (a set).
