@@ -746,6 +746,38 @@ TEST(Cli, RecordReplacesARecordingOnlyWithForceAndWhole) {
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
 }
 
+// A disk that fills up at record's very last write (truth.yaml, after the streams and the other
+// files, before the folder is renamed into place): code 1 naming that file, the earlier recording
+// as it was and no temporary folder left.
+TEST(Cli, RecordOnADiskThatFillsAtItsLastWriteLeavesTheEarlierRecording) {
+  TempDir dir("cli-record-last-write");
+  const std::string& d = dir.path;
+  const SmallFilesystem disk(d + "/disk", "size=32m");
+  if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
+  const std::string rec = disk.path + "/rec";
+  ASSERT_EQ(run_mirrorcal({"record", "--seed", "3", "--out", rec}, d).code, 0);
+  const auto before = recording_files(rec);
+  ASSERT_GE(before.size(), 7u);
+  // The pages the new recording takes (tmpfs allocates whole pages), from the same command into a
+  // folder off the small disk: the same bytes.
+  ASSERT_EQ(run_mirrorcal({"record", "--seed", "2", "--out", d + "/ref"}, d).code, 0);
+  constexpr std::uintmax_t kPage = 4096;
+  std::uintmax_t pages = 0;
+  for (const auto& e : fs::recursive_directory_iterator(d + "/ref"))
+    if (e.is_regular_file()) pages += (e.file_size() + kPage - 1) / kPage;
+  ASSERT_GT(pages, 100u);
+  // Room for all of it but its last page, which truth.yaml, written last, needs.
+  ASSERT_TRUE(disk.fill(".filler", (pages - 1) * kPage));
+  const Result r = run_mirrorcal({"record", "--seed", "2", "--force", "--out", rec}, d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(rec + "/truth.yaml: cannot write: " + std::strerror(ENOSPC)),
+            std::string::npos)
+      << r.output;
+  EXPECT_TRUE(recording_files(rec) == before) << rec << " changed";
+  for (const auto& e : fs::recursive_directory_iterator(disk.path))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
 // Stopped at random moments (SIGKILL, SIGTERM, SIGINT) while replacing a recording, record leaves
 // the recording before it or the new one, whole; calibrate names the temporary folder a kill left.
 // Only the moments are random (a fixed seed): whatever they hit, the property holds.
