@@ -4,7 +4,6 @@
 #include <linux/can/error.h>
 #include <linux/can/raw.h>
 #include <net/if.h>
-#include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -203,8 +202,11 @@ int open_mm710_socket(const std::string& ifname) {
   return fd;
 }
 
-CanImu::CanImu(int fd, const std::string& device, std::int64_t timeout_ns)
-    : fd_(fd), device_(device), timeout_ns_(timeout_ns) {
+CanImu::CanImu(int fd, const std::string& device, std::int64_t timeout_ns, Timebase* time)
+    : fd_(fd),
+      device_(device),
+      timeout_ns_(timeout_ns),
+      time_(time != nullptr ? *time : monotonic_timebase()) {
   const int on = 1;
   ::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));  // best effort (socketpairs)
 }
@@ -255,11 +257,11 @@ void CanImu::on_error_frame(std::uint32_t can_id, const std::uint8_t* data) {
 }
 
 hal::SourceStatus CanImu::next(ImuSample& sample) {
-  const std::int64_t deadline = monotonic_ns() + timeout_ns_;
+  const std::int64_t deadline = time_.now_ns() + timeout_ns_;
   wait_ns_ = 0;
   std::uint64_t frames_meanwhile = 0;  // of any kind but error frames, none completing a sample
   for (;;) {
-    const std::int64_t poll_start = monotonic_ns();
+    const std::int64_t poll_start = time_.now_ns();
     const std::int64_t left = deadline - poll_start;
     if (left <= 0) {
       if (frames_meanwhile > 0 && !bus_off_)
@@ -278,9 +280,8 @@ hal::SourceStatus CanImu::next(ImuSample& sample) {
                    static_cast<long long>(timeout_ns_ / 1'000'000));
       return hal::SourceStatus::kError;
     }
-    pollfd p{fd_, POLLIN, 0};
-    const int ready = ::poll(&p, 1, static_cast<int>((left + 999'999) / 1'000'000));
-    wait_ns_ += monotonic_ns() - poll_start;
+    const int ready = time_.wait_readable(fd_, left);
+    wait_ns_ += time_.now_ns() - poll_start;
     if (ready < 0 && errno != EINTR) {
       error_.set("%s: poll failed: %s", device_.c_str(), std::strerror(errno));
       return hal::SourceStatus::kError;
@@ -310,7 +311,7 @@ hal::SourceStatus CanImu::next(ImuSample& sample) {
       continue;
     }
     // The kernel's receive time is CLOCK_REALTIME; move it onto CLOCK_MONOTONIC.
-    std::int64_t t_ns = monotonic_ns();
+    std::int64_t t_ns = time_.now_ns();
     for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
       if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
         timespec ts{};

@@ -1,5 +1,7 @@
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 
+#include <poll.h>
+
 #include <cerrno>
 #include <ctime>
 
@@ -27,6 +29,12 @@ void sleep_until_ns(std::int64_t t_ns) {
   ts.tv_nsec = static_cast<long>(t_ns % 1'000'000'000);
   while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
   }
+}
+
+int Timebase::wait_readable(int fd, std::int64_t timeout_ns) {
+  pollfd p{fd, POLLIN, 0};
+  const int ready = ::poll(&p, 1, static_cast<int>((timeout_ns + 999'999) / 1'000'000));
+  return ready < 0 ? -1 : ready > 0 ? 1 : 0;
 }
 
 Timebase& monotonic_timebase() {

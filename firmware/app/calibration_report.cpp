@@ -65,10 +65,10 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
     d.gyro_bias_sigma(i) = std::sqrt(run.covariance(State::kBg + i, State::kBg + i));
   }
   const std::vector<ParamInfo>& params = run.result.params;
-  const State& last = run.history.back().state;
+  const State last = run.history.back().state;
   const Eigen::Quaterniond q0 = run.history.front().state.q_n_b;
   for (std::size_t k = 0; k < run.history.size(); ++k) {
-    const HistoryRow<typename SimRun<NK>::Filter>& row = run.history[k];
+    const HistoryRow<typename SimRun<NK>::Filter> row = run.history[k];
     const double t = double(row.t_ns) * 1e-9;
     d.t_s.push_back(t);
     const Eigen::Matrix<double, L, 1> from_last = row.state.template boxminus_block<B, L>(last);

@@ -230,6 +230,7 @@ int cmd_montecarlo(int argc, char** argv) {
   std::vector<ParamInfo> params;
   std::atomic<std::uint64_t> next{0}, done{0};
   std::mutex mu;
+  std::string store_error;
   const auto t0 = std::chrono::steady_clock::now();
   auto worker = [&] {
     for (std::uint64_t i; (i = next++) < runs;) {
@@ -265,14 +266,21 @@ int cmd_montecarlo(int argc, char** argv) {
         std::lock_guard<std::mutex> lock(mu);
         if (params.empty()) params = r.result.params;
       };
-      if (intrinsics && hold_skew)
-        record(one_stage ? run_one_stage_simulation<4>(rs, run_seed)
-                         : run_two_stage_simulation<4>(rs, run_seed));
-      else if (intrinsics)
-        record(one_stage ? run_one_stage_simulation<5>(rs, run_seed)
-                         : run_two_stage_simulation<5>(rs, run_seed));
-      else
-        record(run_simulation(rs, run_seed, {}, frames, nullptr, passes));
+      try {
+        if (intrinsics && hold_skew)
+          record(one_stage ? run_one_stage_simulation<4>(rs, run_seed)
+                           : run_two_stage_simulation<4>(rs, run_seed));
+        else if (intrinsics)
+          record(one_stage ? run_one_stage_simulation<5>(rs, run_seed)
+                           : run_two_stage_simulation<5>(rs, run_seed));
+        else
+          record(run_simulation(rs, run_seed, {}, frames, nullptr, passes));
+      } catch (const files::StoreError& e) {  // a full $TMPDIR: no more runs, main says why
+        std::lock_guard<std::mutex> lock(mu);
+        if (store_error.empty()) store_error = e.what();
+        next = runs;
+        return;
+      }
       std::lock_guard<std::mutex> lock(mu);
       print_progress("runs done:", double(++done) / double(runs));
     }
@@ -280,6 +288,10 @@ int cmd_montecarlo(int argc, char** argv) {
   std::vector<std::thread> pool;
   for (std::uint64_t j = 0; j < jobs; ++j) pool.emplace_back(worker);
   for (auto& t : pool) t.join();
+  if (!store_error.empty()) {
+    end_progress("stopped");
+    fail(store_error, 1);
+  }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   end_progress("all runs done");
 

@@ -1,15 +1,18 @@
 // The estimate over time, as the loop publishes it: a sink that keeps every published estimate in
-// storage reserved before the loop starts (with each frame's residuals and normalised innovation
-// squared, for the report), and the calibration parameters' names and units.
+// a temporary file (record_store.hpp: one page of it in memory, whatever the recording's length;
+// with each frame's residuals and normalised innovation squared, for the report), and the
+// calibration parameters' names and units.
 #pragma once
 
 #include <array>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/hal/frames.hpp"
+#include "record_store.hpp"
 
 namespace mirrorcal::app {
 
@@ -128,15 +131,16 @@ struct MotionRow {
 template <class Filter>
 class HistorySink final : public firmware::EstimateSink<Filter> {
  public:
-  // With tap (the loop's marker source, wrapped), each row has its frame's residuals.
+  // At most capacity rows; with tap (the loop's marker source, wrapped), each row has its frame's
+  // residuals. The rows go to a file created now: publishing allocates nothing, and throws
+  // files::StoreError if the file cannot be written (a full disk).
   HistorySink(std::size_t capacity, const typename Filter::State* truth,
               FrameTap<Filter::State::kMarkers>* tap = nullptr)
-      : truth_(truth), tap_(tap) {
-    rows_.reserve(capacity);
-  }
+      : truth_(truth), tap_(tap), capacity_(capacity) {}
   void publish(std::int64_t t_ns, const Filter& f) override {
-    if (rows_.size() == rows_.capacity()) return;  // never grow inside the loop
-    HistoryRow<Filter>& r = rows_.emplace_back();
+    if (rows_.size() == capacity_) return;
+    row_ = HistoryRow<Filter>{};
+    HistoryRow<Filter>& r = row_;
     r.t_ns = t_ns;
     r.state = f.state();
     r.predicted = f.predicted();
@@ -151,20 +155,31 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     counted_ = c;
     if (tap_ != nullptr)
       if (const auto* frame = tap_->take(t_ns)) record_residuals(f, *frame, r);
-    if (motion_.size() < motion_.capacity())
-      motion_.push_back({f.motion_step(), f.covariance().template topLeftCorner<15, 15>()});
+    rows_.push_back(r);
+    if (motion_) {
+      motion_row_.step = f.motion_step();
+      motion_row_.covariance = f.covariance().template topLeftCorner<15, 15>();
+      motion_->push_back(motion_row_);
+    }
   }
-  const std::vector<HistoryRow<Filter>>& rows() const { return rows_; }
+  const RecordStore<HistoryRow<Filter>>& rows() const { return rows_; }
+  RecordStore<HistoryRow<Filter>> take_rows() { return std::move(rows_); }
   // A MotionRow beside each row, for a smoother (the filter keeping its motion steps).
-  void keep_motion() { motion_.reserve(rows_.capacity()); }
-  const std::vector<MotionRow<Filter>>& motion() const { return motion_; }
+  void keep_motion() {
+    if (!motion_) motion_.emplace("the tracking pass's motion");
+  }
+  std::optional<RecordStore<MotionRow<Filter>>> take_motion() { return std::move(motion_); }
 
  private:
   const typename Filter::State* truth_;
   FrameTap<Filter::State::kMarkers>* tap_;
+  std::size_t capacity_;
   FilterCounters counted_{};
-  std::vector<HistoryRow<Filter>> rows_;
-  std::vector<MotionRow<Filter>> motion_;
+  RecordStore<HistoryRow<Filter>> rows_;
+  std::optional<RecordStore<MotionRow<Filter>>> motion_;
+  // The rows being filled (off the stack: a MotionRow is 5 KB).
+  HistoryRow<Filter> row_{};
+  MotionRow<Filter> motion_row_{};
 };
 
 }  // namespace mirrorcal::app

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "cli.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::app {
 
@@ -102,6 +103,12 @@ int main(int argc, char** argv) {
     return argc < 2 ? 2 : 0;
   }
   for (const auto& c : app::commands())
-    if (first == c.name) return c.run(argc, argv);
+    if (first == c.name) try {
+        return c.run(argc, argv);
+      } catch (const mirrorcal::files::StoreError& e) {
+        // A calibration's temporary store that could not be written (a full $TMPDIR): as a
+        // result file that could not be written, code 1 and the file named.
+        app::fail(e.what(), 1);
+      }
   app::fail("unknown command '" + first + "'\n" + app::usage());
 }

@@ -176,6 +176,6 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
 // quaternion q_b_c with the 1-sigma of its error vector's components).
 template <class Filter>
 bool write_estimates_csv(files::OutputSet& out, const std::string& path,
-                         const std::vector<HistoryRow<Filter>>& rows, std::string& error);
+                         const RecordStore<HistoryRow<Filter>>& rows, std::string& error);
 
 }  // namespace mirrorcal::app

@@ -18,7 +18,7 @@ struct ErrorSeries {
 };
 
 template <class Filter>
-ErrorSeries error_series(const std::vector<HistoryRow<Filter>>& rows,
+ErrorSeries error_series(const RecordStore<HistoryRow<Filter>>& rows,
                          const std::vector<ParamInfo>& params) {
   ErrorSeries s;
   s.error.resize(params.size());

@@ -64,11 +64,37 @@ State truth_state(const sim::Scenario& s) {
 
 namespace {
 
-// The estimates a pass published at its frames, to linearise another pass along.
+// The estimates a pass published at its frames, to linearise another pass along: in a temporary
+// file, read by the filter as its frames come.
 template <int NK>
-struct Trajectory {
-  std::vector<typename SimRun<NK>::State> states;
-  std::vector<std::int64_t> stamps_ns;
+struct TrajectoryPoint {
+  typename SimRun<NK>::State state;
+  std::int64_t t_ns = 0;
+};
+template <int NK>
+class Trajectory final : public SimRun<NK>::Filter::LinearisationPoints {
+ public:
+  using State = typename SimRun<NK>::State;
+  std::size_t count() const override { return points_.size(); }
+  std::int64_t stamp(std::size_t k) override { return at(k).t_ns; }
+  const State& state(std::size_t k) override { return at(k).state; }
+  void set(std::size_t k, const State& state, std::int64_t t_ns) {
+    points_.set(k, {state, t_ns});
+    read_ = kNone;
+  }
+
+ private:
+  static constexpr std::size_t kNone = ~std::size_t{0};
+  const TrajectoryPoint<NK>& at(std::size_t k) {
+    if (k != read_) {
+      point_ = points_[k];
+      read_ = k;
+    }
+    return point_;
+  }
+  RecordStore<TrajectoryPoint<NK>> points_{"the smoothed trajectory"};
+  TrajectoryPoint<NK> point_{};
+  std::size_t read_ = kNone;
 };
 
 // Every frame a pass's loop met, used or not: the same in every replay of the same data.
@@ -84,7 +110,7 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
                     const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
                     const typename SimRun<NK>::State* truth,
                     const std::function<void(double)>& progress, const LoopHooks& input,
-                    const Trajectory<NK>* along = nullptr, bool keep_motion = false) {
+                    Trajectory<NK>* along = nullptr, bool keep_motion = false) {
   using Run = SimRun<NK>;
   using Filter = typename Run::Filter;
   Run run;
@@ -92,8 +118,7 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   run.has_truth = truth != nullptr;
   Filter filter(config);
   filter.reset(x0, p0);
-  if (along != nullptr)
-    filter.linearise_along(along->states.data(), along->stamps_ns.data(), along->states.size());
+  if (along != nullptr) filter.linearise_along(along);
 
   const std::unique_ptr<hal::ImuSource> imu = data.open_imu();
   const std::unique_ptr<hal::MarkerSource<kMarkers>> listed = data.open_markers();
@@ -118,8 +143,8 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   }
   loop.finish();
 
-  run.history = sink.rows();
-  run.motion = sink.motion();
+  run.history = sink.take_rows();
+  run.motion = sink.take_motion();
   run.covariance = filter.covariance();
   run.result = make_result(filter, data.width, data.height);
   run.filter_counters = filter.counters();
@@ -134,41 +159,46 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
 // frame's linearisation point then rests on every frame, not on those before it, and holds its
 // own frame's noise no more than any other's.
 template <int NK>
-Trajectory<NK> smoothed_trajectory(const SimRun<NK>& track) {
+void smoothed_trajectory(const SimRun<NK>& track, Trajectory<NK>& out) {
   using State = typename SimRun<NK>::State;
   using Mat15 = Eigen::Matrix<double, 15, 15>;
-  const std::size_t n = std::min(track.history.size(), track.motion.size());
-  Trajectory<NK> out;
-  out.states.resize(n);
-  out.stamps_ns.resize(n);
-  if (n == 0) return out;
-  const State& final_estimate = track.history[n - 1].state;
-  out.states[n - 1] = final_estimate;
-  out.stamps_ns[n - 1] = track.history[n - 1].t_ns;
-  for (std::size_t k = n - 1; k-- > 0;) {
-    const auto& row = track.history[k];
-    const auto& next = track.motion[k + 1];
-    State smoothed = row.state;
-    // A row that followed no update (the final one) says nothing new about the one before it.
-    if (next.step.update != track.motion[k].step.update) {
-      // C = P_k F^T P_{k+1|k}^-1, so C^T = P_{k+1|k}^-1 F P_k (both covariances symmetric).
-      const Mat15 f_p = next.step.transition * track.motion[k].covariance;
-      const Mat15 gain_t = next.step.predicted_covariance.ldlt().solve(f_p);
-      const Eigen::Matrix<double, 15, 1> d =
-          out.states[k + 1].template boxminus_block<0, 15>(track.history[k + 1].predicted);
-      if (gain_t.allFinite()) smoothed.template boxplus_block<0, 15>(gain_t.transpose() * d);
-    }
-    out.states[k] = smoothed;
-    out.stamps_ns[k] = row.t_ns;
-  }
-  for (State& s : out.states) {
+  const std::size_t n = track.motion ? std::min(track.history.size(), track.motion->size()) : 0;
+  if (n == 0) return;
+  const RecordStore<MotionRow<typename SimRun<NK>::Filter>>& motion = *track.motion;
+  // Backwards over the frames, reading each row and motion step once: what step k needs of k + 1
+  // is carried over from the step before.
+  const State final_estimate = track.history[n - 1].state;
+  // The calibration held at the final estimate in every state.
+  const auto held = [&](State s) {
     s.p_b_c = final_estimate.p_b_c;
     s.q_b_c = final_estimate.q_b_c;
     s.markers = final_estimate.markers;
     s.t_d = final_estimate.t_d;
     s.intrinsics = final_estimate.intrinsics;
+    return s;
+  };
+  HistoryRow<typename SimRun<NK>::Filter> next_row = track.history[n - 1];
+  MotionRow<typename SimRun<NK>::Filter> next = motion[n - 1], row_motion;
+  State next_smoothed = final_estimate;
+  out.set(n - 1, held(final_estimate), next_row.t_ns);
+  for (std::size_t k = n - 1; k-- > 0;) {
+    const HistoryRow<typename SimRun<NK>::Filter> row = track.history[k];
+    row_motion = motion[k];
+    State smoothed = row.state;
+    // A row that followed no update (the final one) says nothing new about the one before it.
+    if (next.step.update != row_motion.step.update) {
+      // C = P_k F^T P_{k+1|k}^-1, so C^T = P_{k+1|k}^-1 F P_k (both covariances symmetric).
+      const Mat15 f_p = next.step.transition * row_motion.covariance;
+      const Mat15 gain_t = next.step.predicted_covariance.ldlt().solve(f_p);
+      const Eigen::Matrix<double, 15, 1> d =
+          next_smoothed.template boxminus_block<0, 15>(next_row.predicted);
+      if (gain_t.allFinite()) smoothed.template boxplus_block<0, 15>(gain_t.transpose() * d);
+    }
+    out.set(k, held(smoothed), row.t_ns);
+    next_smoothed = smoothed;
+    next_row = row;
+    next = row_motion;
   }
-  return out;
 }
 
 // The first stretch of the data, for imu_start_from(): from the first IMU sample to the one after
@@ -367,7 +397,8 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       // rigs, runs beyond 4 sigma and the consistent runs' marker RMS over the data's limit:
       // linearised after each update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05;
       // smoothed 3 and 0.96 (along the true motion, a diagnostic: 3 and 0.97).
-      const Trajectory<NK> trajectory = smoothed_trajectory<NK>(track);
+      Trajectory<NK> trajectory;
+      smoothed_trajectory<NK>(track, trajectory);
       // From the prior's guesses of the calibration (the data count once), and the IMU start the
       // trajectory has.
       State prior = x0;

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -52,9 +53,10 @@ struct SimRun {
   using Filter = CalibrationFilter<double, kMarkers, NK>;
   using State = typename Filter::State;
   State truth{};
-  std::vector<HistoryRow<Filter>> history;  // one row per frame, and the final one (last pass)
-  HistoryRow<Filter> first_frame;           // the first pass's first row: after one frame
-  typename Filter::Covariance covariance;   // the final one (stage 2 starts from stage 1's)
+  // One row per frame, and the final one (last pass); in a temporary file (record_store.hpp).
+  RecordStore<HistoryRow<Filter>> history;
+  HistoryRow<Filter> first_frame;          // the first pass's first row: after one frame
+  typename Filter::Covariance covariance;  // the final one (stage 2 starts from stage 1's)
   CalibrationResult result;
   FilterCounters filter_counters;
   firmware::LoopCounters loop_counters;
@@ -65,9 +67,10 @@ struct SimRun {
   // order), against which the data's narrowing of it is judged, and the pixel noise assumed.
   std::vector<double> prior_sigma;
   double pixel_sigma = 0.0;
-  std::uint64_t gate_after_frames = 0;    // frames the estimate had to settle before the gate
-  bool has_truth = false;                 // the history rows carry the error against truth
-  std::vector<MotionRow<Filter>> motion;  // beside history, when a smoother asked for them
+  std::uint64_t gate_after_frames = 0;  // frames the estimate had to settle before the gate
+  bool has_truth = false;               // the history rows carry the error against truth
+  // Beside history, when a smoother asked for them (a temporary file too).
+  std::optional<RecordStore<MotionRow<Filter>>> motion;
 };
 template <int NK>
 using CalibrationRun = SimRun<NK>;

@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <stdexcept>
+#include <utility>
 
 #include <dirent.h>
 #include <fcntl.h>
@@ -345,6 +347,123 @@ std::vector<std::string> cut_folders(const std::string& dir) {
   }
   std::sort(cut.begin(), cut.end());
   return cut;
+}
+
+namespace {
+std::atomic<std::size_t> default_buffer_bytes{RecordFile::kDefaultBufferBytes};
+}  // namespace
+
+void RecordFile::set_default_buffer_bytes(std::size_t bytes) {
+  default_buffer_bytes = bytes > 0 ? bytes : kDefaultBufferBytes;
+}
+
+RecordFile::RecordFile(std::size_t record_bytes, std::string label, std::size_t buffer_bytes)
+    : record_bytes_(std::max<std::size_t>(record_bytes, 1)),
+      capacity_(std::max<std::size_t>(
+          (buffer_bytes > 0 ? buffer_bytes : default_buffer_bytes.load()) / record_bytes_, 1)),
+      label_(std::move(label)),
+      page_(capacity_ * record_bytes_) {
+  // Created now, not at the first page's write: the loop that fills it never allocates.
+  open();
+}
+
+RecordFile::~RecordFile() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+RecordFile::RecordFile(RecordFile&& other) noexcept {
+  *this = std::move(other);
+}
+
+RecordFile& RecordFile::operator=(RecordFile&& other) noexcept {
+  if (this == &other) return *this;
+  if (fd_ >= 0) ::close(fd_);
+  record_bytes_ = other.record_bytes_;
+  capacity_ = other.capacity_;
+  label_ = std::move(other.label_);
+  path_ = std::move(other.path_);
+  fd_ = std::exchange(other.fd_, -1);
+  size_ = std::exchange(other.size_, 0);
+  page_ = std::move(other.page_);
+  first_ = other.first_;
+  valid_begin_ = other.valid_begin_;
+  valid_end_ = other.valid_end_;
+  dirty_ = std::exchange(other.dirty_, false);
+  other.first_ = other.valid_begin_ = other.valid_end_ = 0;
+  return *this;
+}
+
+void RecordFile::fail(const char* what, int error_number) const {
+  throw StoreError(path_ + ": cannot " + what + " the temporary store of " + label_ + ": " +
+                   reason(error_number));
+}
+
+void RecordFile::open() const {
+  const char* tmp = std::getenv("TMPDIR");
+  path_ = std::string(tmp != nullptr && *tmp != '\0' ? tmp : "/tmp") + "/mirrorcal-store-XXXXXX";
+  fd_ = ::mkostemp(path_.data(), O_CLOEXEC);
+  if (fd_ < 0) fail("create", errno);
+  ::unlink(path_.c_str());
+}
+
+void RecordFile::flush() const {
+  if (!dirty_) return;
+  const unsigned char* p = page_.data() + (valid_begin_ - first_) * record_bytes_;
+  std::size_t left = (valid_end_ - valid_begin_) * record_bytes_;
+  auto at = static_cast<off_t>(valid_begin_ * record_bytes_);
+  while (left > 0) {
+    const ssize_t n = ::pwrite(fd_, p, left, at);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) fail("write", n < 0 ? errno : ENOSPC);
+    p += n;
+    at += n;
+    left -= static_cast<std::size_t>(n);
+  }
+  dirty_ = false;
+}
+
+void RecordFile::place_page(std::size_t k) const {
+  flush();
+  first_ = k < first_ ? k + 1 - std::min(k + 1, capacity_) : k;
+  valid_begin_ = valid_end_ = k;
+}
+
+void RecordFile::write(std::size_t k, const void* record) {
+  // Into the page if it extends the records current there without a gap.
+  const bool in_page = k >= first_ && k < first_ + capacity_;
+  const bool adjoins = valid_begin_ == valid_end_ || (k + 1 >= valid_begin_ && k <= valid_end_);
+  if (!in_page || !adjoins) place_page(k);
+  std::memcpy(page_.data() + (k - first_) * record_bytes_, record, record_bytes_);
+  valid_begin_ = std::min(valid_begin_, k);
+  valid_end_ = std::max(valid_end_, k + 1);
+  dirty_ = true;
+  size_ = std::max(size_, k + 1);
+}
+
+void RecordFile::read(std::size_t k, void* record) const {
+  if (k >= size_) throw std::out_of_range("RecordFile::read beyond its records");
+  if (k < valid_begin_ || k >= valid_end_) {
+    place_page(k);
+    const std::size_t count = std::min(capacity_, size_ - first_);
+    unsigned char* p = page_.data();
+    std::size_t left = count * record_bytes_;
+    auto at = static_cast<off_t>(first_ * record_bytes_);
+    while (left > 0) {
+      const ssize_t n = ::pread(fd_, p, left, at);
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) fail("read", errno);
+      if (n == 0) {  // a hole at the end, never written: zeros
+        std::memset(p, 0, left);
+        break;
+      }
+      p += n;
+      at += n;
+      left -= static_cast<std::size_t>(n);
+    }
+    valid_begin_ = first_;
+    valid_end_ = first_ + count;
+  }
+  std::memcpy(record, page_.data() + (k - first_) * record_bytes_, record_bytes_);
 }
 
 bool is_staging_folder(const std::string& dir) {

@@ -11,6 +11,7 @@
 #include <random>
 #include <thread>
 
+#include "fakes.hpp"
 #include "mirrorcal/drivers/can_imu.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 
@@ -253,37 +254,41 @@ TEST(CanImu, DeliversSamplesAndSurvivesGarbageAndBusOff) {
   EXPECT_NE(std::string(imu.error()).find("restart-ms"), std::string::npos) << imu.error();
 }
 
+// On a fake time base: the frames are in the socket when the read starts, and the fake says they
+// took kDelay to come. No sleep, no thread: nothing here depends on the machine's scheduling.
 TEST(CanImu, TheWaitForFramesIsReportedApartFromTheRead) {
   Pair pair;
   ASSERT_GE(pair.rx, 0);
-  CanImu imu(pair.rx, "pair", 2'000'000'000);
+  test::FakeTimebase time;
+  CanImu imu(pair.rx, "pair", 2'000'000'000, &time);
   CanImuSender sender(pair.tx);
   const ImuSample in = sample_of(0.5, -0.25, 1.0, 0.1, -9.8, 0.3);
   ImuSample out;
   // The sample's frames come 100 ms after the read starts: that time is the wait, not the read.
   constexpr std::int64_t kDelay = 100'000'000;
-  const std::int64_t t0 = monotonic_ns();
-  std::thread late([&] {
-    sleep_until_ns(t0 + kDelay);
-    sender.send(in);
-  });
-  const hal::SourceStatus st = imu.next(out);
-  const std::int64_t elapsed = monotonic_ns() - t0;
-  late.join();
-  ASSERT_EQ(st, hal::SourceStatus::kOk);
-  EXPECT_LE(imu.wait_ns(), elapsed);
-  // Decoding three frames takes microseconds; half the delay leaves room for a loaded machine.
-  EXPECT_GE(imu.wait_ns(), kDelay / 2);
-  EXPECT_LT(elapsed - imu.wait_ns(), kDelay / 2);
+  ASSERT_TRUE(sender.send(in));
+  time.data_after_ns = kDelay;
+  const std::int64_t t0 = time.now_ns();
+  ASSERT_EQ(imu.next(out), hal::SourceStatus::kOk);
+  // All of the time next() took was the wait (decoding takes none of the fake time).
+  EXPECT_EQ(imu.wait_ns(), kDelay);
+  EXPECT_EQ(time.now_ns() - t0, kDelay);
+  // Frames there already: no wait at all.
+  ASSERT_TRUE(sender.send(in));
+  ASSERT_EQ(imu.next(out), hal::SourceStatus::kOk);
+  EXPECT_EQ(imu.wait_ns(), 0);
+  EXPECT_EQ(time.now_ns() - t0, kDelay);
 }
 
 TEST(CanImu, ASilentBusIsReportedAsNotAnswering) {
   Pair pair;
-  CanImu imu(pair.rx, "pair", 50'000'000);
+  test::FakeTimebase time;
+  CanImu imu(pair.rx, "pair", 50'000'000, &time);
   ImuSample out;
-  const std::int64_t t0 = monotonic_ns();
+  const std::int64_t t0 = time.now_ns();
   EXPECT_EQ(imu.next(out), hal::SourceStatus::kError);
-  EXPECT_GE(monotonic_ns() - t0, 50'000'000);
+  EXPECT_EQ(time.now_ns() - t0, 50'000'000);
+  EXPECT_EQ(imu.wait_ns(), 50'000'000);
   EXPECT_NE(std::string(imu.error()).find("stops answering"), std::string::npos) << imu.error();
 }
 

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <poll.h>
+
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/register_bus.hpp"
 #include "mirrorcal/hal/lines.hpp"
@@ -30,6 +32,19 @@ class FakeTimebase final : public Timebase {
   std::int64_t now_ns() override { return now_ns_; }
   void sleep_until_ns(std::int64_t t_ns) override { now_ns_ = t_ns > now_ns_ ? t_ns : now_ns_; }
   void advance(std::int64_t ns) { now_ns_ += ns; }
+  // A descriptor is waited on as it is now (poll(2) without waiting): data there arrives
+  // data_after_ns later (the next wait's only: then it is 0 again) unless that is beyond the
+  // timeout; without data, or with it later than that, the wait lasts the whole timeout.
+  int wait_readable(int fd, std::int64_t timeout_ns) override {
+    pollfd p{fd, POLLIN, 0};
+    const int ready = ::poll(&p, 1, 0);
+    if (ready < 0) return -1;
+    const bool in_time = ready > 0 && data_after_ns <= timeout_ns;
+    advance(in_time ? data_after_ns : timeout_ns);
+    if (in_time) data_after_ns = 0;
+    return in_time ? 1 : 0;
+  }
+  std::int64_t data_after_ns = 0;
 
  private:
   std::int64_t now_ns_ = 1'000'000'000;

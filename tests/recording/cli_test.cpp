@@ -555,6 +555,31 @@ struct SmallFilesystem {
 
 }  // namespace
 
+// calibrate's temporary stores (what it keeps per frame, record_store.hpp) in a $TMPDIR with no
+// room left: code 1 and a message naming the store and why, never a crash, and no result written.
+TEST(Cli, AFullTemporaryFolderFailsNamingTheStore) {
+  TempDir dir("cli-store-full");
+  const std::string& d = dir.path;
+  const SmallFilesystem disk(d + "/tmp", "size=1m");
+  if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
+  const auto s = short_scenario(10.0);
+  write_recording(d + "/rec", s, mc::sim::simulate(s, 5), 5);
+  ASSERT_TRUE(disk.fill("filler", 0));
+  const pid_t pid = spawn_mirrorcal({"calibrate", d + "/rec", "--out", d + "/out"},
+                                    d + "/calibrate.log", {"TMPDIR=" + disk.path});
+  ASSERT_GT(pid, 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  const std::string output = slurp(d + "/calibrate.log");
+  ASSERT_TRUE(WIFEXITED(status)) << "ended by signal " << WTERMSIG(status) << ": " << output;
+  EXPECT_EQ(WEXITSTATUS(status), 1) << output;
+  EXPECT_NE(output.find("mirrorcal: " + disk.path + "/mirrorcal-store-"), std::string::npos)
+      << output;
+  EXPECT_NE(output.find(": cannot write the temporary store of "), std::string::npos) << output;
+  EXPECT_NE(output.find(std::strerror(ENOSPC)), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(d + "/out/mirrorcal-result.yaml"));
+}
+
 // A full disk: each command fails with a non-zero exit naming the file it could not write, and the
 // results of its earlier run stay byte for byte. With room for camchain-imucam.yaml and
 // mirrorcal-result.yaml but not estimates.csv, none of the three is replaced (a set).
@@ -722,17 +747,7 @@ std::map<std::string, std::string> recording_files(const std::string& dir) {
 // mirrorcal with args, stopped by signal after delay_us (or ended before).
 void run_and_kill(const std::vector<std::string>& args, int signal, long delay_us,
                   const std::string& log) {
-  std::vector<std::string> words = {MIRRORCAL_BIN};
-  words.insert(words.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (std::string& w : words) argv.push_back(w.data());
-  argv.push_back(nullptr);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    if (!freopen(log.c_str(), "w", stdout) || dup2(fileno(stdout), 2) < 0) _exit(126);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
+  const pid_t pid = spawn_mirrorcal(args, log);
   ASSERT_GT(pid, 0);
   usleep(static_cast<useconds_t>(delay_us));
   kill(pid, signal);
@@ -761,6 +776,38 @@ TEST(Cli, RecordReplacesARecordingOnlyWithForceAndWhole) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(recording_files(d + "/rec"), two);
   for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+// A disk that fills up at record's very last write (truth.yaml, after the streams and the other
+// files, before the folder is renamed into place): code 1 naming that file, the earlier recording
+// as it was and no temporary folder left.
+TEST(Cli, RecordOnADiskThatFillsAtItsLastWriteLeavesTheEarlierRecording) {
+  TempDir dir("cli-record-last-write");
+  const std::string& d = dir.path;
+  const SmallFilesystem disk(d + "/disk", "size=32m");
+  if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
+  const std::string rec = disk.path + "/rec";
+  ASSERT_EQ(run_mirrorcal({"record", "--seed", "3", "--out", rec}, d).code, 0);
+  const auto before = recording_files(rec);
+  ASSERT_GE(before.size(), 7u);
+  // The pages the new recording takes (tmpfs allocates whole pages), from the same command into a
+  // folder off the small disk: the same bytes.
+  ASSERT_EQ(run_mirrorcal({"record", "--seed", "2", "--out", d + "/ref"}, d).code, 0);
+  constexpr std::uintmax_t kPage = 4096;
+  std::uintmax_t pages = 0;
+  for (const auto& e : fs::recursive_directory_iterator(d + "/ref"))
+    if (e.is_regular_file()) pages += (e.file_size() + kPage - 1) / kPage;
+  ASSERT_GT(pages, 100u);
+  // Room for all of it but its last page, which truth.yaml, written last, needs.
+  ASSERT_TRUE(disk.fill(".filler", (pages - 1) * kPage));
+  const Result r = run_mirrorcal({"record", "--seed", "2", "--force", "--out", rec}, d);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find(rec + "/truth.yaml: cannot write: " + std::strerror(ENOSPC)),
+            std::string::npos)
+      << r.output;
+  EXPECT_TRUE(recording_files(rec) == before) << rec << " changed";
+  for (const auto& e : fs::recursive_directory_iterator(disk.path))
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
 }
 

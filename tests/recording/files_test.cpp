@@ -4,9 +4,14 @@
 // never after a sleep.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <csignal>
+#include <cstdint>
+#include <cstring>
+#include <random>
 #include <string>
 
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -163,4 +168,111 @@ TEST(LockFolder, ASecondWriterIsRefusedUntilTheFirstEnds) {
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
   EXPECT_TRUE(mc::files::lock_folder(tmp.path, err)) << err;
   close(ready[0]);
+}
+
+namespace {
+
+// A record of odd size (not a divisor of the page), without padding, whose bytes say which
+// record it is.
+struct Rec {
+  unsigned char bytes[29] = {};
+};
+static_assert(sizeof(Rec) == 29);
+Rec rec(std::uint64_t k) {
+  Rec r;
+  const double value = std::ldexp(static_cast<double>(k) + 0.1, static_cast<int>(k % 40) - 20);
+  std::memcpy(r.bytes, &k, sizeof k);
+  std::memcpy(r.bytes + sizeof k, &value, sizeof value);
+  for (std::size_t i = 16; i < sizeof r.bytes; ++i)
+    r.bytes[i] = static_cast<unsigned char>(k * 7 + i);
+  return r;
+}
+bool same(const Rec& a, const Rec& b) {
+  return std::memcmp(a.bytes, b.bytes, sizeof a.bytes) == 0;
+}
+void write_rec(mc::files::RecordFile& f, std::size_t k, const Rec& r) {
+  f.write(k, &r);
+}
+Rec read_rec(const mc::files::RecordFile& f, std::size_t k) {
+  Rec r;
+  std::memset(r.bytes, 0xee, sizeof r.bytes);
+  f.read(k, &r);
+  return r;
+}
+
+}  // namespace
+
+// Records come back byte for byte, forwards, backwards and at random, written in order, in
+// reverse or over earlier ones, through a page of a few records (every access crosses pages).
+TEST(RecordFile, GivesBackEveryRecordByteForByteInAnyOrder) {
+  constexpr std::size_t kN = 1000;
+  mc::files::RecordFile ahead(sizeof(Rec), "the test's records", 5 * sizeof(Rec) + 3);
+  for (std::size_t k = 0; k < kN; ++k) write_rec(ahead, ahead.size(), rec(k));
+  ASSERT_EQ(ahead.size(), kN);
+  for (std::size_t k = 0; k < kN; ++k) ASSERT_TRUE(same(read_rec(ahead, k), rec(k))) << k;
+  for (std::size_t k = kN; k-- > 0;) ASSERT_TRUE(same(read_rec(ahead, k), rec(k))) << k;
+  std::mt19937 random(3);
+  for (int i = 0; i < 500; ++i) {
+    const std::size_t k = random() % kN;
+    ASSERT_TRUE(same(read_rec(ahead, k), rec(k))) << k;
+  }
+  // Over earlier records, then read again.
+  for (std::size_t k = 100; k < 120; ++k) write_rec(ahead, k, rec(k + 5000));
+  for (std::size_t k = 0; k < kN; ++k)
+    ASSERT_TRUE(same(read_rec(ahead, k), rec(k >= 100 && k < 120 ? k + 5000 : k))) << k;
+
+  // Written backwards (a smoother's order), read forwards.
+  mc::files::RecordFile back(sizeof(Rec), "the test's records", 64);
+  for (std::size_t k = kN; k-- > 0;) write_rec(back, k, rec(k));
+  ASSERT_EQ(back.size(), kN);
+  for (std::size_t k = 0; k < kN; ++k) ASSERT_TRUE(same(read_rec(back, k), rec(k))) << k;
+
+  // Records never written read as zeros.
+  mc::files::RecordFile holes(sizeof(Rec), "the test's records", 64);
+  write_rec(holes, 50, rec(50));
+  const Rec zero{};
+  ASSERT_EQ(holes.size(), 51u);
+  EXPECT_TRUE(same(read_rec(holes, 49), zero));
+  EXPECT_TRUE(same(read_rec(holes, 0), zero));
+  EXPECT_TRUE(same(read_rec(holes, 50), rec(50)));
+}
+
+// The file has no name from the start (nothing left behind, whatever ends the process), and a
+// store moved keeps its records.
+TEST(RecordFile, LeavesNoFileAndMovesWhole) {
+  mc::files::RecordFile f(sizeof(Rec), "the test's records", 64);
+  EXPECT_FALSE(fs::exists(f.path())) << f.path();
+  for (std::size_t k = 0; k < 40; ++k) write_rec(f, f.size(), rec(k));
+  mc::files::RecordFile g = std::move(f);
+  ASSERT_EQ(g.size(), 40u);
+  for (std::size_t k = 0; k < 40; ++k) ASSERT_TRUE(same(read_rec(g, k), rec(k))) << k;
+}
+
+// A write the file system refuses (here the process's file size limit, as a full disk would) is a
+// StoreError that names the store's file and why, not a crash.
+TEST(RecordFile, AWriteRefusedIsAnErrorNamingTheStore) {
+  rlimit old{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // EFBIG instead of the signal
+  std::string message;
+  std::string path;
+  {
+    mc::files::RecordFile f(sizeof(Rec), "the test's records", 10 * sizeof(Rec));
+    path = f.path();
+    rlimit small = old;
+    small.rlim_cur = 40 * sizeof(Rec);
+    ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+    try {
+      for (std::size_t k = 0; k < 1000; ++k) write_rec(f, f.size(), rec(k));
+      (void)read_rec(f, 0);  // writes the last page out
+    } catch (const mc::files::StoreError& e) {
+      message = e.what();
+    }
+    setrlimit(RLIMIT_FSIZE, &old);
+  }
+  std::signal(SIGXFSZ, old_handler);
+  EXPECT_NE(message.find(path + ": cannot write the temporary store of the test's records: "),
+            std::string::npos)
+      << message;
+  EXPECT_NE(message.find(std::strerror(EFBIG)), std::string::npos) << message;
 }

@@ -1,11 +1,15 @@
 // Shared by the recording tests: temporary folders, files as text, a short simulated recording.
 #pragma once
 
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
+#include <sys/types.h>
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/recording.hpp"
@@ -80,5 +84,31 @@ inline void write_recording(const std::string& dir, const mc::sim::Scenario& s,
           dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))
     throw std::runtime_error(err);
 }
+
+#ifdef MIRRORCAL_BIN
+// Starts mirrorcal with args, its output and errors into log, with env's NAME=VALUE entries added
+// to its environment; its pid, for the caller to wait for (wait4 for its peak memory) or signal,
+// or -1 if it could not fork.
+inline pid_t spawn_mirrorcal(const std::vector<std::string>& args, const std::string& log,
+                             const std::vector<std::string>& env = {}) {
+  std::vector<std::string> words = {MIRRORCAL_BIN};
+  words.insert(words.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(w.data());
+  argv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    if (!freopen(log.c_str(), "w", stdout) || dup2(fileno(stdout), 2) < 0) _exit(126);
+    for (const std::string& e : env) {
+      const std::size_t eq = e.find('=');
+      if (eq == std::string::npos || setenv(e.substr(0, eq).c_str(), e.c_str() + eq + 1, 1) != 0)
+        _exit(126);
+    }
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+#endif
 
 }  // namespace rectest

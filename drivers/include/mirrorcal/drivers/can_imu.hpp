@@ -37,6 +37,7 @@
 #include <string>
 
 #include "mirrorcal/drivers/driver_error.hpp"
+#include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/hal/sources.hpp"
 
 namespace mirrorcal::drivers {
@@ -121,8 +122,11 @@ class CanImu final : public hal::ImuSource {
  public:
   // Adopts fd (a socket from open_mm710_socket, or any socket delivering struct can_frame records,
   // e.g. a socketpair in tests); device names it in messages. next() fails when no frame of the
-  // sensor arrives for timeout_ns.
-  CanImu(int fd, const std::string& device, std::int64_t timeout_ns = 500'000'000);
+  // sensor arrives for timeout_ns. time is what it waits on the socket and times out by
+  // (nullptr: CLOCK_MONOTONIC; tests give a fake one, as to the register IMUs); a sample's time
+  // is the kernel's receive stamp where the socket gives one, else time's when it was read.
+  CanImu(int fd, const std::string& device, std::int64_t timeout_ns = 500'000'000,
+         Timebase* time = nullptr);
   ~CanImu() override;
   CanImu(const CanImu&) = delete;
   CanImu& operator=(const CanImu&) = delete;
@@ -142,6 +146,7 @@ class CanImu final : public hal::ImuSource {
   int fd_;
   std::string device_;
   std::int64_t timeout_ns_;
+  Timebase& time_;  // what it waits and times out by
   std::int64_t wait_ns_ = 0;
   mm710::Assembler assembler_;
   mutable CanImuCounters counters_{};

@@ -18,6 +18,10 @@ class Timebase : public hal::Clock {
  public:
   // Returns once now_ns() has reached t_ns (at once if it has).
   virtual void sleep_until_ns(std::int64_t t_ns) = 0;
+  // Waits until fd has data to read or timeout_ns (> 0) has passed on this time base: 1 when it
+  // has data, 0 on the timeout, -1 on an error (errno set, EINTR included). By default poll(2)
+  // on CLOCK_MONOTONIC; a fake time base moves its own time instead of waiting.
+  virtual int wait_readable(int fd, std::int64_t timeout_ns);
 };
 
 class MonotonicClock final : public Timebase {

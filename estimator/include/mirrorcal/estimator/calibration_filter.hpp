@@ -67,17 +67,34 @@ class CalibrationFilter {
     gyro_rate_.setZero();
     timed_ = true;
   }
-  // Linearise the measurement of the frame stamped stamps_ns[k] at states[k] instead of at the
-  // estimate (stamps increasing; frames not listed, and all with nullptr, at the estimate): the
-  // filter becomes the Kalman filter of the measurements linearised along that trajectory, whose
-  // final estimate of the constant calibration is the batch solution of the linearised problem
-  // and whose covariance is what the data hold along the trajectory, whatever estimates it passed
-  // through (a Gauss-Newton step over the whole recording; sim_run.hpp).
-  void linearise_along(const State* states, const std::int64_t* stamps_ns, std::size_t count) {
-    along_ = states;
-    along_stamps_ = stamps_ns;
-    along_count_ = count;
+  // The states to linearise frames at (linearise_along): count() points, the k-th for the frame
+  // stamped stamp(k), stamps increasing. The filter asks for them in increasing k only, so that
+  // they can be read from a file as they are needed (sim_run.cpp).
+  class LinearisationPoints {
+   public:
+    virtual ~LinearisationPoints() = default;
+    virtual std::size_t count() const = 0;
+    virtual std::int64_t stamp(std::size_t k) = 0;
+    virtual const State& state(std::size_t k) = 0;
+  };
+  // Linearise the measurement of the frame stamped points->stamp(k) at points->state(k) instead
+  // of at the estimate (frames not listed, and all with nullptr, at the estimate): the filter
+  // becomes the Kalman filter of the measurements linearised along that trajectory, whose final
+  // estimate of the constant calibration is the batch solution of the linearised problem and
+  // whose covariance is what the data hold along the trajectory, whatever estimates it passed
+  // through (a Gauss-Newton step over the whole recording; sim_run.hpp). points must outlive the
+  // filter's updates.
+  void linearise_along(LinearisationPoints* points) {
+    along_ = points;
+    along_arrays_ = false;
     along_next_ = 0;
+  }
+  // The same from arrays: states[k] for the frame stamped stamps_ns[k], k < count.
+  void linearise_along(const State* states, const std::int64_t* stamps_ns, std::size_t count) {
+    along_ = nullptr;
+    along_next_ = 0;
+    arrays_ = ArrayPoints(states, stamps_ns, count);
+    along_arrays_ = states != nullptr;  // arrays_ by name: a copy of the filter uses its own
   }
 
   // Defined below the class: member functions defined in it would be inline, and an extern
@@ -140,9 +157,24 @@ class CalibrationFilter {
   // The state to linearise the frame stamped t_ns at (linearise_along), or nullptr.
   const State* linearisation_point(std::int64_t t_ns);
 
-  const State* along_ = nullptr;
-  const std::int64_t* along_stamps_ = nullptr;
-  std::size_t along_count_ = 0, along_next_ = 0;
+  class ArrayPoints final : public LinearisationPoints {
+   public:
+    ArrayPoints() = default;
+    ArrayPoints(const State* states, const std::int64_t* stamps_ns, std::size_t count)
+        : states_(states), stamps_(stamps_ns), count_(count) {}
+    std::size_t count() const override { return count_; }
+    std::int64_t stamp(std::size_t k) override { return stamps_[k]; }
+    const State& state(std::size_t k) override { return states_[k]; }
+
+   private:
+    const State* states_ = nullptr;
+    const std::int64_t* stamps_ = nullptr;
+    std::size_t count_ = 0;
+  };
+  LinearisationPoints* along_ = nullptr;
+  ArrayPoints arrays_;
+  bool along_arrays_ = false;
+  std::size_t along_next_ = 0;
   State predicted_{};
   bool keep_steps_ = false;
   Eigen::Matrix<S, 15, 15> since_update_ = Eigen::Matrix<S, 15, 15>::Identity();
@@ -157,10 +189,12 @@ class CalibrationFilter {
 template <typename S, int M, int NK>
 const typename CalibrationFilter<S, M, NK>::State* CalibrationFilter<S, M, NK>::linearisation_point(
     std::int64_t t_ns) {
-  if (along_ == nullptr) return nullptr;
-  while (along_next_ < along_count_ && along_stamps_[along_next_] < t_ns) ++along_next_;
-  if (along_next_ == along_count_ || along_stamps_[along_next_] != t_ns) return nullptr;
-  return &along_[along_next_++];
+  LinearisationPoints* points = along_arrays_ ? &arrays_ : along_;
+  if (points == nullptr) return nullptr;
+  const std::size_t count = points->count();
+  while (along_next_ < count && points->stamp(along_next_) < t_ns) ++along_next_;
+  if (along_next_ == count || points->stamp(along_next_) != t_ns) return nullptr;
+  return &points->state(along_next_++);
 }
 
 template <typename S, int M, int NK>

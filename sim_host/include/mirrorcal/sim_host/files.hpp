@@ -8,8 +8,10 @@
 // mirrorcal from writing into it at the same time.
 #pragma once
 
+#include <cstddef>
 #include <cstdio>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -87,5 +89,65 @@ class StagedFolder {
 std::vector<std::string> cut_folders(const std::string& dir);
 // Whether dir is such a temporary folder (by its name).
 bool is_staging_folder(const std::string& dir);
+
+// A temporary store that could not be created, written or read (a full disk): its message names
+// the store's file and the reason. The commands exit with it (code 1), as with a result they could
+// not write.
+class StoreError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Fixed-size records numbered from 0 in a temporary file, so that what a calibration keeps per
+// frame takes disk, not memory: the file is created in $TMPDIR (/tmp without it) and unlinked at
+// once (nothing is left behind, whatever ends the process), and only one page of records
+// (buffer_bytes, at least one record) is held in memory. Records are written anywhere (holes read
+// as zeros), in order or in reverse, and read in either order at the cost of one pread per page.
+// Any failure (a full disk) throws StoreError naming the file.
+class RecordFile {
+ public:
+  static constexpr std::size_t kDefaultBufferBytes = 64 * 1024;
+  // label says whose store it is in messages ("the calibration's frames"); buffer_bytes 0: the
+  // default (kDefaultBufferBytes, or set_default_buffer_bytes's).
+  RecordFile(std::size_t record_bytes, std::string label, std::size_t buffer_bytes = 0);
+  // The page of the stores created after it, for tests: one that holds a whole store keeps it in
+  // memory and never touches the file, the reference the file is compared with.
+  static void set_default_buffer_bytes(std::size_t bytes);
+  ~RecordFile();
+  RecordFile(RecordFile&& other) noexcept;
+  RecordFile& operator=(RecordFile&& other) noexcept;
+  RecordFile(const RecordFile&) = delete;
+  RecordFile& operator=(const RecordFile&) = delete;
+
+  // Record k from record_bytes bytes at record; size() grows to k + 1 if it was smaller.
+  void write(std::size_t k, const void* record);
+  void append(const void* record) { write(size_, record); }
+  // Record k (< size()) into record.
+  void read(std::size_t k, void* record) const;
+  std::size_t size() const { return size_; }
+  std::size_t record_bytes() const { return record_bytes_; }
+  // Where the file was created (it has no name left once open).
+  const std::string& path() const { return path_; }
+
+ private:
+  void open() const;
+  // Writes the page's records written since it was last written; throws StoreError.
+  void flush() const;
+  [[noreturn]] void fail(const char* what, int error_number) const;
+  // Moves the page so that it holds k, going forwards from k or, if k lies before the page,
+  // backwards so that k is its last record.
+  void place_page(std::size_t k) const;
+
+  std::size_t record_bytes_ = 0, capacity_ = 0;  // capacity_: records in the page
+  std::string label_;
+  mutable std::string path_;
+  mutable int fd_ = -1;
+  std::size_t size_ = 0;
+  mutable std::vector<unsigned char> page_;
+  // The page holds records [first_, first_ + capacity_); those in [valid_begin_, valid_end_) are
+  // current, and written to the file only when dirty_.
+  mutable std::size_t first_ = 0, valid_begin_ = 0, valid_end_ = 0;
+  mutable bool dirty_ = false;
+};
 
 }  // namespace mirrorcal::files
