@@ -45,6 +45,7 @@ struct DetectionReport {
   double centroid_max_px = 0.0;
   double centroid_mean_px[2] = {0.0, 0.0};  // the mean error in u and v: detection's bias
   double ms_per_frame = 0.0;                // detection and identification, wall time
+  double read_ms_per_frame = 0.0;           // reading the image first (calibrate from images)
 };
 
 template <int NK>
@@ -82,6 +83,10 @@ struct LoopData {
   sim::RecordingStats stats;                             // of the streams
   std::int64_t imu_period_ns = 5'000'000;                // nominal IMU period
   int width = 640, height = 480;                         // image size, for the result files
+  // Set: the markers are found in the streams' images (RecordingStreams::open_images) by the
+  // board's detection, labelled with the filter's prediction, in every pass; it gets how that went
+  // in the last pass over all the data.
+  std::shared_ptr<DetectionReport> image_detection;
 
   std::size_t imu_samples() const { return streams ? stats.imu_samples : imu.size(); }
   std::size_t frame_count() const { return streams ? stats.frames : frames.size(); }
