@@ -113,8 +113,8 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv\n",
-      out.c_str());
+      "report.html, residuals.csv%s\n",
+      out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "");
   return 0;
 }
 

@@ -61,6 +61,7 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
   }
   if (data.image_detection) {  // the markers the detection labelled are the data's
     run.detection = *data.image_detection;
+    run.features_found = true;
     run.result.markers_observed = run.detection.markers_labelled;
   }
   run.result.rostopic = r.sensors.rostopic;

@@ -61,7 +61,8 @@ struct SimRun {
   firmware::LoopCounters loop_counters;
   std::uint64_t markers_out_of_image = 0;
   std::size_t imu_samples = 0, frames = 0;
-  DetectionReport detection;  // --frames only
+  DetectionReport detection;    // --frames, and calibrate from images
+  bool features_found = false;  // the markers were found in images: features.csv with the results
   // For the report: the prior's 1-sigma of each calibration state (SI, calibration_params()
   // order), against which the data's narrowing of it is judged, and the pixel noise assumed.
   std::vector<double> prior_sigma;
@@ -252,7 +253,9 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun
                      std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(out, dir + "/estimates.csv", run.history, error);
+         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) &&
+         (!run.features_found ||
+          write_features_csv(out, dir + "/features.csv", run.history, error));
 }
 template <int NK>
 bool write_run_outputs(const std::string& dir, const SimRun<NK>& run, std::string& error) {

@@ -17,7 +17,6 @@ inline constexpr const char* kImuHeader =
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
     "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]";
 inline constexpr const char* kFramesHeader = "#timestamp [ns],filename";
-inline constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
 
 // The lines of a text, or of a regular file read in chunks: memory bounded by the longest line
 // allowed (kMaxLine), whatever the file's size.

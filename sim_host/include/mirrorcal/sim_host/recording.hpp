@@ -29,6 +29,9 @@
 
 namespace mirrorcal::sim {
 
+// features.csv's header (the other files' are EuRoC's).
+inline constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
+
 // Kalibr's topic of the first camera: what camchain.yaml names when it names none.
 inline constexpr const char* kDefaultCameraTopic = "/cam0/image_raw";
 
