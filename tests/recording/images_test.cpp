@@ -270,3 +270,66 @@ TEST(Images, ReadFilesNamesThemAndBoundsTheirSize) {
   ASSERT_TRUE(reader.read(good.c_str(), image)) << reader.error();
   EXPECT_TRUE(std::equal(pixels.begin(), pixels.end(), image.pixels));
 }
+
+// A recording's images as calibrate reads them: without cam0/data/ it says so; an image that cannot
+// be read, or has another size than camchain.yaml's, is skipped and named, and the rest go on.
+TEST(Images, UnreadableImagesOfARecordingAreNamedAndSkipped) {
+  const TempDir tmp("images-recording");
+  const mc::sim::Scenario s = short_scenario(0.5);
+  const mc::sim::SimData data = mc::sim::simulate(s, 5);
+  write_recording(tmp.path, s, data, 5);
+  mc::sim::Recording rec;
+  std::string err;
+  EXPECT_FALSE(mc::sim::open_recording(tmp.path, mc::app::kMarkers, rec, err, true));
+  EXPECT_EQ(err.rfind(tmp.path + "/mav0/cam0/data: no such folder", 0), 0u) << err;
+
+  // Every frame's image: grey PNG, but frame 3 a 16-bit one, frame 5 of 320x240, frame 7 missing.
+  const std::string images = tmp.path + "/mav0/cam0/data";
+  fs::create_directories(images);
+  mc::sim::PngWriter writer(640, 480);
+  const Bytes pixels = random_bytes(640 * 480, 11);
+  std::string deep;
+  for (std::size_t k = 0; k < data.frames.size(); ++k) {
+    const std::string path = images + "/" + std::to_string(data.frames[k].t_ns) + ".png";
+    if (k == 7) continue;
+    if (k == 3) {
+      PngSpec spec;
+      spec.depth = 16;
+      const Bytes png =
+          make_png(spec, filter_rows(random_bytes(24, 1), 8, 3, 2, [](std::size_t) { return 0; }));
+      spit(path, std::string(png.begin(), png.end()));
+      deep = path;
+      continue;
+    }
+    const int w = k == 5 ? 320 : 640, h = k == 5 ? 240 : 480;
+    std::size_t n = 0;
+    const std::uint8_t* png = writer.encode({w, h, pixels.data()}, n);
+    ASSERT_NE(png, nullptr);
+    spit(path, std::string(reinterpret_cast<const char*>(png), n));
+  }
+  ASSERT_TRUE(mc::sim::open_recording(tmp.path, mc::app::kMarkers, rec, err, true)) << err;
+  {
+    const auto source = rec.streams->open_images();
+    ASSERT_NE(source, nullptr);
+    mc::hal::FrameView view;
+    std::size_t delivered = 0;
+    while (source->poll(view) == mc::hal::SourceStatus::kOk) {
+      ++delivered;
+      ASSERT_EQ(view.width, 640);
+      EXPECT_TRUE(std::equal(pixels.begin(), pixels.end(), view.data));
+    }
+    EXPECT_EQ(delivered, data.frames.size() - 3);
+    EXPECT_STREQ(source->error(), "");
+  }
+  const mc::sim::ImageLog* log = rec.streams->image_log();
+  ASSERT_NE(log, nullptr);
+  EXPECT_EQ(log->unreadable, 3u);
+  ASSERT_EQ(log->kept, 3);
+  const std::string name5 = images + "/" + std::to_string(data.frames[5].t_ns) + ".png";
+  const std::string name7 = images + "/" + std::to_string(data.frames[7].t_ns) + ".png";
+  EXPECT_EQ(std::string(log->messages[0].data()),
+            deep + ": bit depth 16: only 8-bit images are read");
+  EXPECT_EQ(std::string(log->messages[1].data()),
+            name5 + ": 320x240 pixels; camchain.yaml's camera has 640x480");
+  EXPECT_EQ(std::string(log->messages[2].data()).rfind(name7 + ": cannot open", 0), 0u);
+}
