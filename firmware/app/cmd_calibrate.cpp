@@ -89,6 +89,23 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
       (unsigned long long)lc.imu_gaps, (unsigned long long)lc.imu_restarts,
       (unsigned long long)lc.frames_before_filter, (unsigned long long)fc.markers_used,
       (unsigned long long)fc.markers_gated, (unsigned long long)fc.failures, wall);
+  if (rec.from_images) {
+    const DetectionReport& d = run.detection;
+    std::printf(
+        "detection in the images, last pass: %llu frames, %llu markers labelled, %llu withheld "
+        "in doubt, %llu blobs unlabelled; %.2f ms per frame reading the image, %.2f ms detecting "
+        "and labelling\n",
+        (unsigned long long)d.frames, (unsigned long long)d.markers_labelled,
+        (unsigned long long)d.dropped_in_doubt, (unsigned long long)d.unlabelled_blobs,
+        d.read_ms_per_frame, d.ms_per_frame);
+    if (const sim::ImageLog* log = rec.streams->image_log(); log && log->unreadable > 0) {
+      std::fprintf(stderr, "mirrorcal: WARNING: %llu images could not be read and were skipped:\n",
+                   (unsigned long long)log->unreadable);
+      for (int k = 0; k < log->kept; ++k)
+        std::fprintf(stderr, "  %s\n", log->messages[std::size_t(k)].data());
+      if (log->unreadable > std::uint64_t(log->kept)) std::fprintf(stderr, "  ...\n");
+    }
+  }
   for (const std::string& w : result_warnings(run.result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
@@ -96,22 +113,31 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv\n",
-      out.c_str());
+      "report.html, residuals.csv%s\n",
+      out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "");
   return 0;
 }
 
 }  // namespace
 
 int cmd_calibrate(int argc, char** argv) {
-  const Options o =
-      parse(argc, argv, 2, {"out", "from"}, {"intrinsics", "hold-skew", "from-same-data"}, 1);
+  const Options o = parse(argc, argv, 2, {"out", "from"},
+                          {"intrinsics", "hold-skew", "from-same-data", "from-images"}, 1);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
   sim::Recording rec;
   std::string err;
+  // The markers: features.csv, or found in the images where there is none (or when asked).
+  const bool from_images =
+      o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
   // Streamed from its files in each pass: memory does not grow with the recording.
-  if (!sim::open_recording(in, kMarkers, rec, err)) fail(err, 1);
+  if (!sim::open_recording(in, kMarkers, rec, err, from_images)) fail(err, 1);
+  if (from_images)
+    std::printf(
+        "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
+        in.c_str(),
+        sim::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
+                                  : " (no features.csv)");
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
   for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier

@@ -3,11 +3,14 @@
 // --imu, of the board's devices (the IMU's samples and the markers detected in the camera's
 // frames, labelled by their brightness) through the same writer.
 #include <cstdio>
+#include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "cli.hpp"
 #include "devices.hpp"
 #include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "sim_run.hpp"
 
@@ -57,6 +60,12 @@ int record_devices(const Options& o, const std::string& dir) {
   std::string err;
   sim::RecordingWriter writer;
   if (!writer.open(folder.path(), err)) folder.fail_with(err);
+  // --images: each frame's luma too, as PNG in mav0/cam0/data/ (a buffer allocated here; the
+  // writer allocates its PNG buffers with the first image).
+  const bool images = o.flag("images");
+  if (images && !devices.camera) fail("--images needs a camera (--camera DEV)");
+  std::vector<std::uint8_t> luma(
+      images ? std::size_t(sensors.sensors.width) * std::size_t(sensors.sensors.height) : 0);
   std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
               describe_camera(s, devices).c_str(),
               describe_trigger(s, devices, imu_rate_hz).c_str(),
@@ -76,7 +85,19 @@ int record_devices(const Options& o, const std::string& dir) {
       // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
       while (devices.camera &&
              (frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
-        if (!writer.add_frame(frame)) break;
+        const sim::GrayImage* image = nullptr;
+        sim::GrayImage grey;
+        if (images) {
+          const hal::FrameView& view = devices.camera->markers->last_frame();
+          grey = {view.width, view.height, luma.data()};
+          if (std::size_t(view.width) * std::size_t(view.height) <= luma.size()) {
+            for (int y = 0; y < view.height; ++y)
+              for (int x = 0; x < view.width; ++x)
+                luma[std::size_t(y) * std::size_t(view.width) + std::size_t(x)] = view.luma(x, y);
+            image = &grey;
+          }
+        }
+        if (!writer.add_frame(frame, image)) break;
         ++frames;
       }
       if (frame_status == hal::SourceStatus::kError) break;
@@ -107,8 +128,12 @@ int record_devices(const Options& o, const std::string& dir) {
 // The simulated rig's streams of one run (data and prior from seed) and its priors, as `sim` with
 // that seed hands them to the loop, and its truth, into dir.
 // dir lies within folder's temporary folder; failures name the folder the user asked for.
+// With images, each frame's image is drawn too (the renderer of sim --frames, GREY): a spot for
+// each marker of features.csv at the very pixel listed there (its pixel noise included), so the
+// images hold the same data as features.csv and a calibration from either sees the same.
 void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
-                               bool hold_skew, RecordingFolder& folder, const std::string& sub) {
+                               bool hold_skew, RecordingFolder& folder, const std::string& sub,
+                               bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -118,8 +143,21 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   if (!writer.open(dir, err)) folder.fail_with(err);
   for (const ImuSample& smp : data.imu)
     if (!writer.add_imu(smp)) break;
-  for (const sim::ObservedFrame& f : data.frames)
-    if (!writer.add_frame(f)) break;
+  const sim::RenderConfig render;
+  sim::FrameRenderer renderer(s, render, sim::derive_seed(seed, 200));
+  std::vector<std::uint8_t> pixels(
+      images ? std::size_t(renderer.width()) * std::size_t(renderer.height()) : 0);
+  const sim::GrayImage image{renderer.width(), renderer.height(), pixels.data()};
+  std::uint64_t j = 0;
+  for (const sim::ObservedFrame& f : data.frames) {
+    if (images) {
+      for (const sim::ObservedMarker& m : f.markers)
+        renderer.add_spot(m.u, m.v,
+                          render.brightness[std::size_t(m.id) % render.brightness.size()]);
+      renderer.finish(j++, pixels.data());
+    }
+    if (!writer.add_frame(f, images ? &image : nullptr)) break;
+  }
   if (!writer.close(err)) folder.fail_with(err);
 
   sim::SensorInfo sensors;
@@ -143,10 +181,10 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
     folder.fail_with(err);
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
-      "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv, imu.yaml, "
+      "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv,%s imu.yaml, "
       "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
-      s.duration_s, folder.as_target(dir).c_str());
+      s.duration_s, folder.as_target(dir).c_str(), images ? " mav0/cam0/data/*.png," : "");
 }
 
 }  // namespace
@@ -157,7 +195,7 @@ int cmd_record(int argc, char** argv) {
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   const Options o =
-      parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage", "force"});
+      parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage", "force", "images"});
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
   const std::string dir = o.get("out", "");
   if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
@@ -168,20 +206,29 @@ int cmd_record(int argc, char** argv) {
     fail("--two-stage records stage 1 without and stage 2 with the intrinsics; drop --intrinsics");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const sim::Scenario s =
-      hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  sim::Scenario s = hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.
+  if (o.flag("duration")) {
+    const std::string text = o.get("duration", "");
+    char* end = nullptr;
+    const double seconds = std::strtod(text.c_str(), &end);
+    if (end == text.c_str() || *end != '\0' || !(seconds >= 1.0 && seconds <= 600.0))
+      fail("--duration: '" + text + "' is not seconds of simulated data within 1..600");
+    s.duration_s = seconds;
+  }
   RecordingFolder folder(dir, o.flag("force"));
+  const bool images = o.flag("images");
   if (!two_stage) {
-    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, folder, "");
+    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, folder, "", images);
     folder.commit();
     return 0;
   }
   // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
   // together.
   const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  write_simulated_recording(s, seed, false, false, folder, "/stage1");
+  write_simulated_recording(s, seed, false, false, folder, "/stage1", images);
   write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, folder,
-                            "/stage2");
+                            "/stage2", images);
   folder.commit();
   std::printf(
       "calibrate them as `sim --intrinsics%s --seed %llu` does (the same bytes):\n"

@@ -41,6 +41,9 @@ struct HistoryRow {
   // predicts; none in the final row. Needs the sink's FrameTap.
   std::array<bool, State::kMarkers> residual_valid{};
   std::array<Eigen::Vector2d, State::kMarkers> residual{};
+  // The frame's markers as the loop took them (detected and labelled, from images), px.
+  std::array<bool, State::kMarkers> seen{};
+  std::array<Eigen::Vector2d, State::kMarkers> measured{};
   int markers_seen = 0;
   // This update's markers rejected by the gate, and their normalised innovation squared with its
   // degrees of freedom (2 per marker used; 0 until the gate is on: see CalibrationConfig).
@@ -114,6 +117,8 @@ void record_residuals(const Filter& f, const MarkerFrame<Filter::State::kMarkers
   for (int i = 0; i < M; ++i) {
     const auto k = static_cast<std::size_t>(i);
     row.markers_seen += frame.seen[k] ? 1 : 0;
+    row.seen[k] = frame.seen[k];
+    if (frame.seen[k]) row.measured[k] = frame.uv[k];
     row.residual_valid[k] = frame.seen[k] && ok[k];
     if (row.residual_valid[k])
       row.residual[k] = frame.uv[k] - z.template segment<2>(2 * i).template cast<double>();

@@ -1,11 +1,13 @@
 #include "outputs.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
 
 namespace mirrorcal::app {
 
@@ -477,6 +479,41 @@ bool write_estimates_csv(files::OutputSet& out, const std::string& path,
   }
   return true;
 }
+
+template <class Filter>
+bool write_features_csv(files::OutputSet& out, const std::string& path,
+                        const std::vector<HistoryRow<Filter>>& rows, std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  std::fprintf(o, "%s\n", sim::kFeaturesHeader);
+  for (const auto& r : rows)
+    for (std::size_t i = 0; i < r.seen.size(); ++i) {
+      if (!r.seen[i]) continue;
+      char line[128];
+      char* p = line;
+      char* const end = line + sizeof line - 1;
+      p = std::to_chars(p, end, r.t_ns).ptr;
+      *p++ = ',';
+      p = std::to_chars(p, end, i).ptr;
+      *p++ = ',';
+      p = std::to_chars(p, end, r.measured[i].x()).ptr;
+      *p++ = ',';
+      p = std::to_chars(p, end, r.measured[i].y()).ptr;
+      *p++ = '\n';
+      std::fwrite(line, 1, std::size_t(p - line), o);
+    }
+  return true;
+}
+
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const std::vector<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
+                                 std::string&);
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const std::vector<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
+                                 std::string&);
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const std::vector<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
+                                 std::string&);
 
 template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,

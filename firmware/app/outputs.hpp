@@ -178,4 +178,11 @@ template <class Filter>
 bool write_estimates_csv(files::OutputSet& out, const std::string& path,
                          const RecordStore<HistoryRow<Filter>>& rows, std::string& error);
 
+// The markers each row's frame gave the filter, as a recording's features.csv (its header, the
+// frame's timestamp, numbers that read back as the same doubles): what calibrate found in a
+// recording's images, to check or to calibrate from again.
+template <class Filter>
+bool write_features_csv(files::OutputSet& out, const std::string& path,
+                        const std::vector<HistoryRow<Filter>>& rows, std::string& error);
+
 }  // namespace mirrorcal::app

@@ -20,6 +20,7 @@ LoopData recording_loop_data(const sim::Recording& r) {
   d.imu_period_ns = imu_period_ns(r.sensors.imu_rate_hz);
   d.width = r.sensors.width;
   d.height = r.sensors.height;
+  if (r.from_images) d.image_detection = std::make_shared<DetectionReport>();
   return d;
 }
 
@@ -52,11 +53,16 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
       for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[j];
     }
   }
-  run = run_loop<NK>(recording_config(r), x0, p0, recording_loop_data(r),
-                     r.has_truth ? &truth : nullptr, progress);
+  const LoopData data = recording_loop_data(r);
+  run = run_loop<NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();
     return false;
+  }
+  if (data.image_detection) {  // the markers the detection labelled are the data's
+    run.detection = *data.image_detection;
+    run.features_found = true;
+    run.result.markers_observed = run.detection.markers_labelled;
   }
   run.result.rostopic = r.sensors.rostopic;
   run.result.recording_fingerprint = r.fingerprint;

@@ -35,6 +35,9 @@ std::unique_ptr<hal::ImuSource> LoopData::open_imu() const {
 }
 
 std::unique_ptr<hal::MarkerSource<kMarkers>> LoopData::open_markers() const {
+  if (streams && image_detection)
+    return std::make_unique<ImageMarkers>(streams->open_images(), width, height,
+                                          image_detection.get());
   if (streams) return std::make_unique<sim::StreamedMarkerSource<kMarkers>>(streams->open_frames());
   return std::make_unique<sim::VectorMarkerSource<kMarkers>>(frames);
 }
@@ -122,7 +125,12 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
 
   const std::unique_ptr<hal::ImuSource> imu = data.open_imu();
   const std::unique_ptr<hal::MarkerSource<kMarkers>> listed = data.open_markers();
-  FrameTap<kMarkers> markers(input.source != nullptr ? *input.source : *listed, input.relabeler);
+  // Markers found in images (calibrate from images) are labelled with the filter's prediction, as
+  // those of rendered frames (sim --frames) and of the board's camera are.
+  hal::MarkerRelabeler<kMarkers>* relabeler = input.relabeler;
+  if (input.source == nullptr && relabeler == nullptr)
+    relabeler = dynamic_cast<hal::MarkerRelabeler<kMarkers>*>(listed.get());
+  FrameTap<kMarkers> markers(input.source != nullptr ? *input.source : *listed, relabeler);
   HistorySink<Filter> sink(data.frame_count() + 1, truth != nullptr ? &run.truth : nullptr,
                            &markers);
   if (keep_motion) {
@@ -133,7 +141,7 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
   firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, *imu, markers, lc, &sink);
-  if (input.relabeler != nullptr) loop.set_identifier(&markers);
+  if (relabeler != nullptr) loop.set_identifier(&markers);
 
   const std::size_t report_every = data.imu_samples() / 100 + 1;
   std::size_t n = 0;

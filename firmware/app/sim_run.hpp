@@ -46,6 +46,7 @@ struct DetectionReport {
   double centroid_max_px = 0.0;
   double centroid_mean_px[2] = {0.0, 0.0};  // the mean error in u and v: detection's bias
   double ms_per_frame = 0.0;                // detection and identification, wall time
+  double read_ms_per_frame = 0.0;           // reading the image first (calibrate from images)
 };
 
 template <int NK>
@@ -62,7 +63,8 @@ struct SimRun {
   firmware::LoopCounters loop_counters;
   std::uint64_t markers_out_of_image = 0;
   std::size_t imu_samples = 0, frames = 0;
-  DetectionReport detection;  // --frames only
+  DetectionReport detection;    // --frames, and calibrate from images
+  bool features_found = false;  // the markers were found in images: features.csv with the results
   // For the report: the prior's 1-sigma of each calibration state (SI, calibration_params()
   // order), against which the data's narrowing of it is judged, and the pixel noise assumed.
   std::vector<double> prior_sigma;
@@ -85,6 +87,10 @@ struct LoopData {
   sim::RecordingStats stats;                             // of the streams
   std::int64_t imu_period_ns = 5'000'000;                // nominal IMU period
   int width = 640, height = 480;                         // image size, for the result files
+  // Set: the markers are found in the streams' images (RecordingStreams::open_images) by the
+  // board's detection, labelled with the filter's prediction, in every pass; it gets how that went
+  // in the last pass over all the data.
+  std::shared_ptr<DetectionReport> image_detection;
 
   std::size_t imu_samples() const { return streams ? stats.imu_samples : imu.size(); }
   std::size_t frame_count() const { return streams ? stats.frames : frames.size(); }
@@ -255,7 +261,9 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun
                      std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(out, dir + "/estimates.csv", run.history, error);
+         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) &&
+         (!run.features_found ||
+          write_features_csv(out, dir + "/features.csv", run.history, error));
 }
 template <int NK>
 bool write_run_outputs(const std::string& dir, const SimRun<NK>& run, std::string& error) {

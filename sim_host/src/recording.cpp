@@ -60,6 +60,7 @@ CsvFiles csv_files(const std::string& dir) {
 bool fingerprint_of(const CsvFiles& f, std::string& hex, std::string& error) {
   Fingerprint fingerprint;
   for (const std::string* path : {&f.imu_csv, &f.frames_csv, &f.features_csv}) {
+    if (path->empty()) continue;  // markers from the images: no features.csv
     LineInput input;
     if (!input.open(*path, error)) return false;
     std::string_view chunk;
@@ -95,8 +96,11 @@ bool gather_stats(const CsvFiles& f, int markers, RecordingStats& stats,
     }
   }
   LineInput frames, features;
-  if (!frames.open(f.frames_csv, error) || !features.open(f.features_csv, error)) return false;
+  const bool with_features = !f.features_csv.empty();
+  if (!frames.open(f.frames_csv, error) || (with_features && !features.open(f.features_csv, error)))
+    return false;
   FrameReader reader(frames, f.frames_csv, features, f.features_csv, markers);
+  if (!with_features) reader.frames_only();
   ObservedFrame frame;
   if (reader.headers())
     while (reader.next(frame)) {
@@ -142,11 +146,22 @@ bool check_not_cut(const std::string& dir, std::vector<std::string>& notes, std:
 // streams (read_recording).
 bool read_checked(const std::string& dir, int markers, Recording& out,
                   const std::function<void(const ImuSample&)>& keep_imu,
-                  const std::function<void(const ObservedFrame&)>& keep_frame, std::string& error) {
+                  const std::function<void(const ObservedFrame&)>& keep_frame, std::string& error,
+                  bool from_images = false) {
   out = Recording{};
+  out.from_images = from_images;
   if (!check_not_cut(dir, out.notes, error)) return false;
   std::string text;
-  const CsvFiles csv = csv_files(dir);
+  CsvFiles csv = csv_files(dir);
+  if (from_images) {
+    if (!has_images(dir)) {
+      error = dir +
+              "/mav0/cam0/data: no such folder: the recording has no images to find the "
+              "markers in";
+      return false;
+    }
+    csv.features_csv.clear();
+  }
   const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
   const std::string priors_yaml = dir + "/mirrorcal.yaml";
   if (!files::read_file(imu_yaml, text, error) ||
@@ -189,7 +204,7 @@ bool read_checked(const std::string& dir, int markers, Recording& out,
     out.notes.push_back(csv.frames_csv + ": " + std::to_string(out.frames_outside_imu) +
                         " frames outside the IMU data (" + std::to_string(st.imu_first_ns) + ".." +
                         std::to_string(st.imu_last_ns) + " ns) skipped");
-  for (int id = 0; id < markers; ++id)
+  for (int id = 0; id < markers && !from_images; ++id)
     if (!st.marker_seen[static_cast<std::size_t>(id)]) {
       error = csv.features_csv + ": marker " + std::to_string(id) +
               " is seen in no frame within the IMU data; the filter cannot locate it";
@@ -257,8 +272,10 @@ class FileFrameStream final : public FrameStream {
         last_ns_(last_ns),
         first_error_(first_error) {
     std::string error;
-    if (!frames_.open(f.frames_csv, error) || !features_.open(f.features_csv, error) ||
-        !reader_.headers())
+    const bool with_features = !f.features_csv.empty();  // none: the markers are in the images
+    if (!with_features) reader_.frames_only();
+    if (!frames_.open(f.frames_csv, error) ||
+        (with_features && !features_.open(f.features_csv, error)) || !reader_.headers())
       fail(error);
   }
   hal::SourceStatus next(ObservedFrame& frame) override {
@@ -287,12 +304,131 @@ class FileFrameStream final : public FrameStream {
   std::string& first_error_;
 };
 
+// The images of cam0/data.csv's frames within the IMU data, read one per frame into buffers
+// allocated when opened. An image that cannot be read (or has another size than camchain.yaml's)
+// is skipped and named in the log; the frames after it go on.
+class FileImageSource final : public hal::FrameSource {
+ public:
+  FileImageSource(const CsvFiles& f, const std::string& images_dir, int width, int height,
+                  std::int64_t first_ns, std::int64_t last_ns, ImageLog& log,
+                  std::string& first_error)
+      : reader_(frames_, f.frames_csv, no_features_, f.features_csv, 0),
+        images_(width, height),
+        images_dir_(images_dir),
+        width_(width),
+        height_(height),
+        first_ns_(first_ns),
+        last_ns_(last_ns),
+        log_(log),
+        first_error_(first_error) {
+    reader_.frames_only();
+    frame_.markers.reserve(1);
+    std::string error;
+    if (!frames_.open(f.frames_csv, error) || !reader_.headers()) fail(error);
+  }
+  ~FileImageSource() override {
+    if (unreadable_ > log_.unreadable) log_.unreadable = unreadable_;
+  }
+  hal::SourceStatus poll(hal::FrameView& view) override {
+    while (error_.empty()) {
+      if (!reader_.next(frame_)) {
+        if (reader_.error().empty()) return hal::SourceStatus::kEndOfStream;
+        fail(reader_.error());
+        break;
+      }
+      if (frame_.t_ns < first_ns_) continue;
+      if (frame_.t_ns > last_ns_) return hal::SourceStatus::kEndOfStream;
+      const std::string_view name = reader_.filename();
+      const int n = std::snprintf(path_, sizeof path_, "%s/%.*s", images_dir_.c_str(),
+                                  static_cast<int>(name.size()), name.data());
+      GrayImage image;
+      if (n < 0 || std::size_t(n) >= sizeof path_) {
+        unreadable(path_, "path too long");
+        continue;
+      }
+      if (!images_.read(path_, image)) {
+        unreadable(images_.error(), nullptr);
+        continue;
+      }
+      if (image.width != width_ || image.height != height_) {
+        char what[96];
+        std::snprintf(what, sizeof what, "%dx%d pixels; camchain.yaml's camera has %dx%d",
+                      image.width, image.height, width_, height_);
+        unreadable(path_, what);
+        continue;
+      }
+      view.format = hal::PixelFormat::kGrey;
+      view.width = image.width;
+      view.height = image.height;
+      view.bytes_per_line = image.width;
+      view.data = image.pixels;
+      view.bytes = std::size_t(image.width) * std::size_t(image.height);
+      view.t_ns = frame_.t_ns;
+      view.sequence = sequence_++;
+      view.flags = 0;
+      ++counters_.frames;
+      return hal::SourceStatus::kOk;
+    }
+    return hal::SourceStatus::kError;
+  }
+  const char* error() const override { return error_.c_str(); }
+  hal::FrameCounters counters() const override { return counters_; }
+
+ private:
+  // One image skipped: counted, and its message kept if it is among the first (each once).
+  void unreadable(const char* message, const char* what) {
+    ++unreadable_;
+    char text[512];
+    // Truncated to fit: a path's end and the reason are what matters, and both fit in practice.
+    if (what != nullptr)
+      std::snprintf(text, sizeof text, "%.380s: %.120s", message, what);
+    else
+      std::snprintf(text, sizeof text, "%.511s", message);
+    for (int k = 0; k < log_.kept; ++k)
+      if (std::strcmp(log_.messages[std::size_t(k)].data(), text) == 0) return;
+    if (log_.kept == ImageLog::kKept) return;
+    std::memcpy(log_.messages[std::size_t(log_.kept++)].data(), text, sizeof text);
+  }
+  void fail(const std::string& error) {
+    error_ = !error.empty() ? error : reader_.error();
+    if (first_error_.empty()) first_error_ = error_ + " (the file changed while calibrating?)";
+  }
+  LineInput frames_, no_features_;
+  FrameReader reader_;
+  ImageReader images_;
+  std::string images_dir_;
+  int width_, height_;
+  std::int64_t first_ns_, last_ns_;
+  ImageLog& log_;
+  std::string& first_error_;
+  std::string error_;
+  ObservedFrame frame_;
+  char path_[4096] = "";
+  std::uint32_t sequence_ = 0;
+  std::uint64_t unreadable_ = 0;
+  hal::FrameCounters counters_{};
+};
+
 // The streams read from the files again for each pass.
 class FileStreams final : public RecordingStreams {
  public:
-  // Frames before first_ns or after last_ns (the IMU data's span) are skipped.
-  FileStreams(CsvFiles files, int markers, std::int64_t first_ns, std::int64_t last_ns)
-      : files_(std::move(files)), markers_(markers), first_ns_(first_ns), last_ns_(last_ns) {}
+  // Frames before first_ns or after last_ns (the IMU data's span) are skipped. With images_dir,
+  // the images of width x height pixels there are the frames' markers' source.
+  FileStreams(CsvFiles files, int markers, std::int64_t first_ns, std::int64_t last_ns,
+              std::string images_dir = {}, int width = 0, int height = 0)
+      : files_(std::move(files)),
+        markers_(markers),
+        first_ns_(first_ns),
+        last_ns_(last_ns),
+        images_dir_(std::move(images_dir)),
+        width_(width),
+        height_(height) {}
+  std::unique_ptr<hal::FrameSource> open_images() const override {
+    if (images_dir_.empty()) return nullptr;
+    return std::make_unique<FileImageSource>(files_, images_dir_, width_, height_, first_ns_,
+                                             last_ns_, *log_, *error_);
+  }
+  const ImageLog* image_log() const override { return images_dir_.empty() ? nullptr : log_.get(); }
   std::unique_ptr<hal::ImuSource> open_imu() const override {
     return std::make_unique<FileImuSource>(files_.imu_csv, *error_);
   }
@@ -305,16 +441,38 @@ class FileStreams final : public RecordingStreams {
   CsvFiles files_;
   int markers_;
   std::int64_t first_ns_, last_ns_;
+  std::string images_dir_;
+  int width_, height_;
   std::unique_ptr<std::string> error_ = std::make_unique<std::string>();  // the sources write it
+  std::unique_ptr<ImageLog> log_ = std::make_unique<ImageLog>();          // the image sources too
 };
 
 }  // namespace
 
-bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
-  if (!read_checked(dir, markers, out, {}, {}, error)) return false;
-  out.streams = std::make_shared<const FileStreams>(csv_files(dir), markers, out.stats.imu_first_ns,
-                                                    out.stats.imu_last_ns);
+bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error,
+                    bool from_images) {
+  if (!read_checked(dir, markers, out, {}, {}, error, from_images)) return false;
+  CsvFiles csv = csv_files(dir);
+  if (!from_images) {
+    out.streams = std::make_shared<const FileStreams>(csv, markers, out.stats.imu_first_ns,
+                                                      out.stats.imu_last_ns);
+    return true;
+  }
+  csv.features_csv.clear();
+  out.streams = std::make_shared<const FileStreams>(csv, markers, out.stats.imu_first_ns,
+                                                    out.stats.imu_last_ns, dir + "/mav0/cam0/data",
+                                                    out.sensors.width, out.sensors.height);
   return true;
+}
+
+bool has_features_csv(const std::string& dir) {
+  std::error_code ec;
+  return std::filesystem::exists(csv_files(dir).features_csv, ec);
+}
+
+bool has_images(const std::string& dir) {
+  std::error_code ec;
+  return std::filesystem::is_directory(dir + "/mav0/cam0/data", ec);
 }
 
 // --- RecordingWriter ---------------------------------------------------------------------------
@@ -414,7 +572,7 @@ bool RecordingWriter::begin_frame(std::int64_t t_ns, const GrayImage* image) {
   char* const end = line + kLine;
   char* p = put(line, end, t_ns, ',');
   p = put(p, end, t_ns, '.');
-  p = std::copy_n("pgm\n", 4, p);
+  p = std::copy_n("png\n", 4, p);
   std::fwrite(line, 1, static_cast<std::size_t>(p - line), frames_->f);
   last_frame_ns_ = t_ns;
   any_frame_ = true;
@@ -431,7 +589,7 @@ void RecordingWriter::add_feature(std::int64_t t_ns, int id, double u, double v)
   std::fwrite(line, 1, static_cast<std::size_t>(p - line), features_->f);
 }
 
-// An 8-bit PGM through POSIX calls, which need no heap (unlike a FILE).
+// An 8-bit grey PNG through POSIX calls, which need no heap (unlike a FILE).
 bool RecordingWriter::write_image(std::int64_t t_ns, const GrayImage& image) {
   if (!images_dir_) {  // created with the first image, so image-less recordings have none
     std::error_code ec;
@@ -441,16 +599,19 @@ bool RecordingWriter::write_image(std::int64_t t_ns, const GrayImage& image) {
       return fail("cannot create the image folder", images_path_);
     }
     images_dir_ = true;
+    png_ = std::make_unique<PngWriter>(image.width, image.height);
   }
   char path[4096];
-  std::snprintf(path, sizeof path, "%s/%lld.pgm", images_path_.c_str(),
+  std::snprintf(path, sizeof path, "%s/%lld.png", images_path_.c_str(),
                 static_cast<long long>(t_ns));
+  std::size_t n = 0;
+  const std::uint8_t* png = png_->encode(image, n);
+  if (png == nullptr) {
+    errno = 0;
+    return fail(png_->error(), path);
+  }
   const int fd = ::open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return fail("cannot write", path);
-  char header[64];
-  const int h = std::snprintf(header, sizeof header, "P5\n%d %d\n255\n", image.width, image.height);
-  const std::size_t n =
-      static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height);
   const auto write_all = [fd](const void* data, std::size_t size) {
     const char* c = static_cast<const char*>(data);
     while (size > 0) {
@@ -462,7 +623,7 @@ bool RecordingWriter::write_image(std::int64_t t_ns, const GrayImage& image) {
     }
     return true;
   };
-  const bool ok = write_all(header, static_cast<std::size_t>(h)) && write_all(image.pixels, n);
+  const bool ok = write_all(png, n);
   if (::close(fd) != 0 || !ok) return fail("error writing", path);
   return true;
 }

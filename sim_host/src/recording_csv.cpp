@@ -195,7 +195,8 @@ bool FrameRows::next(std::int64_t& t_ns) {
   CsvRow csv(input_, file_, error_);
   std::string_view f[2];
   if (!csv.row(2, f) || !csv.integer(f[0], "timestamp", t_ns)) return false;
-  if (text::trim(f[1]).empty()) return csv.fail("empty filename");
+  filename_ = text::trim(f[1]);
+  if (filename_.empty()) return csv.fail("empty filename");
   if (!csv.in_order(t_ns, any_, last_ns_, false)) return false;
   any_ = true;
   last_ns_ = t_ns;
@@ -238,7 +239,7 @@ FrameReader::FrameReader(LineInput& frames, const std::string& frames_csv, LineI
     : frames_(frames, frames_csv), features_(features, features_csv, markers) {}
 
 bool FrameReader::headers() {
-  return frames_.header() && features_.header();
+  return frames_.header() && (!with_features_ || features_.header());
 }
 
 const std::string& FrameReader::error() const {
@@ -259,6 +260,12 @@ bool FrameReader::next(ObservedFrame& frame) {
     return has_pending_;
   };
   std::int64_t t = 0;
+  if (!with_features_) {
+    if (!frames_.next(t)) return false;
+    frame.t_ns = t;
+    frame.markers.clear();
+    return true;
+  }
   if (!frames_.next(t)) {
     // Rows left in features.csv after the last frame belong to none.
     if (frames_.error().empty() && pend()) not_a_frame();

@@ -17,7 +17,6 @@ inline constexpr const char* kImuHeader =
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
     "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]";
 inline constexpr const char* kFramesHeader = "#timestamp [ns],filename";
-inline constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
 
 // The lines of a text, or of a regular file read in chunks: memory bounded by the longest line
 // allowed (kMaxLine), whatever the file's size.
@@ -75,11 +74,14 @@ class FrameRows {
   FrameRows(LineInput& input, std::string file) : input_(input), file_(std::move(file)) {}
   bool header();
   bool next(std::int64_t& t_ns);
+  // The last row's file name (trimmed), valid until the next row is read.
+  std::string_view filename() const { return filename_; }
   const std::string& error() const { return error_; }
 
  private:
   LineInput& input_;
   std::string file_, error_;
+  std::string_view filename_;
   bool any_ = false;
   std::int64_t last_ns_ = 0;
 };
@@ -114,6 +116,10 @@ class FrameReader {
  public:
   FrameReader(LineInput& frames, const std::string& frames_csv, LineInput& features,
               const std::string& features_csv, int markers);
+  // cam0/data.csv alone (markers from the images): every frame without markers, features unread.
+  void frames_only() { with_features_ = false; }
+  // The last frame's file name, valid until the next frame is read.
+  std::string_view filename() const { return frames_.filename(); }
   bool headers();
   // The next frame; false at the end of cam0/data.csv (error() empty) or on bad input. frame's
   // marker list is reused, so reading allocates nothing once it holds M markers.
@@ -124,7 +130,7 @@ class FrameReader {
   FrameRows frames_;
   FeatureRows features_;
   FeatureRow pending_;  // the first feature row of a later frame, read ahead
-  bool has_pending_ = false, features_done_ = false;
+  bool has_pending_ = false, features_done_ = false, with_features_ = true;
   std::string error_;
 };
 

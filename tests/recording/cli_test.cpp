@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <map>
@@ -17,8 +18,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "mirrorcal/drivers/blob_detector.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "process.hpp"
+#include "recording_run.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -884,4 +887,114 @@ TEST(Cli, RecordTwoStageStoppedAtRandomMomentsLeavesBothStagesOrNone) {
       refused = true;
     }
   }
+}
+
+// A recording with images (`record --images`: each frame's image with a spot at every marker
+// features.csv lists) calibrated from its images, by the board's detection and labelling, agrees
+// with the calibration from its features.csv: every state within half its sigma (the centroids'
+// error is a few hundredths of a pixel against 1 px of noise). Without features.csv, calibrate
+// takes the images by itself, and an image that cannot be read is named and skipped.
+TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
+  TempDir dir("cli-images");
+  const std::string& d = dir.path;
+  const std::string rec = d + "/rec";
+  Result r = run_mirrorcal("record --seed 4 --images --duration 10 --out " + rec, d);
+  ASSERT_EQ(r.code, 0) << r.output;
+
+  using Run = mc::app::SimRun<0>;
+  using State = Run::State;
+  std::string err;
+  mc::sim::Recording features, images;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::app::kMarkers, features, err)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::app::kMarkers, images, err, true)) << err;
+  ASSERT_TRUE(images.from_images);
+  Run from_features, from_images;
+  ASSERT_TRUE(mc::app::calibrate_recording<0>(features, from_features, err)) << err;
+  ASSERT_TRUE(mc::app::calibrate_recording<0>(images, from_images, err)) << err;
+  const auto& a = from_features.history.back();
+  const auto& b = from_images.history.back();
+  constexpr int B = State::kPbc, L = State::kDim - State::kPbc;
+  const Eigen::Matrix<double, L, 1> diff = b.state.boxminus_block<B, L>(a.state);
+  double worst = 0.0;
+  for (int j = 0; j < L; ++j) {
+    EXPECT_LT(std::abs(diff(j)), 0.5 * a.sigma(j)) << "state " << j;
+    EXPECT_NEAR(b.sigma(j), a.sigma(j), 0.05 * a.sigma(j)) << "state " << j;
+    worst = std::max(worst, std::abs(diff(j)) / a.sigma(j));
+  }
+  std::printf("images against features: largest difference %.3f sigma\n", worst);
+  // The detection found nearly every marker features.csv lists, all labelled by the filter.
+  const std::uint64_t listed = features.stats.markers;  // in features.csv, within the IMU data
+  EXPECT_GT(from_images.detection.markers_labelled, 0.97 * double(listed));
+  EXPECT_LE(from_images.detection.markers_labelled, listed);
+  EXPECT_EQ(from_images.detection.frames, features.stats.frames);
+
+  // Detection against the pixels the spots were drawn at (features.csv, the truth of the images):
+  // every blob near a listed marker lies within a small fraction of the 1 px spot noise of it.
+  mc::sim::Recording listed_frames;
+  ASSERT_TRUE(mc::sim::read_recording(rec, mc::app::kMarkers, listed_frames, err)) << err;
+  auto source = images.streams->open_images();
+  ASSERT_NE(source, nullptr);
+  mc::drivers::BlobDetector detector(mc::drivers::BlobConfig{}, 640, 480);
+  std::vector<mc::drivers::Blob> blobs(16);
+  double sum_sq = 0.0;
+  std::size_t matched = 0, k = 0;
+  mc::hal::FrameView view;
+  while (source->poll(view) == mc::hal::SourceStatus::kOk) {
+    ASSERT_LT(k, listed_frames.frames.size());
+    const auto& f = listed_frames.frames[k++];
+    ASSERT_EQ(view.t_ns, f.t_ns);
+    const int n = detector.detect(view, blobs.data(), int(blobs.size()));
+    for (const auto& m : f.markers)
+      for (int i = 0; i < n; ++i) {
+        const double du = blobs[std::size_t(i)].u - m.u, dv = blobs[std::size_t(i)].v - m.v;
+        if (du * du + dv * dv > 4.0 || blobs[std::size_t(i)].truncated) continue;
+        sum_sq += du * du + dv * dv;
+        ++matched;
+      }
+  }
+  EXPECT_EQ(k, listed_frames.frames.size());
+  ASSERT_GT(matched, 0.97 * double(listed));
+  const double rms = std::sqrt(sum_sq / double(matched));
+  std::printf("centroids against the drawn pixels: %.4f px RMS over %zu markers\n", rms, matched);
+  EXPECT_LT(rms, 0.1);  // the spots carry 1 px of noise; detection adds a tenth of that at most
+
+  // No features.csv: calibrate finds the markers in the images; a cut image is named, skipped.
+  fs::remove(rec + "/mav0/cam0/features.csv");
+  const std::string cut =
+      rec + "/mav0/cam0/data/" + std::to_string(listed_frames.frames[100].t_ns) + ".png";
+  const std::string png = slurp(cut);
+  spit(cut, png.substr(0, png.size() / 2));
+  r = run_mirrorcal("calibrate " + rec + " --out " + d + "/out", d);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("detected in the images of " + rec + "/mav0/cam0/data (no features.csv)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("1 images could not be read and were skipped:\n  " + cut + ": truncated"),
+            std::string::npos)
+      << r.output;
+  // The markers it found, beside the results as a features.csv: each labelled as the marker drawn
+  // there (no wrong label), at its drawn pixel, and nearly all of them; none from the cut image.
+  std::vector<mc::sim::ObservedFrame> found = listed_frames.frames;
+  for (auto& f : found) f.markers.clear();
+  ASSERT_TRUE(mc::sim::parse_features_csv(slurp(d + "/out/features.csv"), "features.csv",
+                                          mc::app::kMarkers, found, err))
+      << err;
+  std::size_t rows = 0, wrong = 0;
+  double farthest = 0.0;
+  for (std::size_t f = 0; f < found.size(); ++f)
+    for (const auto& m : found[f].markers) {
+      ++rows;
+      const auto& drawn = listed_frames.frames[f].markers;
+      const auto same =
+          std::find_if(drawn.begin(), drawn.end(), [&](const auto& x) { return x.id == m.id; });
+      const double e = same == drawn.end() ? INFINITY : std::hypot(same->u - m.u, same->v - m.v);
+      if (!(e < 1.0)) ++wrong;
+      if (e < 1.0) farthest = std::max(farthest, e);
+    }
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_LT(farthest, 0.5);
+  EXPECT_GT(double(rows), 0.97 * double(listed));
+  EXPECT_TRUE(found[100].markers.empty());
+  std::printf("features.csv of the images: %zu markers, %zu wrong labels, worst %.3f px\n", rows,
+              wrong, farthest);
 }

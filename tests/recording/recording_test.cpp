@@ -165,7 +165,7 @@ TEST(Recording, AWriterNeverClosedLeavesTheEarlierRecording) {
       std::distance(fs::directory_iterator(tmp.path + "/mav0/imu0"), fs::directory_iterator()), 1);
 }
 
-TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
+TEST(Recording, ImagesGoToCam0DataAsPngNamedInDataCsv) {
   const TempDir tmp("images");
   const std::string& dir = tmp.path;
   std::string err;
@@ -178,9 +178,15 @@ TEST(Recording, ImagesGoToCam0DataAsPgmNamedInDataCsv) {
   f.markers.push_back({1, 10.5, 20.25});
   ASSERT_TRUE(w.add_frame(f, &img));
   ASSERT_TRUE(w.close(err)) << err;
-  EXPECT_EQ(slurp(dir + "/mav0/cam0/data/1234.pgm"),
-            std::string("P5\n3 2\n255\n") + std::string(reinterpret_cast<const char*>(pixels), 6));
-  EXPECT_EQ(slurp(dir + "/mav0/cam0/data.csv"), "#timestamp [ns],filename\n1234,1234.pgm\n");
+  const std::string png = slurp(dir + "/mav0/cam0/data/1234.png");
+  EXPECT_EQ(png.substr(0, 8), "\x89PNG\r\n\x1a\n");
+  mc::sim::ImageReader reader(3, 2);
+  mc::sim::GrayImage back;
+  ASSERT_TRUE(reader.read((dir + "/mav0/cam0/data/1234.png").c_str(), back)) << reader.error();
+  ASSERT_EQ(back.width, 3);
+  ASSERT_EQ(back.height, 2);
+  EXPECT_TRUE(std::equal(pixels, pixels + 6, back.pixels));
+  EXPECT_EQ(slurp(dir + "/mav0/cam0/data.csv"), "#timestamp [ns],filename\n1234,1234.png\n");
   EXPECT_EQ(slurp(dir + "/mav0/cam0/features.csv"),
             "#timestamp [ns],feature_id,u [px],v [px]\n1234,1,10.5,20.25\n");
 }

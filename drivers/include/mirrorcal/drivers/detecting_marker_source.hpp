@@ -45,6 +45,7 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
       if ((view.flags & hal::kFrameCorrupt) == 0) break;
       ++counters_.corrupt_skipped;
     }
+    last_view_ = view;
     const auto t0 = std::chrono::steady_clock::now();
     blob_count_ = detector_.detect(view, blobs_.data(), static_cast<int>(blobs_.size()));
     committed_ += last_;  // the previous frame's labelling is final now
@@ -76,6 +77,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
     return c;
   }
   hal::FrameCounters frame_counters() const { return frames_.counters(); }
+  // The image of the last frame delivered (record --images keeps it), valid until the next poll.
+  const hal::FrameView& last_frame() const { return last_view_; }
   // The blobs of the last frame (for diagnostics and tests).
   const Blob* last_blobs(int& n) const {
     n = blob_count_;
@@ -92,6 +95,7 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   MarkerIdentifier<M> identifier_;
   std::array<Blob, MarkerIdentifier<M>::kMaxBlobs> blobs_{};
   int blob_count_ = 0;
+  hal::FrameView last_view_{};
   IdentifierCounters committed_{}, last_{};
   DetectionCounters counters_{};
   std::int64_t last_detection_ns_ = 0;

@@ -5,7 +5,8 @@
 //   DIR/mav0/cam0/features.csv   #timestamp [ns],feature_id,u [px],v [px]   (ids 0..M-1; pixels
 //                                                                  with the origin at the top-left
 //                                                                  pixel's centre)
-//   DIR/mav0/cam0/data/          the images, only when the recording has them (8-bit PGM)
+//   DIR/mav0/cam0/data/          the images, only when the recording has them (8-bit grey PNG,
+//                                <timestamp>.png as data.csv names them; PGM is read too)
 //   DIR/imu.yaml, DIR/camchain.yaml   Kalibr sensor descriptions
 //   DIR/mirrorcal.yaml                the priors (README, "mirrorcal.yaml")
 // Numbers are written as the shortest decimal that reads back as the same double, so a recording
@@ -20,11 +21,16 @@
 #include <vector>
 
 #include "mirrorcal/estimator/prior.hpp"
+#include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/hal/sources.hpp"
 #include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/sim_host/images.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 
 namespace mirrorcal::sim {
+
+// features.csv's header (the other files' are EuRoC's).
+inline constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
 
 // Kalibr's topic of the first camera: what camchain.yaml names when it names none.
 inline constexpr const char* kDefaultCameraTopic = "/cam0/image_raw";
@@ -103,6 +109,15 @@ struct RecordingStats {
 
 class FrameStream;
 
+// What reading a recording's images met (calibrate on images): an image that cannot be read is
+// skipped, counted and named here, and the rest go on. Fixed storage: the loop allocates nothing.
+struct ImageLog {
+  std::uint64_t unreadable = 0;  // in the pass that met most (every full pass meets the same)
+  static constexpr int kKept = 5;
+  int kept = 0;
+  std::array<std::array<char, 512>, kKept> messages{};  // the first ones', naming their files
+};
+
 // A recording's streams, opened afresh for each pass of a calibration (open_recording reads them
 // from the files again each time, so that memory stays bounded whatever their size).
 class RecordingStreams {
@@ -112,6 +127,11 @@ class RecordingStreams {
   // IMU data. A file that no longer reads as it did ends its stream with an error.
   virtual std::unique_ptr<hal::ImuSource> open_imu() const = 0;
   virtual std::unique_ptr<FrameStream> open_frames() const = 0;
+  // The images of the frames within the IMU data, as 8-bit grey frames (a recording opened with
+  // from_images; nullptr otherwise). Each source allocates its buffers when opened.
+  virtual std::unique_ptr<hal::FrameSource> open_images() const { return nullptr; }
+  // What the image sources met; nullptr without images.
+  virtual const ImageLog* image_log() const { return nullptr; }
   // The first error any pass met (the files changed while calibrating); empty if none.
   virtual const std::string& error() const = 0;
 };
@@ -163,7 +183,10 @@ struct Recording {
   std::vector<std::string> notes;        // defaults used, frames skipped: tell the user
   std::vector<std::string> warnings;     // the data disagree with a description (noise densities)
   std::string fingerprint;               // of the CSV files' bytes: results name their recording
-  bool has_truth = false;                // truth.yaml was there
+  // The markers come from the images in cam0/data/ (open_recording's from_images), not from
+  // features.csv; the streams' frames then carry no markers.
+  bool from_images = false;
+  bool has_truth = false;  // truth.yaml was there
   RecordingTruth truth;
 };
 
@@ -174,7 +197,13 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
 // The same checks without holding the streams: they are read from the files in passes of bounded
 // memory (out.streams), whatever their size. A recording that changes on disk after this gives
 // errors through out.streams->error().
-bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error);
+// from_images: the markers are to be found in the images cam0/data.csv names (in cam0/data/);
+// features.csv is not read, and the streams open the images too (RecordingStreams::open_images).
+bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error,
+                    bool from_images = false);
+// Whether DIR's recording has features.csv, and whether it has images (cam0/data/ is a folder).
+bool has_features_csv(const std::string& dir);
+bool has_images(const std::string& dir);
 
 // The parsers behind read_recording, on a file's text; file names the file in messages.
 bool parse_imu_csv(std::string_view text, const std::string& file, std::vector<ImuSample>& out,
@@ -296,15 +325,10 @@ RecordingPriors from_prior(const Prior<M>& p, const Eigen::Vector3d& gravity_n, 
   return r;
 }
 
-// An 8-bit grey image, row-major, stride = width.
-struct GrayImage {
-  int width = 0, height = 0;
-  const std::uint8_t* pixels = nullptr;
-};
-
 // Writes the streams of a recording as they come (the simulator here, the board's loop later).
 // open() allocates what it needs; add_imu() and add_frame() only write (fixed buffers, POSIX calls
-// for images; only the first image allocates, creating cam0/data/). Timestamps must increase in
+// for images; only the first image allocates, creating cam0/data/ and the PNG writer's buffers for
+// its size, which no later image may exceed). Timestamps must increase in
 // each stream, so whatever it writes reads back.
 class RecordingWriter {
  public:
@@ -343,6 +367,7 @@ class RecordingWriter {
 
   std::string dir_, images_path_, error_;
   std::unique_ptr<File> imu_, frames_, features_;
+  std::unique_ptr<PngWriter> png_;
   // The CSV files, renamed into place by close(). Declared after the Files so that it goes first,
   // closing its files while their buffers still exist.
   std::unique_ptr<files::OutputSet> streams_;
