@@ -482,7 +482,7 @@ bool write_estimates_csv(files::OutputSet& out, const std::string& path,
 
 template <class Filter>
 bool write_features_csv(files::OutputSet& out, const std::string& path,
-                        const std::vector<HistoryRow<Filter>>& rows, std::string& error) {
+                        const RecordStore<HistoryRow<Filter>>& rows, std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
   std::fprintf(o, "%s\n", sim::kFeaturesHeader);
@@ -506,13 +506,13 @@ bool write_features_csv(files::OutputSet& out, const std::string& path,
 }
 
 template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const std::vector<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
                                  std::string&);
 template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const std::vector<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
                                  std::string&);
 template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const std::vector<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
                                  std::string&);
 
 template bool write_estimates_csv(files::OutputSet&, const std::string&,

@@ -183,6 +183,6 @@ bool write_estimates_csv(files::OutputSet& out, const std::string& path,
 // recording's images, to check or to calibrate from again.
 template <class Filter>
 bool write_features_csv(files::OutputSet& out, const std::string& path,
-                        const std::vector<HistoryRow<Filter>>& rows, std::string& error);
+                        const RecordStore<HistoryRow<Filter>>& rows, std::string& error);
 
 }  // namespace mirrorcal::app
