@@ -81,7 +81,7 @@ ImageReader::ImageReader(int max_width, int max_height)
                                                : max_height),
       zlib_(std::make_unique<Zlib>()) {
   const std::size_t w = std::size_t(max_width_), h = std::size_t(max_height_);
-  raw_.resize((4 * w + 1) * h + 1);  // RGBA, a filter byte per row; a byte to see excess data
+  raw_.resize((8 * w + 1) * h + 1);  // 16-bit RGBA, a filter byte per row; one to see excess data
   pixels_.resize(w * h);
   // A PNG holds its data in chunks of any size, compressed or stored: twice the largest raw
   // image and a MiB of other chunks is more than any encoder writes.
@@ -176,18 +176,30 @@ bool ImageReader::decode_pgm(const std::uint8_t* data, std::size_t size, const c
   if (w > max_width_ || h > max_height_)
     return fail(name, "%lldx%lld pixels: larger than the %dx%d this reads", w, h, max_width_,
                 max_height_);
-  if (maxval > 255)
-    return fail(name, "maxval %lld: a 16-bit PGM; only 8-bit images (maxval 255) are read", maxval);
-  if (maxval != 255)
-    return fail(name, "maxval %lld: only 8-bit images with maxval 255 are read", maxval);
-  const std::size_t need = std::size_t(w) * std::size_t(h);
+  if (maxval < 1 || maxval > 65535) return fail(name, "maxval %lld: PGM's is 1..65535", maxval);
+  // Two bytes a sample (most significant first) beyond 255, one up to it.
+  const std::size_t bytes = maxval > 255 ? 2 : 1;
+  const std::size_t need = std::size_t(w) * std::size_t(h) * bytes;
   if (size - at < need)
     return fail(name, "truncated: %zu of the %zu pixel bytes of %lldx%lld", size - at, need, w, h);
   if (size - at > need)
     return fail(name, "%zu bytes follow the %lldx%lld pixels", size - at - need, w, h);
   image.width = int(w);
   image.height = int(h);
-  image.pixels = data + at;
+  if (maxval == 255) {
+    image.pixels = data + at;
+    return true;
+  }
+  // Another range: scaled to 0..255, rounded, as the detection's thresholds expect.
+  const std::uint8_t* in = data + at;
+  for (std::size_t k = 0; k < std::size_t(w) * std::size_t(h); ++k) {
+    const long long v =
+        bytes == 2 ? (static_cast<long long>(in[2 * k]) << 8 | in[2 * k + 1]) : in[k];
+    if (v > maxval)
+      return fail(name, "pixel %zu is %lld, above the maxval %lld of its header", k, v, maxval);
+    pixels_[k] = std::uint8_t((v * 255 + maxval / 2) / maxval);
+  }
+  image.pixels = pixels_.data();
   return true;
 }
 
@@ -196,7 +208,7 @@ bool ImageReader::decode_png(const std::uint8_t* data, std::size_t size, const c
   if (!zlib_->ok) return fail(name, "zlib could not be set up");
   z_stream& z = zlib_->stream;
   inflateReset(&z);
-  int width = 0, height = 0, channels = 0;
+  int width = 0, height = 0, channels = 0, sample_bytes = 1;
   std::size_t raw_size = 0;
   bool header = false, in_idat = false, idat_done = false, stream_end = false;
   std::size_t at = 8;
@@ -237,7 +249,9 @@ bool ImageReader::decode_png(const std::uint8_t* data, std::size_t size, const c
       if (colour == 3)
         return fail(name, "a palette image (colour type 3): only grey, RGB and RGBA are read");
       if (channels == 0) return fail(name, "colour type %d is not PNG's", colour);
-      if (depth != 8) return fail(name, "bit depth %d: only 8-bit images are read", depth);
+      if (depth != 8 && depth != 16)
+        return fail(name, "bit depth %d: only 8- and 16-bit images are read", depth);
+      sample_bytes = depth / 8;
       if (payload[10] != 0) return fail(name, "compression method %d is not PNG's", payload[10]);
       if (payload[11] != 0) return fail(name, "filter method %d is not PNG's", payload[11]);
       if (payload[12] == 1)
@@ -245,7 +259,8 @@ bool ImageReader::decode_png(const std::uint8_t* data, std::size_t size, const c
       if (payload[12] != 0) return fail(name, "interlace method %d is not PNG's", payload[12]);
       width = int(w);
       height = int(h);
-      raw_size = (std::size_t(width) * std::size_t(channels) + 1) * std::size_t(height);
+      raw_size =
+          (std::size_t(width) * std::size_t(channels * sample_bytes) + 1) * std::size_t(height);
       z.next_out = raw_.data();
       z.avail_out = uInt(raw_size + 1);  // room for one byte too many
     } else if (is_idat) {
@@ -278,9 +293,11 @@ bool ImageReader::decode_png(const std::uint8_t* data, std::size_t size, const c
   if (z.total_out != raw_size)
     return fail(name, "its image data inflate to %lu bytes; %dx%d pixels need %zu", z.total_out,
                 width, height, raw_size);
-  // Undo each row's filter in place (the row above is undone already), then take the luma.
-  const std::size_t stride = std::size_t(width) * std::size_t(channels);
-  const std::size_t bpp = std::size_t(channels);
+  // Undo each row's filter in place (the row above is undone already), then take the luma. A
+  // 16-bit sample's first byte is its most significant: the 8-bit value (v >> 8, as OpenCV's
+  // IMREAD_GRAYSCALE reduces it); the filters work on whole pixels' bytes either way.
+  const std::size_t bpp = std::size_t(channels * sample_bytes);
+  const std::size_t stride = std::size_t(width) * bpp;
   for (std::size_t y = 0; y < std::size_t(height); ++y) {
     std::uint8_t* row = raw_.data() + y * (stride + 1);
     const int filter = row[0];
@@ -318,7 +335,8 @@ bool ImageReader::decode_png(const std::uint8_t* data, std::size_t size, const c
     } else {  // RGB(A): ITU-R BT.601 luma, as V4L2's and OpenCV's grey
       for (std::size_t x = 0; x < std::size_t(width); ++x) {
         const std::uint8_t* c = p + x * bpp;
-        out[x] = std::uint8_t((77u * c[0] + 150u * c[1] + 29u * c[2] + 128u) >> 8);
+        const unsigned r = c[0], g = c[sample_bytes], b = c[2 * sample_bytes];
+        out[x] = std::uint8_t((77u * r + 150u * g + 29u * b + 128u) >> 8);
       }
     }
   }

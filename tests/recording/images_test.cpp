@@ -135,27 +135,34 @@ TEST(Images, PngWriterRoundTripsThroughTheReader) {
 TEST(Images, ReadsEveryFilterAndColourTypeAsLuma) {
   const std::size_t w = 9, h = 10;
   mc::sim::ImageReader reader(16, 16);
-  // channels per colour type: grey 1, grey+alpha 2, RGB 3, RGBA 4.
-  for (const auto& [colour, bpp] : {std::pair{0, 1}, {4, 2}, {2, 3}, {6, 4}}) {
-    const Bytes pixels = random_bytes(w * h * std::size_t(bpp), std::uint32_t(colour + 7));
-    const Bytes raw = filter_rows(pixels, w * std::size_t(bpp), h, std::size_t(bpp),
-                                  [](std::size_t y) { return int(y % 5); });
-    PngSpec spec;
-    spec.width = w;
-    spec.height = h;
-    spec.colour = colour;
-    mc::sim::GrayImage image;
-    ASSERT_EQ(decode(reader, make_png(spec, raw, 3), image), "") << "colour type " << colour;
-    ASSERT_EQ(image.width, int(w));
-    ASSERT_EQ(image.height, int(h));
-    for (std::size_t k = 0; k < w * h; ++k) {
-      const std::uint8_t* p = &pixels[k * std::size_t(bpp)];
-      // Luma by the BT.601 weights in floating point: the reader's integer weights are within 1.
-      const double luma = bpp >= 3 ? 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2] : p[0];
-      ASSERT_NEAR(image.pixels[k], luma, bpp >= 3 ? 1.0 : 0.0)
-          << "colour " << colour << " at " << k;
+  // channels per colour type: grey 1, grey+alpha 2, RGB 3, RGBA 4; 8 or 16 bits a sample (the
+  // first byte of a 16-bit sample is its upper one, the 8-bit value read).
+  for (const int depth : {8, 16})
+    for (const auto& [colour, channels] : {std::pair{0, 1}, {4, 2}, {2, 3}, {6, 4}}) {
+      const std::size_t sample = std::size_t(depth / 8), bpp = std::size_t(channels) * sample;
+      const Bytes pixels = random_bytes(w * h * bpp, std::uint32_t(colour + 7 + depth));
+      const Bytes raw =
+          filter_rows(pixels, w * bpp, h, bpp, [](std::size_t y) { return int(y % 5); });
+      PngSpec spec;
+      spec.width = w;
+      spec.height = h;
+      spec.colour = colour;
+      spec.depth = depth;
+      mc::sim::GrayImage image;
+      ASSERT_EQ(decode(reader, make_png(spec, raw, 3), image), "")
+          << "colour type " << colour << ", " << depth << " bits";
+      ASSERT_EQ(image.width, int(w));
+      ASSERT_EQ(image.height, int(h));
+      for (std::size_t k = 0; k < w * h; ++k) {
+        const std::uint8_t* p = &pixels[k * bpp];
+        // Luma by the BT.601 weights in floating point: the reader's integer weights are within
+        // 1.
+        const double luma =
+            channels >= 3 ? 0.299 * p[0] + 0.587 * p[sample] + 0.114 * p[2 * sample] : p[0];
+        ASSERT_NEAR(image.pixels[k], luma, channels >= 3 ? 1.0 : 0.0)
+            << "colour " << colour << ", " << depth << " bits, at " << k;
+      }
     }
-  }
 }
 
 TEST(Images, ReadsBinaryPgm) {
@@ -169,12 +176,26 @@ TEST(Images, ReadsBinaryPgm) {
   ASSERT_EQ(image.height, 2);
   EXPECT_EQ(image.pixels[3], 128);
   EXPECT_EQ(image.pixels[5], 255);
-  // What PGM can be but we do not read.
-  Bytes sixteen(pgm);
+  // 16 bits a sample (upper byte first) and other ranges: scaled to 0..255, rounded.
   const std::string t16 = "P5 3 2 65535\n";
-  sixteen.assign(t16.begin(), t16.end());
-  sixteen.resize(sixteen.size() + 12, 0);
-  EXPECT_TRUE(refused(reader, sixteen, "16-bit"));
+  Bytes sixteen(t16.begin(), t16.end());
+  for (const std::uint16_t v : {0, 65535, 32768, 0x1234, 257, 65278}) {
+    sixteen.push_back(std::uint8_t(v >> 8));
+    sixteen.push_back(std::uint8_t(v & 0xff));
+  }
+  ASSERT_EQ(decode(reader, sixteen, image, "b.pgm"), "");
+  const int expect16[] = {0, 255, 128, 18, 1, 254};  // round(v * 255 / 65535)
+  for (int k = 0; k < 6; ++k) EXPECT_EQ(image.pixels[k], expect16[k]) << k;
+  const std::string t15 = "P5 3 1 15\n";
+  Bytes fifteen(t15.begin(), t15.end());
+  for (std::uint8_t v : {0, 7, 15}) fifteen.push_back(v);
+  ASSERT_EQ(decode(reader, fifteen, image, "c.pgm"), "");
+  EXPECT_EQ(image.pixels[1], 119);  // round(7 * 255 / 15)
+  EXPECT_EQ(image.pixels[2], 255);
+  fifteen.back() = 16;
+  EXPECT_TRUE(refused(reader, fifteen, "pixel 2 is 16, above the maxval 15"));
+  const std::string t0 = "P5 1 1 0\n";
+  EXPECT_TRUE(refused(reader, Bytes(t0.begin(), t0.end()), "maxval 0"));
   Bytes cut(pgm.begin(), pgm.end() - 1);
   EXPECT_TRUE(refused(reader, cut, "truncated: 5 of the 6 pixel bytes"));
   const std::string plain = "P2 1 1 255 7\n";
@@ -208,11 +229,9 @@ TEST(Images, DamagedAndUnsupportedPngsAreRefusedNamingTheFile) {
   EXPECT_TRUE(refused(reader, bad_crc, "CRC error in the IHDR chunk"));
 
   PngSpec spec = good_spec;
-  spec.depth = 16;
-  EXPECT_TRUE(refused(
-      reader,
-      make_png(spec, filter_rows(random_bytes(24, 1), 8, 3, 2, [](std::size_t) { return 0; })),
-      "bit depth 16: only 8-bit images are read"));
+  spec.depth = 4;
+  EXPECT_TRUE(
+      refused(reader, make_png(spec, raw), "bit depth 4: only 8- and 16-bit images are read"));
   spec = good_spec;
   spec.interlace = 1;
   EXPECT_TRUE(refused(reader, make_png(spec, raw), "interlaced (Adam7)"));
@@ -283,7 +302,7 @@ TEST(Images, UnreadableImagesOfARecordingAreNamedAndSkipped) {
   EXPECT_FALSE(mc::sim::open_recording(tmp.path, mc::app::kMarkers, rec, err, true));
   EXPECT_EQ(err.rfind(tmp.path + "/mav0/cam0/data: no such folder", 0), 0u) << err;
 
-  // Every frame's image: grey PNG, but frame 3 a 16-bit one, frame 5 of 320x240, frame 7 missing.
+  // Every frame's image: grey PNG, but frame 3 a 4-bit one, frame 5 of 320x240, frame 7 missing.
   const std::string images = tmp.path + "/mav0/cam0/data";
   fs::create_directories(images);
   mc::sim::PngWriter writer(640, 480);
@@ -294,9 +313,9 @@ TEST(Images, UnreadableImagesOfARecordingAreNamedAndSkipped) {
     if (k == 7) continue;
     if (k == 3) {
       PngSpec spec;
-      spec.depth = 16;
+      spec.depth = 4;
       const Bytes png =
-          make_png(spec, filter_rows(random_bytes(24, 1), 8, 3, 2, [](std::size_t) { return 0; }));
+          make_png(spec, filter_rows(random_bytes(6, 1), 2, 3, 1, [](std::size_t) { return 0; }));
       spit(path, std::string(png.begin(), png.end()));
       deep = path;
       continue;
@@ -328,7 +347,7 @@ TEST(Images, UnreadableImagesOfARecordingAreNamedAndSkipped) {
   const std::string name5 = images + "/" + std::to_string(data.frames[5].t_ns) + ".png";
   const std::string name7 = images + "/" + std::to_string(data.frames[7].t_ns) + ".png";
   EXPECT_EQ(std::string(log->messages[0].data()),
-            deep + ": bit depth 16: only 8-bit images are read");
+            deep + ": bit depth 4: only 8- and 16-bit images are read");
   EXPECT_EQ(std::string(log->messages[1].data()),
             name5 + ": 320x240 pixels; camchain.yaml's camera has 640x480");
   EXPECT_EQ(std::string(log->messages[2].data()).rfind(name7 + ": cannot open", 0), 0u);

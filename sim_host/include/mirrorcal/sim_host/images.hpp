@@ -1,6 +1,7 @@
 // A recording's camera images (mav0/cam0/data/): PNG as EuRoC and Kalibr's bag tools keep them,
-// and binary PGM. A strict, bounded reader: 8-bit PNG (grey; RGB, RGBA and grey with alpha read
-// as their luma, alpha ignored) and P5 PGM with maxval 255; every chunk's CRC and the image data's
+// and binary PGM. A strict, bounded reader: 8- and 16-bit PNG (grey; RGB, RGBA and grey with alpha
+// read as their luma, alpha ignored; 16 bits as their upper 8) and P5 PGM of any maxval (scaled
+// to 0..255); every chunk's CRC and the image data's
 // size checked; nothing sized from a file beyond the bounds given up front. And the PNG writer of
 // `record --images` (grey, 8-bit). Both allocate their buffers when made and nothing afterwards, so
 // a loop can read or write an image per frame without the heap (zlib gets its memory from them
@@ -24,7 +25,7 @@ struct GrayImage {
 inline constexpr int kMaxImageSide = 16384;
 
 // Reads images of at most max_width x max_height pixels. Its messages name the file and what is
-// wrong with it ("data/1.png: bit depth 16: only 8-bit images are read").
+// wrong with it ("data/1.png: bit depth 4: only 8- and 16-bit images are read").
 class ImageReader {
  public:
   ImageReader(int max_width, int max_height);
