@@ -98,6 +98,7 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
 template ReportData report_data<0>(const SimRun<0>&, const std::string&);
 template ReportData report_data<4>(const SimRun<4>&, const std::string&);
 template ReportData report_data<5>(const SimRun<5>&, const std::string&);
+template ReportData report_data<8>(const SimRun<8>&, const std::string&);
 
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title) {
   ReportData d;
@@ -237,11 +238,8 @@ void add_calibration(std::string& t, const ReportData& d) {
       value = r.markers[(j - 6) / 3](int((j - 6) % 3)) * p.scale;
     else if (j == 6 + 3 * r.markers.size())
       value = r.t_d * p.scale;
-    else {
-      const double k[5] = {r.intrinsics.fu, r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv,
-                           r.intrinsics.skew};
-      value = k[j - 7 - 3 * r.markers.size()];
-    }
+    else
+      value = estimated_camera_parameter(r, int(j - 7 - 3 * r.markers.size())) * p.scale;
     t += format("%-17s %-5s %14.4f %12.4f", p.name.c_str(), p.unit.c_str(), value,
                 r.sigma[j] * p.scale);
     if (j < d.prior_sigma.size())

@@ -20,7 +20,9 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
               std::size_t(rec.stats.imu_samples), rec.sensors.imu_rate_hz,
               std::size_t(rec.stats.frames),
-              NK == 5   ? "camera intrinsics estimated too"
+              NK == 8   ? "camera intrinsics and the lens's distortion coefficients estimated too, "
+                          "skew held at camchain.yaml's"
+              : NK == 5 ? "camera intrinsics estimated too"
               : NK == 4 ? "camera intrinsics estimated too, skew held at camchain.yaml's"
                         : "camera intrinsics from camchain.yaml");
   const std::uint64_t burn_in = recording_config(rec).gate_after_frames;
@@ -171,6 +173,9 @@ int cmd_calibrate(int argc, char** argv) {
                  "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
                  "not estimated\n",
                  in.c_str());
+  // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
+  // the lens's coefficients too, skew held.
+  if (intrinsics && rec.priors.estimate_distortion) return calibrate<8>(rec, in, out, from);
   if (intrinsics && hold_skew) return calibrate<4>(rec, in, out, from);
   if (intrinsics) return calibrate<5>(rec, in, out, from);
   return calibrate<0>(rec, in, out, from);

@@ -212,7 +212,9 @@ int cmd_run(int argc, char** argv) {
       report = report_data(run, title);
       report.from_earlier = from != nullptr;
     };
-    if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
+    if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
+      refine(SimRun<8>{});
+    else if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
       refine(SimRun<4>{});
     else if (sensors.priors.estimate_intrinsics)
       refine(SimRun<5>{});

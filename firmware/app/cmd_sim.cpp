@@ -26,7 +26,7 @@ int cmd_sim(int argc, char** argv) {
       with_value = {"scenario",         "seed",   "out",       "format",     "pixel-sigma",
                     "spot-noise",       "passes", "timeshift", "distortion", "line-delay",
                     "filter-line-delay"},
-      flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage"};
+      flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   const Options o = parse(argc, argv, 2, with_value, flags);
@@ -37,6 +37,11 @@ int cmd_sim(int argc, char** argv) {
   if ((o.flag("hold-skew") || o.flag("one-stage")) && !intrinsics)
     fail("--hold-skew and --one-stage apply with --intrinsics");
   const bool one_stage = o.flag("one-stage");
+  // --estimate-distortion: stage 2 estimates the lens's coefficients with fu fv cu cv, skew held
+  // (at the scenario camera's; --hold-skew: a camera without skew).
+  const bool lens = o.flag("estimate-distortion");
+  if (lens && (!intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
+    fail("--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const sim::Scenario s =
@@ -123,7 +128,10 @@ int cmd_sim(int argc, char** argv) {
       report_profile(*profiler,
                      "this host's monotonic clock, simulated data fed as fast as it is taken", dir);
   };
-  if (intrinsics && o.flag("hold-skew"))
+  if (lens)
+    report(one_stage ? run_one_stage_simulation<8>(s, seed, progress)
+                     : run_two_stage_simulation<8>(s, seed, progress));
+  else if (intrinsics && o.flag("hold-skew"))
     report(one_stage ? run_one_stage_simulation<4>(s, seed, progress)
                      : run_two_stage_simulation<4>(s, seed, progress));
   else if (intrinsics)

@@ -24,7 +24,12 @@ struct ParamInfo {
 };
 
 // The calibration block of the error state, [p_b_c, phi, markers, t_d, intrinsics], in order.
-std::vector<ParamInfo> calibration_params(int markers, int intrinsics);
+// With 8 intrinsics the last four are the lens's coefficients, named after its model (k1 k2 p1
+// p2, or k1..k4), shown in thousandths (unit "1e-3"; SI: unitless).
+std::vector<ParamInfo> calibration_params(int markers, int intrinsics,
+                                          Distortion lens = Distortion::kNone);
+// The names of a lens's four distortion coefficients (Pinhole::coeffs order).
+std::array<const char*, 4> distortion_coeff_names(Distortion lens);
 
 template <class Filter>
 struct HistoryRow {

@@ -28,6 +28,8 @@ const std::vector<Command>& commands() {
        "              one above, camchain.yaml's line_delay; default 0: a global shutter)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III;\n"
        "              --hold-skew: skew 0; --one-stage: everything at once from one minute)\n"
+       "              [--estimate-distortion]  (with --intrinsics and --distortion: stage 2\n"
+       "              estimates the lens's coefficients too, skew held: OpenVINS's eight)\n"
        "              [--frames [--format grey|yuyv]]  (markers detected in rendered frames)\n"
        "              [--spot-noise PX] [--pixel-sigma PX]  (with --frames: the pixel noise drawn\n"
        "              into the frames and the one the filter assumes; default the scenario's)\n"
@@ -43,6 +45,7 @@ const std::vector<Command>& commands() {
        "              (as sim) [--filter-line-delay S]  (the line delay the filter is told;\n"
        "              default the true one: what an unmodelled rolling shutter does)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n"
+       "              [--estimate-distortion]  (as sim)\n"
        "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
        "              [--pixel-sigma PX]  (as sim)\n",
        cmd_montecarlo},

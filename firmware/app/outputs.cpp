@@ -11,7 +11,12 @@
 
 namespace mirrorcal::app {
 
-std::vector<ParamInfo> calibration_params(int markers, int intrinsics) {
+std::array<const char*, 4> distortion_coeff_names(Distortion lens) {
+  if (lens == Distortion::kEquidistant) return {"k1", "k2", "k3", "k4"};
+  return {"k1", "k2", "p1", "p2"};
+}
+
+std::vector<ParamInfo> calibration_params(int markers, int intrinsics, Distortion lens) {
   constexpr double kCm = 100.0, kDeg = 180.0 / M_PI;
   std::vector<ParamInfo> p;
   for (const char* a : {"x", "y", "z"}) p.push_back({std::string("p_") + a, "cm", kCm});
@@ -21,7 +26,12 @@ std::vector<ParamInfo> calibration_params(int markers, int intrinsics) {
       p.push_back({"f" + std::to_string(i + 1) + "_" + a, "cm", kCm});
   p.push_back({"timeshift_cam_imu", "ms", 1e3});
   const char* k[5] = {"fu", "fv", "cu", "cv", "skew"};
-  for (int j = 0; j < intrinsics; ++j) p.push_back({k[j], "px", 1.0});
+  for (int j = 0; j < std::min(intrinsics, 5); ++j) p.push_back({k[j], "px", 1.0});
+  if (intrinsics == 8) {
+    p.pop_back();  // no skew: the lens's coefficients follow cv
+    // Shown in thousandths (p2 of EuRoC's lens is 1.8e-5); the files keep them as they are.
+    for (const char* c : distortion_coeff_names(lens)) p.push_back({c, "1e-3", 1e3});
+  }
   return p;
 }
 
@@ -280,15 +290,26 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
   std::fprintf(o, "timeshift_cam_imu: %.17g  # s: t_imu = t_cam + timeshift_cam_imu\n", r.t_d);
   std::fprintf(o, "intrinsics: [%.6f, %.6f, %.6f, %.6f]\nskew: %.6f\n", r.intrinsics.fu,
                r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv, r.intrinsics.skew);
-  std::fprintf(o, "distortion_model: %s  # held as camchain.yaml gave it\n",
-               to_string(r.intrinsics.distortion));
+  const bool lens_estimated = r.estimated_intrinsics == 8;
+  std::fprintf(o, "distortion_model: %s  # %s\n", to_string(r.intrinsics.distortion),
+               lens_estimated ? "as camchain.yaml gave it, its coefficients estimated"
+                              : "held as camchain.yaml gave it");
   std::fprintf(o, "distortion_coeffs: [%.17g, %.17g, %.17g, %.17g]\n", r.intrinsics.coeffs[0],
                r.intrinsics.coeffs[1], r.intrinsics.coeffs[2], r.intrinsics.coeffs[3]);
+  if (lens_estimated) {
+    const std::array<const char*, 4> names = distortion_coeff_names(r.intrinsics.distortion);
+    std::fprintf(o, "distortion_estimate:  # distortion_coeffs by name; 1-sigma under sigma\n");
+    for (std::size_t j = 0; j < 4; ++j)
+      std::fprintf(o, "  %s: %.17g\n", names[j], r.intrinsics.coeffs[j]);
+  }
   std::fprintf(o, "line_delay: %.17g  # s per row, held as camchain.yaml gave it\n",
                r.intrinsics.line_delay_s);
-  std::fprintf(o, "intrinsics_estimated: %s\nskew_estimated: %s\nresolution: [%d, %d]\n",
+  std::fprintf(o,
+               "intrinsics_estimated: %s\nskew_estimated: %s\ndistortion_estimated: %s\n"
+               "resolution: [%d, %d]\n",
                r.estimated_intrinsics > 0 ? "true" : "false",
-               r.estimated_intrinsics == 5 ? "true" : "false", r.width, r.height);
+               r.estimated_intrinsics == 5 ? "true" : "false", lens_estimated ? "true" : "false",
+               r.width, r.height);
   std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
   if (!r.recording_fingerprint.empty())
     std::fprintf(
@@ -448,23 +469,27 @@ bool write_export(ExportFormat format, const std::string& path, const Calibratio
 
 template <class Filter>
 bool write_estimates_csv(files::OutputSet& out, const std::string& path,
-                         const RecordStore<HistoryRow<Filter>>& rows, std::string& error) {
+                         const RecordStore<HistoryRow<Filter>>& rows, Distortion lens,
+                         std::string& error) {
   using State = typename Filter::State;
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
-  const auto params = calibration_params(State::kMarkers, State::kIntrinsics);
+  const auto params = calibration_params(State::kMarkers, State::kIntrinsics, lens);
   std::fprintf(o, "#time [s],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z");
   for (int i = 0; i < State::kMarkers; ++i)
     for (const char* a : {"x", "y", "z"}) std::fprintf(o, ",f%d_%s [m]", i + 1, a);
   std::fprintf(o, ",timeshift_cam_imu [s]");
-  const char* k[5] = {"fu [px]", "fv [px]", "cu [px]", "cv [px]", "skew [px]"};
-  for (int j = 0; j < State::kIntrinsics; ++j) std::fprintf(o, ",%s", k[j]);
-  for (const auto& p : params)
-    std::fprintf(o, ",sigma_%s [%s]", p.name.c_str(),
-                 p.unit == "cm"    ? "m"
-                 : p.unit == "deg" ? "rad"
-                 : p.unit == "ms"  ? "s"
-                                   : "px");
+  const std::size_t first_intrinsic = params.size() - std::size_t(State::kIntrinsics);
+  const auto si_unit = [](const ParamInfo& p) {
+    return p.unit == "cm"     ? "m"
+           : p.unit == "deg"  ? "rad"
+           : p.unit == "ms"   ? "s"
+           : p.unit == "1e-3" ? "-"
+                              : "px";
+  };
+  for (std::size_t j = first_intrinsic; j < params.size(); ++j)
+    std::fprintf(o, ",%s [%s]", params[j].name.c_str(), si_unit(params[j]));
+  for (const auto& p : params) std::fprintf(o, ",sigma_%s [%s]", p.name.c_str(), si_unit(p));
   std::fprintf(o, "\n");
   for (const auto& r : rows) {
     const State& x = r.state;
@@ -514,15 +539,21 @@ template bool write_features_csv(files::OutputSet&, const std::string&,
 template bool write_features_csv(files::OutputSet&, const std::string&,
                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
                                  std::string&);
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
+                                 std::string&);
 
 template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
-                                  std::string&);
+                                  Distortion, std::string&);
 template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const RecordStore<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
-                                  std::string&);
+                                  Distortion, std::string&);
 template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
-                                  std::string&);
+                                  Distortion, std::string&);
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
+                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
+                                  Distortion, std::string&);
 
 }  // namespace mirrorcal::app

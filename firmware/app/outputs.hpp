@@ -23,7 +23,8 @@ struct CalibrationResult {
   std::vector<Eigen::Vector3d> markers;
   double t_d = 0.0;  // timeshift_cam_imu (s)
   Pinhole<double> intrinsics{};
-  int estimated_intrinsics = 0;  // 0, 4 (fu fv cu cv; skew held) or 5 (with skew)
+  // 0, 4 (fu fv cu cv; skew held), 5 (with skew) or 8 (fu fv cu cv and the lens's coefficients)
+  int estimated_intrinsics = 0;
   int width = 0, height = 0;
   std::string rostopic = sim::kDefaultCameraTopic;  // camchain.yaml's, for Kalibr and OpenVINS
   std::string recording_fingerprint;  // of the recording calibrated (none for a simulation)
@@ -53,6 +54,15 @@ struct CalibrationResult {
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
 };
+
+// The j-th camera parameter a result estimated (fu fv cu cv, then skew, or the lens's four
+// coefficients when estimated_intrinsics is 8), as the calibration block orders them.
+inline double estimated_camera_parameter(const CalibrationResult& r, int j) {
+  const Pinhole<double>& k = r.intrinsics;
+  const double fc[4] = {k.fu, k.fv, k.cu, k.cv};
+  if (j < 4) return fc[j];
+  return r.estimated_intrinsics == 8 ? k.coeffs[static_cast<std::size_t>(j - 4)] : k.skew;
+}
 
 // A filter that calibrated consistently rejects about 0.1 % of the markers at its 99.9 % gate (9 of
 // about 8700 in the paper scenario). One that rejected more than kSuspectGatedFraction has most
@@ -138,7 +148,7 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.covariance = f.covariance()
                      .template block<kCalibration, kCalibration>(State::kPbc, State::kPbc)
                      .template cast<double>();
-  r.params = calibration_params(State::kMarkers, State::kIntrinsics);
+  r.params = calibration_params(State::kMarkers, State::kIntrinsics, r.intrinsics.distortion);
   r.markers_used = f.counters().markers_used;
   r.nis_dof = f.counters().nis_dof;
   r.nis_per_dof = r.nis_dof > 0 ? f.counters().nis_sum / double(r.nis_dof) : 0.0;
@@ -173,10 +183,12 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                        std::string& error);
 
 // estimates.csv: time and every calibration state with its 1-sigma (SI units, rotation as the
-// quaternion q_b_c with the 1-sigma of its error vector's components).
+// quaternion q_b_c with the 1-sigma of its error vector's components); lens names the distortion
+// coefficients a stage 2 with estimate_distortion estimates.
 template <class Filter>
 bool write_estimates_csv(files::OutputSet& out, const std::string& path,
-                         const RecordStore<HistoryRow<Filter>>& rows, std::string& error);
+                         const RecordStore<HistoryRow<Filter>>& rows, Distortion lens,
+                         std::string& error);
 
 // The markers each row's frame gave the filter, as a recording's features.csv (its header, the
 // frame's timestamp, numbers that read back as the same doubles): what calibrate found in a

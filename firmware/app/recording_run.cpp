@@ -48,9 +48,11 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
       truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
     truth.t_d = r.truth.t_d;
     if constexpr (NK > 0) {
-      const Pinhole<double>& k = r.truth.intrinsics;
-      const double v[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
-      for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[j];
+      // truth.yaml has no lens: a simulated recording's camchain.yaml holds the true one.
+      Pinhole<double> k = r.truth.intrinsics;
+      k.coeffs = r.sensors.intrinsics.coeffs;
+      const std::array<double, NK> v = camera_parameters<NK>(k);
+      for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[static_cast<std::size_t>(j)];
     }
   }
   const LoopData data = recording_loop_data(r);
@@ -76,6 +78,9 @@ template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::str
                                      const std::function<void(double)>&,
                                      const sim::CalibrationStart*);
 template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
+template bool calibrate_recording<8>(const sim::Recording&, SimRun<8>&, std::string&,
                                      const std::function<void(double)>&,
                                      const sim::CalibrationStart*);
 

@@ -15,7 +15,8 @@ CalibrationConfig recording_config(const sim::Recording& r);
 // The data of a recording as the loop consumes it.
 LoopData recording_loop_data(const sim::Recording& r);
 
-// Runs the NK filter (0: stage 1; 5: intrinsics too; 4: intrinsics, skew held at camchain.yaml's)
+// Runs the NK filter (0: stage 1; 5: intrinsics too; 4: intrinsics, skew held at camchain.yaml's;
+// 8: fu fv cu cv and the lens's coefficients, skew held: estimate_distortion)
 // on a recording from its priors. False, with a message, if the priors do not fit this build (e.g.
 // another number of markers).
 // With from, the camera pose and markers start from that earlier calibration (start_from).
@@ -31,6 +32,9 @@ extern template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, s
                                             const std::function<void(double)>&,
                                             const sim::CalibrationStart*);
 extern template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
+                                            const std::function<void(double)>&,
+                                            const sim::CalibrationStart*);
+extern template bool calibrate_recording<8>(const sim::Recording&, SimRun<8>&, std::string&,
                                             const std::function<void(double)>&,
                                             const sim::CalibrationStart*);
 

@@ -57,9 +57,10 @@ State truth_state(const sim::Scenario& s) {
   for (int i = 0; i < State::kMarkers; ++i)
     t.markers.template segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
   t.t_d = s.truth.t_d;
-  const Pinhole<double>& k = s.truth.intrinsics;
-  const double all[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
-  for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = all[j];
+  if constexpr (State::kIntrinsics > 0) {
+    const auto k = camera_parameters<State::kIntrinsics>(s.truth.intrinsics);
+    for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = k[static_cast<std::size_t>(j)];
+  }
   return t;
 }
 
@@ -445,6 +446,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
 template MIRRORCAL_RUN_LOOP(0);
 template MIRRORCAL_RUN_LOOP(4);
 template MIRRORCAL_RUN_LOOP(5);
+template MIRRORCAL_RUN_LOOP(8);
 
 SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                          const std::function<void(double)>& progress, const FrameMode& frames,
@@ -553,6 +555,8 @@ template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64
                                                const std::function<void(double)>&);
 template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
                                                const std::function<void(double)>&);
+template SimRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
 
 template <int NK>
 SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
@@ -571,6 +575,8 @@ SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
 template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
                                                const std::function<void(double)>&);
 template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
                                                const std::function<void(double)>&);
 
 sim::Scenario without_skew(sim::Scenario s) {

@@ -175,8 +175,9 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
                     const std::function<void(double)>& progress = {},
                     const std::function<LoopHooks(int pass)>& hooks = {}, Passes passes = {});
 
-// The filters the product instantiates: stage 1 (NK = 0), stage 2 (NK = 5), and stage 2 with the
-// skew held at the configured value (NK = 4: Kalibr and OpenVINS have no slot for skew).
+// The filters the product instantiates: stage 1 (NK = 0), stage 2 (NK = 5), stage 2 with the
+// skew held at the configured value (NK = 4: Kalibr and OpenVINS have no slot for skew), and
+// stage 2 with the lens's distortion coefficients too, skew held (NK = 8, estimate_distortion).
 #define MIRRORCAL_RUN_LOOP(NK)                                                          \
   SimRun<NK> run_loop<NK>(const CalibrationConfig&, const SimRun<NK>::State&,           \
                           const SimRun<NK>::Filter::Covariance&, const LoopData&,       \
@@ -185,6 +186,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
 extern template MIRRORCAL_RUN_LOOP(0);
 extern template MIRRORCAL_RUN_LOOP(4);
 extern template MIRRORCAL_RUN_LOOP(5);
+extern template MIRRORCAL_RUN_LOOP(8);
 
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
@@ -236,6 +238,8 @@ extern template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std:
                                                       const std::function<void(double)>&);
 extern template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
                                                       const std::function<void(double)>&);
+extern template SimRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                                      const std::function<void(double)>&);
 
 // The paper's "everything at once" mode: one minute of data, the intrinsics estimated with the
 // rest from the prior's guesses (100 px off), the same as `record --intrinsics` then `calibrate`.
@@ -245,6 +249,8 @@ SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
 extern template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
                                                       const std::function<void(double)>&);
 extern template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                      const std::function<void(double)>&);
+extern template SimRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
                                                       const std::function<void(double)>&);
 
 // The scenario with a camera that has no skew (most cameras), for --hold-skew.
@@ -261,7 +267,8 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun
                      std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
-         write_estimates_csv(out, dir + "/estimates.csv", run.history, error) &&
+         write_estimates_csv(out, dir + "/estimates.csv", run.history,
+                             run.result.intrinsics.distortion, error) &&
          (!run.features_found ||
           write_features_csv(out, dir + "/features.csv", run.history, error));
 }

@@ -15,5 +15,6 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
 template class CalibrationLoop<double, 3, 0>;
 template class CalibrationLoop<double, 3, 4>;  // stage 2 holding skew
 template class CalibrationLoop<double, 3, 5>;
+template class CalibrationLoop<double, 3, 8>;  // stage 2 with the lens
 
 }  // namespace mirrorcal::firmware

@@ -32,6 +32,7 @@ constexpr SigmaCeiling kAccelBiasSigma{10.0, "m/s^2"};
 constexpr SigmaCeiling kGyroBiasSigma{1.0, "rad/s"};
 constexpr SigmaCeiling kPixelSigma{100.0, "px"};
 constexpr SigmaCeiling kIntrinsicsSigma{10000.0, "px"};
+constexpr SigmaCeiling kDistortionSigma{1.0, "(unitless)"};
 
 // Keys of one YAML map, read with messages that name the file, the line and the key.
 class YamlMap {
@@ -367,7 +368,9 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                   "intrinsics_guess",
                   "sigma_intrinsics",
                   "timeshift_cam_imu",
-                  "sigma_timeshift_cam_imu"});
+                  "sigma_timeshift_cam_imu",
+                  "estimate_distortion",
+                  "sigma_distortion"});
   RecordingPriors r;
   if (!y.vec3("gravity_n", r.gravity_n) || !y.vec3("p_n_b", r.p_n_b) ||
       !y.sigma3("sigma_p_n_b", kStartPositionSigma, r.sigma_p_n_b) || !y.vec3("v_n_b", r.v_n_b) ||
@@ -448,6 +451,35 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
     r.sigma_intrinsics = {100.0, 100.0, 100.0, 100.0, 100.0};
     if (r.estimate_intrinsics) y.note_default("sigma_intrinsics", "100 px each (the paper's)");
   }
+  // The lens is camchain.yaml's; estimate_distortion starts its coefficients there.
+  r.intrinsics_guess.distortion = camera.distortion;
+  r.intrinsics_guess.coeffs = camera.coeffs;
+  r.estimate_distortion = false;
+  if (y.has("estimate_distortion")) {
+    if (!y.flag("estimate_distortion", r.estimate_distortion)) return false;
+    if (r.estimate_distortion && !r.estimate_intrinsics)
+      return y.fail(y.node("estimate_distortion"), "estimate_distortion",
+                    "needs estimate_intrinsics: true (the coefficients are estimated with the "
+                    "intrinsics, in stage 2)");
+    if (r.estimate_distortion && camera.distortion == Distortion::kNone)
+      return y.fail(y.node("estimate_distortion"), "estimate_distortion",
+                    "needs a lens model: camchain.yaml's distortion_model is none (give radtan or "
+                    "equidistant, with its distortion_coeffs as the guess)");
+  }
+  if (y.has("sigma_distortion")) {
+    if (!y.numbers("sigma_distortion", 4, r.sigma_distortion.data())) return false;
+    if (*std::min_element(r.sigma_distortion.begin(), r.sigma_distortion.end()) <= 0.0)
+      return y.fail(y.node("sigma_distortion"), "sigma_distortion", "every 1-sigma must be > 0");
+    if (!y.below_ceiling(y.node("sigma_distortion"), "sigma_distortion", kDistortionSigma,
+                         *std::max_element(r.sigma_distortion.begin(), r.sigma_distortion.end())))
+      return false;
+  } else {
+    r.sigma_distortion = default_sigma_distortion(camera.distortion);
+    if (r.estimate_distortion)
+      y.note_default("sigma_distortion", camera.distortion == Distortion::kEquidistant
+                                             ? "0.05 each (k1..k4)"
+                                             : "0.2, 0.1, 0.002, 0.002 (k1, k2, p1, p2)");
+  }
   out = std::move(r);
   return true;
 }
@@ -500,6 +532,10 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   const auto k = as_array(r.intrinsics_guess);
   t += "intrinsics_guess: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew (px)\n";
   t += "sigma_intrinsics: " + list(r.sigma_intrinsics.data(), 5) + "\n";
+  if (r.estimate_distortion) {
+    t += "estimate_distortion: true  # the lens's coefficients too, from camchain.yaml's\n";
+    t += "sigma_distortion: " + list(r.sigma_distortion.data(), 4) + "\n";
+  }
   return files::write_file(dir + "/mirrorcal.yaml", t, error);
 }
 
@@ -541,13 +577,14 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
   const std::size_t n = 6 + 3 * out.features_c.size() + (out.has_t_d ? 1 : 0);
   const YAML::Node rows = y.node("covariance");
   const std::size_t dim = rows.IsSequence() ? rows.size() : 0;
-  if (dim != n && dim != n + 4 && dim != n + 5)
+  if (dim != n && dim != n + 4 && dim != n + 5 && dim != n + 8)
     return y.fail(rows, "covariance",
                   "expected " + std::to_string(n) + " rows (p_b_c, rotation, " +
                       std::to_string(out.features_c.size()) +
                       (out.features_c.size() == 1 ? " marker" : " markers") +
-                      (out.has_t_d ? ", time offset), " : "), ") + std::to_string(n + 4) + " or " +
-                      std::to_string(n + 5) + " (and intrinsics)");
+                      (out.has_t_d ? ", time offset), " : "), ") + std::to_string(n + 4) + ", " +
+                      std::to_string(n + 5) + " (and intrinsics) or " + std::to_string(n + 8) +
+                      " (and the lens)");
   // Every row the right length before anything is allocated (a damaged file could list many).
   for (std::size_t i = 0; i < dim; ++i)
     if (!rows[i].IsSequence() || rows[i].size() != dim)

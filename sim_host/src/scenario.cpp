@@ -226,6 +226,7 @@ Scenario random_scenario(std::uint64_t seed) {
 void set_lens(Scenario& s, Distortion model) {
   Pinhole<double>& k = s.truth.intrinsics;
   k.distortion = model;
+  s.priors.distortion = default_sigma_distortion(model);
   switch (model) {
     case Distortion::kRadtan:
       k.coeffs = {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05};  // EuRoC cam0

@@ -28,6 +28,10 @@ class FilterOps {
 // The configuration, or nullptr if it is not built.
 std::unique_ptr<FilterOps> make_filter_ops(int markers, bool single_precision);
 
+// Stage 2 at M = 3, double, through a radtan lens: intrinsics 4 (fu fv cu cv, the lens known) or
+// 8 (and the lens's four coefficients), or nullptr.
+std::unique_ptr<FilterOps> make_stage2_filter_ops(int intrinsics);
+
 // The marker counts built into this program, ascending.
 std::vector<int> built_marker_counts();
 

@@ -5,13 +5,16 @@
 
 #include "filter_ops.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/estimator/prior.hpp"
 
 namespace mirrorcal::bench {
 
-template <typename S, int M>
+// NK > 0: stage 2 (double, M = 3: the configurations the product builds) through EuRoC cam0's
+// radtan lens, NK = 4 with the lens known, NK = 8 with its coefficients estimated.
+template <typename S, int M, int NK = 0>
 class FilterOpsOf final : public FilterOps {
  public:
-  using Filter = CalibrationFilter<S, M, 0>;
+  using Filter = CalibrationFilter<S, M, NK>;
   using State = typename Filter::State;
 
   FilterOpsOf() : prepared_(config()), filter_(config()) {
@@ -34,6 +37,10 @@ class FilterOpsOf final : public FilterOps {
       x.markers.template segment<3>(3 * i) =
           Vec3<S>(S(0.06 * std::cos(a)), S(0.06 * std::sin(a)), S(-0.01 * (i % 3)));
     }
+    if constexpr (NK > 0) {
+      const std::array<double, NK> k = camera_parameters<NK>(config().intrinsics);
+      for (int j = 0; j < NK; ++j) x.intrinsics(j) = S(k[static_cast<std::size_t>(j)]);
+    }
     typename Filter::Covariance p = Filter::Covariance::Zero();
     p.diagonal().setConstant(S(1e-8));  // converged: one plain step per update
     prepared_.reset(x, p);
@@ -42,8 +49,8 @@ class FilterOpsOf final : public FilterOps {
     Eigen::Matrix<S, 2 * M, 1> z;
     std::array<bool, M> ok;
     ok.fill(true);
-    predict_markers(x, Pinhole<S>{S(833.33), S(833.33), S(322), S(248), S(0)},
-                    prepared_.exposure(frame_.t_ns), std::array<S, M>{}, z, ok);
+    predict_markers(x, config().intrinsics.template cast<S>(), prepared_.exposure(frame_.t_ns),
+                    std::array<S, M>{}, z, ok);
     for (int i = 0; i < M; ++i) {
       frame_.seen[i] = ok[i];
       frame_.uv[i] = z.template segment<2>(2 * i).template cast<double>() + Eigen::Vector2d(1, -1);
@@ -69,6 +76,10 @@ class FilterOpsOf final : public FilterOps {
   static CalibrationConfig config() {
     CalibrationConfig c;
     c.intrinsics = Pinhole<double>{833.33, 833.33, 322.0, 248.0, 0.0};
+    if (NK > 0) {
+      c.intrinsics.distortion = Distortion::kRadtan;
+      c.intrinsics.coeffs = {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05};
+    }
     return c;
   }
   Filter prepared_, filter_;

@@ -4,6 +4,9 @@
 //   mirrorcal_opcount predict|update|restore <M> <float|double> <N>
 //                                            (restore: the filter reset that precedes each
 //                                            operation, alone, to subtract)
+//   mirrorcal_opcount stage2-update|stage2-restore <NK> <N>
+//                                            stage 2 (M = 3, double, radtan lens) with NK = 4
+//                                            (lens known) or 8 (its coefficients estimated)
 //   mirrorcal_opcount recording <N>          N runs of the whole loop over the 60 s recording
 //   mirrorcal_opcount shipped <N>            N calibrations of it as mirrorcal runs them
 //                                            (two passes)
@@ -27,6 +30,7 @@ namespace {
 int usage() {
   std::fputs(
       "usage: mirrorcal_opcount predict|update|restore <M> <float|double> <N>\n"
+      "       mirrorcal_opcount stage2-update|stage2-restore <4|8> <N>\n"
       "       mirrorcal_opcount recording|shipped <N>\n"
       "       mirrorcal_opcount sizes|stack\n",
       stderr);
@@ -116,6 +120,17 @@ int main(int argc, char** argv) {
       ops->restore();
       if (what == "update") failed += ops->update() ? 0 : 1;
       if (what == "predict") failed += ops->predict() ? 0 : 1;
+    }
+    return failed == 0 ? 0 : 1;
+  }
+  if ((what == "stage2-update" || what == "stage2-restore") && argc == 4) {
+    const auto ops = mb::make_stage2_filter_ops(std::atoi(argv[2]));
+    if (!ops) return usage();
+    const long n = std::atol(argv[3]);
+    long failed = 0;
+    for (long i = 0; i < n; ++i) {
+      ops->restore();
+      if (what == "stage2-update") failed += ops->update() ? 0 : 1;
     }
     return failed == 0 ? 0 : 1;
   }

@@ -366,9 +366,84 @@ void check_state_round_trip(double tol) {
   }
 }
 
+// Stage 2 with the lens estimated (NK = 8: fu fv cu cv and the four coefficients, skew held)
+// predicts exactly what the fixed-lens model predicts when its coefficients are the configured
+// ones, and follows its own coefficients when they differ (they are not ignored).
+void expect_lens_state_matches_fixed_lens(Distortion model, const std::array<double, 4>& coeffs) {
+  const test::SineTrajectory traj = test::wall_mirror_trajectory();
+  const test::Rig rig;
+  Pinhole<double> fixed{833.33, 833.33, 322.0, 248.0, 3.0};
+  fixed.distortion = model;
+  fixed.coeffs = coeffs;
+  int compared = 0;
+  for (const double t : {0.0, 0.7, 1.9, 3.1}) {
+    const MirrorState<double, 3, 0> x0 = test::truth_state<double, 3, 0>(traj, rig, t);
+    MirrorState<double, 3, 8> x8;
+    x8.v = x0.v;
+    x8.p = x0.p;
+    x8.q_n_b = x0.q_n_b;
+    x8.p_b_c = x0.p_b_c;
+    x8.q_b_c = x0.q_b_c;
+    x8.markers = x0.markers;
+    x8.intrinsics << fixed.fu, fixed.fv, fixed.cu, fixed.cv, coeffs[0], coeffs[1], coeffs[2],
+        coeffs[3];
+    // The state's camera parameters go where the fixed ones were: give the fixed camera others,
+    // all but the skew, which NK = 8 holds.
+    Pinhole<double> other = fixed;
+    other.fu += 40.0;
+    other.cv -= 7.0;
+    other.coeffs = {0.1, -0.2, 0.01, -0.01};
+    const Exposure<double> e;
+    const std::array<double, 3> readout{};
+    Eigen::Matrix<double, 6, 1> z0 = Eigen::Matrix<double, 6, 1>::Zero(), z8 = z0;
+    std::array<bool, 3> ok0{true, true, true}, ok8 = ok0;
+    predict_markers(x0, fixed, e, readout, z0, ok0);
+    predict_markers(x8, other, e, readout, z8, ok8);
+    for (int i = 0; i < 3; ++i) {
+      ASSERT_EQ(ok0[i], ok8[i]) << i;
+      if (!ok0[i]) continue;
+      ++compared;
+      EXPECT_EQ(z0(2 * i), z8(2 * i)) << "t " << t << " marker " << i;  // bit for bit
+      EXPECT_EQ(z0(2 * i + 1), z8(2 * i + 1)) << "t " << t << " marker " << i;
+    }
+    // Each coefficient moves the prediction: the state's coefficients are the ones used.
+    for (int j = 0; j < 4; ++j) {
+      MirrorState<double, 3, 8> moved = x8;
+      moved.intrinsics(4 + j) += 0.05;
+      Eigen::Matrix<double, 6, 1> zm = z8;
+      std::array<bool, 3> okm{true, true, true};
+      predict_markers(moved, other, e, readout, zm, okm);
+      Pinhole<double> shifted = fixed;
+      shifted.coeffs[static_cast<std::size_t>(j)] += 0.05;
+      Eigen::Matrix<double, 6, 1> zs = z0;
+      std::array<bool, 3> oks{true, true, true};
+      predict_markers(x0, shifted, e, readout, zs, oks);
+      bool moved_any = false;
+      for (int i = 0; i < 3; ++i) {
+        if (!okm[i] || !oks[i]) continue;
+        EXPECT_EQ(zm.segment<2>(2 * i), zs.segment<2>(2 * i)) << "coefficient " << j;
+        moved_any = moved_any || (zm.segment<2>(2 * i) - z8.segment<2>(2 * i)).norm() > 1e-9;
+      }
+      EXPECT_TRUE(moved_any) << "coefficient " << j;
+    }
+  }
+  EXPECT_GE(compared, 6);  // the markers were in view: the comparison was made
+}
+
+TEST(LensState, EstimatedRadtanCoefficientsPredictAsTheFixedLens) {
+  expect_lens_state_matches_fixed_lens(Distortion::kRadtan,
+                                       {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05});
+}
+
+TEST(LensState, EstimatedEquidistantCoefficientsPredictAsTheFixedLens) {
+  expect_lens_state_matches_fixed_lens(Distortion::kEquidistant,
+                                       {0.00348238, 0.000715034, -0.00205323, 0.000202936});
+}
+
 TEST(MirrorState, BoxplusBoxminusRoundTrip) {
   check_state_round_trip<double, 3, 0>(1e-13);
   check_state_round_trip<double, 3, 5>(1e-13);
+  check_state_round_trip<double, 3, 8>(1e-13);
   check_state_round_trip<double, 1, 4>(1e-13);
   check_state_round_trip<float, 3, 0>(2e-6);
 }

@@ -421,6 +421,57 @@ TEST_F(BadInput, UnknownLensesAndBadCoefficientsAreRefused) {
   expect_error({dir() + "/camchain.yaml:", "given without a distortion_model"});
 }
 
+// estimate_distortion needs the intrinsics estimated and a lens model to estimate the coefficients
+// of: each missing one is refused at its line with the reason; sigma_distortion is checked as the
+// other sigmas. With both, the flag and the sigmas are read (the refusals are not blanket ones).
+TEST_F(BadInput, EstimateDistortionWithoutALensOrTheIntrinsicsIsRefused) {
+  const auto append = [&](const std::vector<std::string>& extra) {
+    auto l = lines_of(priors());
+    const std::size_t first = l.size() + 1;
+    l.insert(l.end(), extra.begin(), extra.end());
+    write_lines(priors(), l);
+    return std::to_string(first);
+  };
+  const std::vector<std::string> original = lines_of(priors());
+  set_key(priors(), "estimate_intrinsics", "estimate_intrinsics: true");
+  std::string at = append({"estimate_distortion: true"});
+  // The recording's camchain.yaml says distortion_model: none.
+  expect_error({priors() + ":" + at + ": estimate_distortion: needs a lens model",
+                "distortion_model is none"});
+
+  auto l = lines_of(dir() + "/camchain.yaml");
+  for (auto& c : l) {
+    if (c.find("distortion_model") != std::string::npos) c = "  distortion_model: radtan";
+    if (c.find("distortion_coeffs") != std::string::npos)
+      c = "  distortion_coeffs: [-0.28, 0.07, 0.0002, 0.00002]";
+  }
+  write_lines(dir() + "/camchain.yaml", l);
+  write_lines(priors(), original);
+  set_key(priors(), "estimate_intrinsics", "estimate_intrinsics: false");
+  at = append({"estimate_distortion: true"});
+  expect_error({priors() + ":" + at + ": estimate_distortion: needs estimate_intrinsics: true"});
+
+  write_lines(priors(), original);
+  set_key(priors(), "estimate_intrinsics", "estimate_intrinsics: true");
+  append({"estimate_distortion: true", "sigma_distortion: [0.1, 0, 0.001, 0.001]"});
+  expect_error({priors() + ":", "sigma_distortion: every 1-sigma must be > 0"});
+  write_lines(priors(), original);
+  set_key(priors(), "estimate_intrinsics", "estimate_intrinsics: true");
+  append({"estimate_distortion: true", "sigma_distortion: [0.1, 0.1, 5, 0.001]"});
+  expect_error({priors() + ":", "sigma_distortion: a 1-sigma of 5 (unitless) is no guess"});
+
+  write_lines(priors(), original);
+  set_key(priors(), "estimate_intrinsics", "estimate_intrinsics: true");
+  append({"estimate_distortion: true", "sigma_distortion: [0.1, 0.05, 0.001, 0.002]"});
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  EXPECT_TRUE(r.priors.estimate_distortion);
+  EXPECT_EQ(r.priors.sigma_distortion, (std::array<double, 4>{0.1, 0.05, 0.001, 0.002}));
+  EXPECT_EQ(r.priors.intrinsics_guess.distortion, mc::Distortion::kRadtan);
+  EXPECT_EQ(r.priors.intrinsics_guess.coeffs[0], -0.28);  // camchain.yaml's coefficients
+}
+
 // A rolling shutter's line_delay is seconds per row: microseconds given as seconds, or a negative
 // delay, are refused; a real one is read.
 TEST_F(BadInput, LineDelaysInTheWrongUnitAreRefused) {

@@ -278,7 +278,8 @@ TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {
   EXPECT_TRUE(mc::sim::parse_calibration_start(head + rows(good), "r.yaml", s, err)) << err;
   refused(head, "r.yaml: missing required key 'covariance'");  // a result of an older mirrorcal
   refused(head + rows(Eigen::MatrixXd::Identity(8, 8)),
-          "r.yaml:6: covariance: expected 9 rows (p_b_c, rotation, 1 marker), 13 or 14");
+          "r.yaml:6: covariance: expected 9 rows (p_b_c, rotation, 1 marker), 13, 14 (and "
+          "intrinsics) or 17 (and the lens)");
   Eigen::MatrixXd asym = good;
   asym(0, 1) = 1e-5;
   refused(head + rows(asym), "covariance: is not symmetric");

@@ -329,6 +329,7 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
 extern template class CalibrationFilter<double, 3, 0>;
 extern template class CalibrationFilter<double, 3, 4>;
 extern template class CalibrationFilter<double, 3, 5>;
+extern template class CalibrationFilter<double, 3, 8>;
 extern template class CalibrationFilter<float, 3, 0>;
 
 }  // namespace mirrorcal

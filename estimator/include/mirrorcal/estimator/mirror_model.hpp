@@ -58,7 +58,8 @@ inline bool distortion_from_string(std::string_view name, Distortion& d) {
 
 // A camera as Kalibr models one: projection, lens and shutter. Pinhole intrinsics, in the state's
 // order, after the lens's distortion of the normalised point: u = fu x_d + skew y_d + cu,
-// v = fv y_d + cv. The distortion and the shutter are known (from camchain.yaml), not estimated.
+// v = fv y_d + cv. The distortion model and the shutter are known (from camchain.yaml); the
+// coefficients are known, or estimated in stage 2 (NK = 8, intrinsics_of).
 template <typename S>
 struct Pinhole {
   S fu, fv, cu, cv, skew;
@@ -81,6 +82,15 @@ struct Pinhole {
             T(line_delay_s)};
   }
 };
+
+// The 1-sigma of a lens's distortion coefficients before calibrating (Pinhole::coeffs order), the
+// spread of real lenses: radtan k1 -0.45..0 (k1 = -0.28 for EuRoC's 2.8 mm lens), k2 0..0.3,
+// decentring p1, p2 within a few 1e-3; equidistant k1..k4 within a few 1e-2 (Kalibr's fisheye
+// calibrations of the T265, EuRoC, TUM-VI lenses).
+inline std::array<double, 4> default_sigma_distortion(Distortion d) {
+  if (d == Distortion::kEquidistant) return {0.05, 0.05, 0.05, 0.05};
+  return {0.2, 0.1, 0.002, 0.002};
+}
 
 // The distorted normalised point of (x, y).
 template <typename S>
@@ -138,7 +148,8 @@ Vec3<S> mirror_image(const Mat3<S>& r_n_c, const Vec3<S>& p_n_c, const Vec3<S>& 
 }
 
 // Calibration state: stage 1 has NK = 0 (22 + 3M error states); stage 2 adds the intrinsics
-// (NK = 5: fu, fv, cu, cv, skew; NK = 4 holds skew at the configured value).
+// (NK = 5: fu, fv, cu, cv, skew; NK = 4 holds skew at the configured value; NK = 8: fu, fv, cu,
+// cv and the lens's four distortion coefficients, skew held, OpenVINS's eight camera parameters).
 //
 // The error state is ordered so that the two structured operations touch contiguous blocks:
 // IMU propagation changes [v, b_a, b_g, p, theta] = [0, 15), the camera reads
@@ -148,7 +159,8 @@ Vec3<S> mirror_image(const Mat3<S>& r_n_c, const Vec3<S>& p_n_c, const Vec3<S>& 
 template <typename S, int M, int NK>
 struct MirrorState {
   static_assert(M >= 1, "at least one marker");
-  static_assert(NK == 0 || NK == 4 || NK == 5, "intrinsics: none, fu fv cu cv, or with skew");
+  static_assert(NK == 0 || NK == 4 || NK == 5 || NK == 8,
+                "intrinsics: none, fu fv cu cv, with skew, or with the distortion coefficients");
   using Scalar = S;
   static constexpr int kMarkers = M;
   static constexpr int kIntrinsics = NK;
@@ -168,7 +180,8 @@ struct MirrorState {
   // The camera-IMU time offset (s), Kalibr's timeshift_cam_imu: a frame stamped t_cam shows the
   // rig as it was at IMU time t_cam + t_d.
   S t_d = S(0);
-  Eigen::Matrix<S, NK, 1> intrinsics = Eigen::Matrix<S, NK, 1>::Zero();  // fu fv cu cv [skew]
+  // fu fv cu cv [skew | c0 c1 c2 c3: the lens's Pinhole::coeffs]
+  Eigen::Matrix<S, NK, 1> intrinsics = Eigen::Matrix<S, NK, 1>::Zero();
 
   Vec3<S> marker(int i) const { return markers.template segment<3>(3 * i); }
 
@@ -411,7 +424,8 @@ void camera_pose(const State& x, const Exposure<typename State::Scalar>& e,
   p_n_c = p + r_n_b * x.p_b_c;
 }
 
-// The intrinsics a state implies: its own for stage 2, the configured ones otherwise.
+// The intrinsics a state implies: its own for stage 2, the configured ones otherwise. NK = 8 takes
+// the distortion coefficients from the state too (the model stays the configured one's).
 template <typename S, int M, int NK>
 Pinhole<S> intrinsics_of(const MirrorState<S, M, NK>& x, const Pinhole<S>& fixed) {
   Pinhole<S> k = fixed;
@@ -422,6 +436,8 @@ Pinhole<S> intrinsics_of(const MirrorState<S, M, NK>& x, const Pinhole<S>& fixed
     k.cv = x.intrinsics(3);
   }
   if constexpr (NK == 5) k.skew = x.intrinsics(4);
+  if constexpr (NK == 8)
+    for (int j = 0; j < 4; ++j) k.coeffs[static_cast<std::size_t>(j)] = x.intrinsics(4 + j);
   return k;
 }
 

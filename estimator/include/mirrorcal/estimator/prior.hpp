@@ -30,7 +30,37 @@ struct Prior {
   std::array<Eigen::Vector3d, M> sigma_markers{};
   double sigma_t_d = 0.02;  // a camera stamping its frames somewhere in the exposure and readout
   std::array<double, 5> sigma_intrinsics{100, 100, 100, 100, 100};  // fu fv cu cv skew (px)
+  // The distortion coefficients' 1-sigma (Pinhole::coeffs order), when stage 2 estimates them
+  // (NK = 8); their guess is intrinsics.coeffs.
+  std::array<double, 4> sigma_distortion = default_sigma_distortion(Distortion::kRadtan);
 };
+
+// The camera parameters a stage-2 state of NK intrinsics estimates, in the state's order (fu fv
+// cu cv, then skew for NK = 5 or the lens's four coefficients for NK = 8), and their 1-sigma.
+template <int NK>
+std::array<double, NK> camera_parameters(const Pinhole<double>& k) {
+  static_assert(NK == 4 || NK == 5 || NK == 8, "stage 2's camera parameters");
+  std::array<double, NK> a{};
+  a[0] = k.fu;
+  a[1] = k.fv;
+  a[2] = k.cu;
+  a[3] = k.cv;
+  if constexpr (NK == 5) a[4] = k.skew;
+  if constexpr (NK == 8)
+    for (std::size_t j = 0; j < 4; ++j) a[4 + j] = k.coeffs[j];
+  return a;
+}
+template <int NK>
+std::array<double, NK> camera_parameter_sigmas(const std::array<double, 5>& sigma_intrinsics,
+                                               const std::array<double, 4>& sigma_distortion) {
+  static_assert(NK == 4 || NK == 5 || NK == 8, "stage 2's camera parameters");
+  std::array<double, NK> a{};
+  for (std::size_t j = 0; j < 4; ++j) a[j] = sigma_intrinsics[j];
+  if constexpr (NK == 5) a[4] = sigma_intrinsics[4];
+  if constexpr (NK == 8)
+    for (std::size_t j = 0; j < 4; ++j) a[4 + j] = sigma_distortion[j];
+  return a;
+}
 
 // The initial state and (diagonal) covariance a prior implies.
 template <typename S, int M, int NK>
@@ -61,11 +91,12 @@ void initialise(const Prior<M>& pr, MirrorState<S, M, NK>& x,
   x.t_d = S(pr.t_d);
   sigma(X::kTd) = S(pr.sigma_t_d);
   if constexpr (NK > 0) {
-    const double k[5] = {pr.intrinsics.fu, pr.intrinsics.fv, pr.intrinsics.cu, pr.intrinsics.cv,
-                         pr.intrinsics.skew};
+    const std::array<double, NK> k = camera_parameters<NK>(pr.intrinsics);
+    const std::array<double, NK> sk =
+        camera_parameter_sigmas<NK>(pr.sigma_intrinsics, pr.sigma_distortion);
     for (int j = 0; j < NK; ++j) {
-      x.intrinsics(j) = S(k[j]);
-      sigma(X::kK + j) = S(pr.sigma_intrinsics[static_cast<std::size_t>(j)]);
+      x.intrinsics(j) = S(k[static_cast<std::size_t>(j)]);
+      sigma(X::kK + j) = S(sk[static_cast<std::size_t>(j)]);
     }
   }
   p = sigma.array().square().matrix().asDiagonal();
@@ -79,7 +110,7 @@ void extend_with_intrinsics(
     const Eigen::Matrix<S, MirrorState<S, M, 0>::kDim, MirrorState<S, M, 0>::kDim>& p1,
     const Pinhole<double>& guess, const std::array<double, 5>& sigma, MirrorState<S, M, NK>& x2,
     Eigen::Matrix<S, MirrorState<S, M, NK>::kDim, MirrorState<S, M, NK>::kDim>& p2) {
-  static_assert(NK > 0, "stage 2 estimates intrinsics");
+  static_assert(NK == 4 || NK == 5, "stage 2 estimates intrinsics (the lens: initialise)");
   constexpr int N1 = MirrorState<S, M, 0>::kDim;
   x2.v = x1.v;
   x2.b_a = x1.b_a;

@@ -127,5 +127,6 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
 extern template class CalibrationLoop<double, 3, 0>;
 extern template class CalibrationLoop<double, 3, 4>;
 extern template class CalibrationLoop<double, 3, 5>;
+extern template class CalibrationLoop<double, 3, 8>;
 
 }  // namespace mirrorcal::firmware

@@ -78,6 +78,11 @@ struct RecordingPriors {
   bool hold_skew = false;  // estimate fu fv cu cv only; skew stays at camchain.yaml's (0 if absent)
   Pinhole<double> intrinsics_guess{};        // default: camchain.yaml's
   std::array<double, 5> sigma_intrinsics{};  // fu fv cu cv skew (px)
+  // With estimate_intrinsics: estimate the lens's four distortion coefficients too, skew held at
+  // camchain.yaml's (needs a distortion_model other than none). Their guess is camchain.yaml's
+  // distortion_coeffs (intrinsics_guess.coeffs), their 1-sigma sigma_distortion.
+  bool estimate_distortion = false;
+  std::array<double, 4> sigma_distortion = default_sigma_distortion(Distortion::kRadtan);
 };
 
 // What is true, known only for simulated recordings (truth.yaml, optional): lets calibrate report
@@ -291,6 +296,7 @@ bool to_prior(const RecordingPriors& r, Prior<M>& p, std::string& error) {
   p.sigma_t_d = r.sigma_t_d;
   p.intrinsics = r.intrinsics_guess;
   p.sigma_intrinsics = r.sigma_intrinsics;
+  p.sigma_distortion = r.sigma_distortion;
   return true;
 }
 
@@ -322,6 +328,7 @@ RecordingPriors from_prior(const Prior<M>& p, const Eigen::Vector3d& gravity_n, 
   r.hold_skew = hold_skew;
   r.intrinsics_guess = p.intrinsics;
   r.sigma_intrinsics = p.sigma_intrinsics;
+  r.sigma_distortion = p.sigma_distortion;
   return r;
 }
 

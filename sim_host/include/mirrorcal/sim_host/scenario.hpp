@@ -35,9 +35,12 @@ struct Priors {
   double marker = 0.10;
   double time_offset = 0.02;                                            // s
   std::array<double, 5> intrinsics{100.0, 100.0, 100.0, 100.0, 100.0};  // fu fv cu cv skew (px)
-  double position = 0.02;                                               // IMU position in n (m)
-  double velocity = 0.05;                                               // m/s
-  double attitude = 1.0 * M_PI / 180.0;                                 // per axis (rad)
+  // The lens's distortion coefficients (Pinhole::coeffs order), when stage 2 estimates them;
+  // set_lens sets the model's default_sigma_distortion.
+  std::array<double, 4> distortion = default_sigma_distortion(Distortion::kRadtan);
+  double position = 0.02;                // IMU position in n (m)
+  double velocity = 0.05;                // m/s
+  double attitude = 1.0 * M_PI / 180.0;  // per axis (rad)
   double accel_bias = 0.03;  // m/s^2; the true bias of each run is drawn with this sigma too
   double gyro_bias = 0.002;  // rad/s; likewise
 };

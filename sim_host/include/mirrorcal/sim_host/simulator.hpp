@@ -80,6 +80,12 @@ Prior<M> draw_prior(const Scenario& s, const SimData& data, std::uint64_t seed) 
   pr.t_d =
       s.truth.t_d + ps.time_offset * n01(rng);  // drawn last: the draws above stay as they were
   pr.sigma_t_d = ps.time_offset;
+  // The lens's model is known; its coefficients' guesses (used only when stage 2 estimates them)
+  // are drawn after everything else, so that the draws above stay as they were.
+  pr.intrinsics.distortion = t.distortion;
+  for (std::size_t j = 0; j < 4; ++j)
+    pr.intrinsics.coeffs[j] = t.coeffs[j] + ps.distortion[j] * n01(rng);
+  pr.sigma_distortion = ps.distortion;
   (void)data;
   return pr;
 }
