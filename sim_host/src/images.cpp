@@ -1,7 +1,8 @@
-// PNG (8-bit, not interlaced) and binary PGM images read strictly, and grey PNG written; zlib
-// does the (de)compression with memory from a fixed arena each object allocates when made.
+// PNG (8- and 16-bit, not interlaced) and binary PGM images read strictly, and grey PNG written;
+// zlib does the (de)compression with memory from a fixed arena each object allocates when made.
 #include "mirrorcal/sim_host/images.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdarg>
 #include <cstdio>
@@ -73,12 +74,8 @@ struct ImageReader::Zlib {
 };
 
 ImageReader::ImageReader(int max_width, int max_height)
-    : max_width_(max_width < 1               ? 1
-                 : max_width > kMaxImageSide ? kMaxImageSide
-                                             : max_width),
-      max_height_(max_height < 1               ? 1
-                  : max_height > kMaxImageSide ? kMaxImageSide
-                                               : max_height),
+    : max_width_(std::clamp(max_width, 1, kMaxImageSide)),
+      max_height_(std::clamp(max_height, 1, kMaxImageSide)),
       zlib_(std::make_unique<Zlib>()) {
   const std::size_t w = std::size_t(max_width_), h = std::size_t(max_height_);
   raw_.resize((8 * w + 1) * h + 1);  // 16-bit RGBA, a filter byte per row; one to see excess data
@@ -368,12 +365,8 @@ constexpr std::size_t kIdatAt = 8 + 25;  // signature, IHDR chunk
 }
 
 PngWriter::PngWriter(int max_width, int max_height)
-    : max_width_(max_width < 1               ? 1
-                 : max_width > kMaxImageSide ? kMaxImageSide
-                                             : max_width),
-      max_height_(max_height < 1               ? 1
-                  : max_height > kMaxImageSide ? kMaxImageSide
-                                               : max_height),
+    : max_width_(std::clamp(max_width, 1, kMaxImageSide)),
+      max_height_(std::clamp(max_height, 1, kMaxImageSide)),
       zlib_(std::make_unique<Zlib>()) {
   filtered_.resize((std::size_t(max_width_) + 1) * std::size_t(max_height_));
   const std::size_t bound =

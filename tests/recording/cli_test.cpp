@@ -768,7 +768,8 @@ TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
 
 // A refinement whose last Gauss-Newton step still moved the calibration far, in its own sigmas,
 // has not converged: its estimate and sigmas are not to be trusted (sim_run.cpp measures the step;
-// runs 71, 78 and 132 of `montecarlo --scenario random --seed 3` moved 216-21000 sigmas).
+// runs 78, 71 and 132 of `montecarlo --scenario random --seed 3` end with steps of 70, 2800
+// and 6400 sigmas).
 TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
   mc::app::CalibrationResult r;
   r.markers_observed = r.markers_used = 8700;

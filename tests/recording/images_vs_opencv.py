@@ -33,41 +33,34 @@ def main():
         noise = rng.integers(0, 256, (37, 53), dtype=np.uint8)
         colour = rng.integers(0, 256, (31, 45, 3), dtype=np.uint8)
         alpha = rng.integers(0, 256, (31, 45, 4), dtype=np.uint8)
+        def decode_as(path, theirs, tol):
+            """Our reader's image of path against OpenCV's, within tol grey levels."""
+            out = path + ".pgm"
+            r = subprocess.run([tool, "decode", path, out], capture_output=True, text=True)
+            if r.returncode != 0:
+                failures.append(f"{path}: {r.stderr.strip()}")
+                return
+            ours = read_pgm(out).astype(int)
+            if ours.shape != theirs.shape or np.abs(ours - theirs.astype(int)).max() > tol:
+                failures.append(f"{path}: pixels differ from OpenCV's")
+
         for name, img in [("scene", scene), ("noise", noise), ("bgr", colour), ("bgra", alpha)]:
             for level in range(10):
                 path = os.path.join(tmp, f"{name}-{level}.png")
                 cv2.imwrite(path, img, [cv2.IMWRITE_PNG_COMPRESSION, level])
-                out = path + ".pgm"
-                r = subprocess.run([tool, "decode", path, out], capture_output=True, text=True)
                 checked += 1
-                if r.returncode != 0:
-                    failures.append(f"{path}: {r.stderr.strip()}")
-                    continue
-                ours = read_pgm(out).astype(int)
                 if img.ndim == 2:
-                    theirs = cv2.imread(path, cv2.IMREAD_UNCHANGED).astype(int)
-                    tol = 0
+                    decode_as(path, cv2.imread(path, cv2.IMREAD_UNCHANGED), 0)
                 else:
                     bgr = cv2.imread(path, cv2.IMREAD_COLOR)
-                    theirs = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(int)
-                    tol = 1
-                if ours.shape != theirs.shape or np.abs(ours - theirs).max() > tol:
-                    failures.append(f"{path}: pixels differ from OpenCV's")
+                    decode_as(path, cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), 1)
         # 16-bit, grey and colour: read as OpenCV reduces them to 8 bits (the upper byte).
         wide = noise.astype(np.uint16) * 256 + 3
         for name, deep in [("deep", wide), ("deep-bgr", np.dstack([wide, wide[::-1], wide[:, ::-1]]))]:
             path = os.path.join(tmp, name + ".png")
             cv2.imwrite(path, deep)
-            out = path + ".pgm"
-            r = subprocess.run([tool, "decode", path, out], capture_output=True, text=True)
             checked += 1
-            if r.returncode != 0:
-                failures.append(f"{path}: {r.stderr.strip()}")
-                continue
-            ours = read_pgm(out).astype(int)
-            theirs = cv2.imread(path, cv2.IMREAD_GRAYSCALE).astype(int)
-            if ours.shape != theirs.shape or np.abs(ours - theirs).max() > (0 if deep.ndim == 2 else 1):
-                failures.append(f"{path}: pixels differ from OpenCV's")
+            decode_as(path, cv2.imread(path, cv2.IMREAD_GRAYSCALE), 0 if deep.ndim == 2 else 1)
         # Our writer, read by OpenCV.
         for name, img in [("scene", scene), ("noise", noise)]:
             pgm = os.path.join(tmp, f"{name}.pgm")
