@@ -5,6 +5,8 @@
 // propagates and the result is the prior, carried through the motion). The live pass keeps what
 // it consumed; the result is then calibrated from it as `mirrorcal calibrate` calibrates a
 // recording (kDefaultPasses passes from the prior: one pass alone is over-confident).
+#include <unistd.h>
+
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -13,6 +15,7 @@
 #include "calibration_report.hpp"
 #include "cli.hpp"
 #include "devices.hpp"
+#include "live_feedback.hpp"
 #include "loop_options.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/firmware/loop.hpp"
@@ -167,7 +170,11 @@ int cmd_run(int argc, char** argv) {
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
-  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc);
+  // While the user moves the rig: what is still uncertain, what motion helps, when it converged.
+  // On a terminal a line every window; in a log only when the verdict changes.
+  LiveFeedback feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
+  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc,
+                                                      camera ? &feedback : nullptr);
   if (camera) loop.set_identifier(logged_markers.get());
   std::printf("mirrorcal run: IMU %s%s%s, %s%s; %s\n", s.imu.c_str(),
               s.drdy.empty() ? "" : ", data-ready ", s.drdy.c_str(),

@@ -47,6 +47,11 @@ cat /tmp/feeder.log /tmp/run.log
 case " $* " in
   *" --trigger "*) grep -Eq "^trigger: [1-9][0-9]* pulses" /tmp/run.log || fail "the trigger never fired" ;;
 esac
+# The live feedback: what is still uncertain and what motion helps, while the rig moves.
+if [ $command = run ]; then
+  grep -Eq "^live [0-9]+ s: (still uncertain|converged|the rig hardly moved)" /tmp/run.log ||
+    fail "run printed no live feedback"
+fi
 if [ $command = record ]; then
   "$mirrorcal" calibrate /tmp/rec --out /tmp/out || fail "mirrorcal calibrate failed on the recording"
 fi

@@ -1,0 +1,190 @@
+#include "live_feedback.hpp"
+
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+
+namespace mirrorcal::app {
+
+namespace {
+
+using State = LiveFeedback::Filter::State;
+using Covariance = LiveFeedback::Filter::Covariance;
+
+// The largest 1-sigma of a 3x3 block and its direction; with the prior's sigma along it.
+GroupUncertainty worst_direction(const Eigen::Matrix3d& p, const Eigen::Matrix3d& p0) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p);
+  GroupUncertainty g;
+  g.direction_c = eig.eigenvectors().col(2);  // eigenvalues ascend
+  g.sigma = std::sqrt(std::max(0.0, eig.eigenvalues()(2)));
+  g.prior_sigma = std::sqrt(std::max(0.0, g.direction_c.dot(p0 * g.direction_c)));
+  return g;
+}
+
+int most_perpendicular_axis(const Eigen::Vector3d& d) {
+  int axis = 0;
+  for (int i = 1; i < 3; ++i)
+    if (std::abs(d(i)) < std::abs(d(axis))) axis = i;
+  return axis;
+}
+
+}  // namespace
+
+CalibrationUncertainty calibration_uncertainty(const Covariance& p, const Covariance& p0,
+                                               const Eigen::Quaterniond& q_b_c) {
+  CalibrationUncertainty u;
+  // p_b_c is in the IMU frame; the advice speaks of the camera's axes.
+  const Eigen::Matrix3d r_c_b = q_b_c.toRotationMatrix().transpose();
+  const auto in_camera = [&](const Covariance& c, int at) {
+    return Eigen::Matrix3d(r_c_b * c.block<3, 3>(at, at) * r_c_b.transpose());
+  };
+  u[0] = worst_direction(in_camera(p, State::kPbc), in_camera(p0, State::kPbc));
+  // The rotation's error is R_b_c Exp(e): e is in the camera frame already.
+  u[1] = worst_direction(p.block<3, 3>(State::kPhi, State::kPhi),
+                         p0.block<3, 3>(State::kPhi, State::kPhi));
+  for (int m = 0; m < kMarkers; ++m) {
+    const int at = State::kPi + 3 * m;
+    const GroupUncertainty g = worst_direction(p.block<3, 3>(at, at), p0.block<3, 3>(at, at));
+    if (m == 0 || g.sigma > u[2].sigma) u[2] = g;
+  }
+  u[3].sigma = std::sqrt(std::max(0.0, p(State::kTd, State::kTd)));
+  u[3].prior_sigma = std::sqrt(std::max(0.0, p0(State::kTd, State::kTd)));
+  return u;
+}
+
+const char* motion_advice(CalibrationGroup group, const Eigen::Vector3d& direction_c) {
+  static constexpr const char* kRotateAbout[3] = {
+      "tilt the rig up and down (about the camera's x axis)",
+      "turn the rig left and right (about the camera's y axis)",
+      "roll the rig about the camera's optical axis"};
+  switch (group) {
+    case CalibrationGroup::kCameraPosition:
+    case CalibrationGroup::kCameraRotation:
+      return kRotateAbout[most_perpendicular_axis(direction_c)];
+    case CalibrationGroup::kMarkers:
+      return std::abs(direction_c.z()) > std::sqrt(0.5)
+                 ? "move the rig towards and away from the mirror"
+                 : "tilt the rig so that the markers sweep across the image";
+    case CalibrationGroup::kTimeOffset:
+      return "rotate the rig briskly back and forth";
+  }
+  return "";
+}
+
+const char* group_name(CalibrationGroup group) {
+  switch (group) {
+    case CalibrationGroup::kCameraPosition:
+      return "camera position";
+    case CalibrationGroup::kCameraRotation:
+      return "camera rotation";
+    case CalibrationGroup::kMarkers:
+      return "markers";
+    case CalibrationGroup::kTimeOffset:
+      return "time offset";
+  }
+  return "";
+}
+
+LiveFeedback::LiveFeedback(const Filter::Covariance& p0, std::FILE* out, bool every_window)
+    : p0_(p0), out_(out), every_window_(every_window) {}
+
+void LiveFeedback::publish(std::int64_t t_ns, const Filter& filter) {
+  const Eigen::Quaterniond q = filter.state().q_n_b;
+  if (!started_) {
+    started_ = true;
+    window_start_ns_ = t_ns;
+    last_q_ = q;
+    markers_at_window_start_ = filter.counters().markers_used;
+    return;
+  }
+  turned_rad_ += last_q_.angularDistance(q);
+  last_q_ = q;
+  if (static_cast<double>(t_ns - window_start_ns_) * 1e-9 < kWindowS) return;
+  close_window(static_cast<double>(t_ns) * 1e-9, filter);
+  window_start_ns_ = t_ns;
+  turned_rad_ = 0.0;
+  markers_at_window_start_ = filter.counters().markers_used;
+}
+
+void LiveFeedback::close_window(double t_s, const Filter& filter) {
+  const CalibrationUncertainty u =
+      calibration_uncertainty(filter.covariance(), p0_, filter.state().q_b_c);
+  std::array<bool, kCalibrationGroups> settled{};
+  // Once converged, a group must fall by twice as much to unsettle it again: sigmas that fall as
+  // 1/sqrt(t) cross the threshold slowly, and the verdict should not flicker as they do.
+  const double fall = verdict_ == Verdict::kConverged ? 2.0 * kSettledFall : kSettledFall;
+  int advised = -1;
+  double worst = 0.0;
+  for (int g = 0; g < kCalibrationGroups; ++g) {
+    const auto k = static_cast<std::size_t>(g);
+    settled[k] = have_previous_ && u[k].sigma > (1.0 - fall) * previous_[k].sigma;
+    const double ratio = u[k].sigma / std::max(u[k].prior_sigma, 1e-300);
+    if (!settled[k] && ratio >= worst) {
+      worst = ratio;
+      advised = g;
+    }
+  }
+  Verdict verdict = Verdict::kUncertain;
+  if (filter.counters().markers_used == markers_at_window_start_)
+    verdict = Verdict::kNoMarkers;
+  else if (turned_rad_ * 180.0 / M_PI < kMovedDeg)
+    verdict = Verdict::kStill;
+  else if (advised < 0)
+    verdict = Verdict::kConverged;
+  const bool changed = verdict != verdict_ || advised != advised_;
+  if (changed || every_window_) print(t_s, verdict, advised, u, settled);
+  verdict_ = verdict;
+  advised_ = advised;
+  previous_ = u;
+  have_previous_ = true;
+}
+
+void LiveFeedback::print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
+                         const std::array<bool, kCalibrationGroups>& settled) {
+  if (out_ == nullptr) return;
+  ++lines_;
+  std::fprintf(out_, "live %.0f s: ", t_s);
+  // Each group's sigma in the unit a user reads it in, and its share of the prior's.
+  const auto figures = [&](bool only_unsettled) {
+    static constexpr double kScale[kCalibrationGroups] = {1e3, 180.0 / M_PI, 1e3, 1e3};
+    static constexpr const char* kUnit[kCalibrationGroups] = {"mm", "deg", "mm", "ms"};
+    const char* sep = "";
+    for (int g = 0; g < kCalibrationGroups; ++g) {
+      const auto k = static_cast<std::size_t>(g);
+      if (only_unsettled && settled[k]) continue;
+      std::fprintf(out_, "%s%s %.3g %s (%.3g %% of prior)", sep,
+                   group_name(static_cast<CalibrationGroup>(g)), kScale[k] * u[k].sigma, kUnit[k],
+                   100.0 * u[k].sigma / std::max(u[k].prior_sigma, 1e-300));
+      sep = ", ";
+    }
+  };
+  switch (verdict) {
+    case Verdict::kNoMarkers:
+      std::fprintf(out_, "no markers seen for %.0f s: point the camera at the mirror\n", kWindowS);
+      break;
+    case Verdict::kStill:
+      std::fprintf(out_, "the rig hardly moved: move it; ");
+      figures(true);
+      std::fprintf(out_, "\n");
+      break;
+    case Verdict::kUncertain: {
+      std::fprintf(out_, "still uncertain: ");
+      figures(true);
+      const auto g = static_cast<CalibrationGroup>(advised);
+      std::fprintf(out_, "; for the %s: %s\n", group_name(g),
+                   motion_advice(g, u[static_cast<std::size_t>(advised)].direction_c));
+      break;
+    }
+    case Verdict::kConverged:
+      std::fprintf(out_, "converged (no sigma fell by %.0f %% over %.0f s of motion): ",
+                   100.0 * kSettledFall, kWindowS);
+      figures(false);
+      std::fprintf(out_, "; you may stop\n");
+      break;
+    case Verdict::kNone:
+      break;
+  }
+  std::fflush(out_);
+}
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,95 @@
+// Live feedback for `mirrorcal run`: while the user moves the rig, which calibration states are
+// still uncertain, what motion would inform them, and when the calibration has converged. No other
+// calibration tool tells the user this while the data are being taken; without it a user stops
+// too early (a weak direction never excited) or moves for minutes after the data stopped helping.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <cstdio>
+
+#include <Eigen/Core>
+
+#include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/firmware/loop.hpp"
+#include "sim_run.hpp"  // kMarkers
+
+namespace mirrorcal::app {
+
+// The parts of the calibration a user's motion informs differently.
+enum class CalibrationGroup : std::uint8_t {
+  kCameraPosition,
+  kCameraRotation,
+  kMarkers,
+  kTimeOffset
+};
+constexpr int kCalibrationGroups = 4;
+
+// One group's uncertainty: the 1-sigma of its least-known direction (SI: m, rad, m, s) against the
+// prior's there, and that direction in the camera frame (unit; unused for the time offset).
+struct GroupUncertainty {
+  double sigma = 0.0;
+  double prior_sigma = 0.0;
+  Eigen::Vector3d direction_c = Eigen::Vector3d::UnitZ();
+};
+
+using CalibrationUncertainty = std::array<GroupUncertainty, kCalibrationGroups>;
+
+// The uncertainty of each group from a filter's covariance P and its prior's P0 (the calibration
+// block of the live filter's state, M markers, no intrinsics: run's filter). The markers' group is
+// the worst of the M markers.
+CalibrationUncertainty calibration_uncertainty(
+    const CalibrationFilter<double, kMarkers, 0>::Covariance& p,
+    const CalibrationFilter<double, kMarkers, 0>::Covariance& p0, const Eigen::Quaterniond& q_b_c);
+
+// The motion that informs a group's least-known direction, as a user would be told it. For the
+// camera's position and rotation: a rotation about the camera axis most nearly perpendicular to
+// that direction (a rotation about an axis says nothing along it: the lever arm and the hand-eye
+// rotation are seen only across it). For the markers: along the optical axis their depth trades
+// against the mirror's distance, which only motion towards and away from the mirror separates.
+const char* motion_advice(CalibrationGroup group, const Eigen::Vector3d& direction_c);
+
+const char* group_name(CalibrationGroup group);
+
+// The sink `run`'s live loop publishes to: every kWindowS of IMU time it compares each group's
+// sigma with the window before and prints a line to `out` when the verdict changes (on a terminal
+// also every window): the groups still uncertain and the motion for the worst of them, or that the
+// calibration has converged (no sigma fell by more than kSettledFall over a window in which the rig
+// moved and the markers were seen; twice that to leave the verdict again). Allocates nothing: it
+// runs inside the loop.
+class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, kMarkers, 0>> {
+ public:
+  using Filter = CalibrationFilter<double, kMarkers, 0>;
+  static constexpr double kWindowS = 5.0;
+  static constexpr double kSettledFall = 0.05;
+  // A window with less rotation than this (total angle turned, deg) cannot show convergence: a rig
+  // held still gains nothing, and its sigmas stop falling for that reason alone.
+  static constexpr double kMovedDeg = 20.0;
+
+  LiveFeedback(const Filter::Covariance& p0, std::FILE* out, bool every_window);
+  void publish(std::int64_t t_ns, const Filter& filter) override;
+  bool converged() const { return verdict_ == Verdict::kConverged; }
+  int lines() const { return lines_; }
+
+ private:
+  enum class Verdict : std::uint8_t { kNone, kNoMarkers, kStill, kUncertain, kConverged };
+  void close_window(double t_s, const Filter& filter);
+  void print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
+             const std::array<bool, kCalibrationGroups>& settled);
+
+  Filter::Covariance p0_;
+  std::FILE* out_;
+  bool every_window_;
+  bool started_ = false;
+  std::int64_t window_start_ns_ = 0;
+  Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();
+  double turned_rad_ = 0.0;
+  std::uint64_t markers_at_window_start_ = 0;
+  bool have_previous_ = false;
+  CalibrationUncertainty previous_{};
+  Verdict verdict_ = Verdict::kNone;
+  int advised_ = -1;
+  int lines_ = 0;
+};
+
+}  // namespace mirrorcal::app
