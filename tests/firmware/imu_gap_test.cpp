@@ -1,7 +1,8 @@
 // IMU gaps survived: the IMU silent for 100-200 ms (a USB hiccup) is propagated across with the
 // uncertainty of the signal it did not give, and the calibration stays consistent; silent for
 // longer (400 ms, 5 s), the motion states restart and the calibration goes on as consistent.
-// Full calibrations (run_loop) of the paper scenario and of random-family rigs, the gap at 30 s.
+// Full calibrations (run_loop) of the paper scenario and of random-family rigs, the gap at 30 s;
+// and twenty more random rigs, each either within 4 sigma in every state or flagged.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -79,6 +80,29 @@ void expect_gap_survived(std::int64_t gap_ms, std::uint64_t restarts) {
   EXPECT_LT(nees_sum / n, chi2_quantile(0.975, dof) / n);
 }
 
+// The largest |error| / sigma over a run's calibration states.
+double worst_sigmas(const Run& run) {
+  const auto row = run.history.back();
+  return (row.error.array().abs() / row.sigma.array()).maxCoeff();
+}
+
+// Random-family rigs 7-26 (slow and fast sweeps, wall and floor mirrors, 20-60 Hz cameras) with
+// the gap at 30 s: every run lies within 4 sigma of the truth in every calibration state or says
+// consistent: false, as the campaigns judge a run (montecarlo's unflagged beyond 4 sigma). With
+// the Gauss-Newton refinement off (Passes{2, 4, false}: the free passes alone, as before it came
+// in) three of the twenty end beyond 4 sigma unflagged after 400 ms (rig 11: 18 sigma, NEES 1719,
+// where it was 7.6 sigma without the gap; rigs 22 and 25: 5.0 and 10.8).
+void expect_each_run_right_or_flagged(std::int64_t gap_ms, std::uint64_t restarts) {
+  for (std::uint64_t seed = 7; seed <= 26; ++seed) {
+    const Run run = calibrate_with_gap(mc::sim::random_scenario(seed), seed, gap_ms);
+    SCOPED_TRACE("random seed " + std::to_string(seed));
+    EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
+    EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
+    EXPECT_TRUE(worst_sigmas(run) <= 4.0 || !mc::app::consistent(run.result))
+        << worst_sigmas(run) << " sigmas, NEES " << run.history.back().nees;
+  }
+}
+
 }  // namespace
 
 TEST(ImuGap, Of100MsIsPropagatedAcrossAndTheCalibrationStaysConsistent) {
@@ -96,4 +120,16 @@ TEST(ImuGap, Of400MsRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
 
 TEST(ImuGap, Of5SRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
   expect_gap_survived(5000, 1);
+}
+
+TEST(ImuGap, Of200MsOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged(200, 0);
+}
+
+TEST(ImuGap, Of400MsOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged(400, 1);
+}
+
+TEST(ImuGap, Of2SOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged(2000, 1);
 }
