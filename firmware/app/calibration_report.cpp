@@ -54,6 +54,7 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
   d.pixel_sigma = run.pixel_sigma;
   d.prior_sigma = run.prior_sigma;
   d.has_truth = run.has_truth;
+  d.loop = run.loop_counters;
   if (run.history.empty()) return d;
   d.final_nees = run.history.back().nees;
   d.settled_from_s =
@@ -417,6 +418,13 @@ void add_excitation(std::string& t, const ReportData& d) {
               frames > 0 ? double(markers) / frames : 0.0);
   for (std::size_t n = 0; n < per_count.size(); ++n)
     t += format(" %zu: %d%s", n, per_count[n], n + 1 < per_count.size() ? "," : ")\n");
+  const firmware::LoopCounters& l = d.loop;
+  t += format(
+      "IMU: %llu samples, %llu gaps (%llu too long to cross: the motion restarted, the calibration "
+      "kept), %llu frames behind the filter skipped\n",
+      static_cast<unsigned long long>(l.imu_samples), static_cast<unsigned long long>(l.imu_gaps),
+      static_cast<unsigned long long>(l.imu_restarts),
+      static_cast<unsigned long long>(l.frames_before_filter));
   const Eigen::Vector3d range = (hi - lo) * kDeg;
   t += format(
       "rotation range about the IMU's axes (from the first pose): x %.1f, y %.1f, z %.1f deg\n",

@@ -75,6 +75,7 @@ struct ReportData {
   double settled_from_s = 0.0;  // the first frame after those the estimate needed to settle
   Eigen::Vector3d accel_bias_sigma = Eigen::Vector3d::Zero(),
                   gyro_bias_sigma = Eigen::Vector3d::Zero();  // final
+  firmware::LoopCounters loop{};  // what the last pass met on its streams: IMU gaps, restarts
 };
 
 template <int NK>

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "calibration_report.hpp"
@@ -104,6 +105,20 @@ TEST(Report, KthSmallestIsExactOnSamplesLargerThanItsBatch) {
     }
     EXPECT_EQ(mirrorcal::app::sample_stats(sample).median, sorted[values.size() / 2]);
   }
+}
+
+// The report says the IMU's gaps and restarts (issue: hiccups counted and reported).
+TEST(Report, ExcitationSaysTheImuGapsAndRestarts) {
+  mirrorcal::app::ReportData d =
+      mirrorcal::app::report_data_without_history(mirrorcal::app::CalibrationResult{}, "test");
+  d.rows.push_back(mirrorcal::app::ReportRow{});
+  d.loop.imu_samples = 1200;
+  d.loop.imu_gaps = 3;
+  d.loop.imu_restarts = 1;
+  d.loop.frames_before_filter = 7;
+  const std::string text = mirrorcal::app::report_text(d);
+  EXPECT_NE(text.find("IMU: 1200 samples, 3 gaps (1 too long to cross"), std::string::npos) << text;
+  EXPECT_NE(text.find("7 frames behind the filter skipped"), std::string::npos) << text;
 }
 
 }  // namespace
