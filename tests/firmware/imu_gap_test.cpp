@@ -5,47 +5,21 @@
 // and twenty more random rigs, each either within 4 sigma in every state or flagged.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cmath>
+#include <string>
 #include <vector>
 
-#include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
+#include "imu_gap_run.hpp"
 
 namespace mc = mirrorcal;
-using Run = mc::app::SimRun<0>;
+using mc::gaptest::Run;
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
-constexpr std::int64_t kGapStartNs = 30'000 * kMs;
+constexpr std::int64_t kGapStartMs = 30'000;
 
-// The true calibration of a scenario, for the NEES.
-Run::State truth_of(const mc::sim::Scenario& s) {
-  Run::State t;
-  t.p_b_c = s.truth.p_b_c;
-  t.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < mc::app::kMarkers; ++i)
-    t.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
-  t.t_d = s.truth.t_d;
-  return t;
-}
-
-// What `mirrorcal calibrate` makes of the recording of seed with the IMU rows of gap_ms from 30 s
-// removed.
 Run calibrate_with_gap(const mc::sim::Scenario& s, std::uint64_t seed, std::int64_t gap_ms) {
-  const mc::sim::SimData data = mc::sim::simulate(s, seed);
-  mc::app::LoopData d = mc::app::loop_data(s, data);
-  d.imu.erase(std::remove_if(d.imu.begin(), d.imu.end(),
-                             [&](const mc::ImuSample& x) {
-                               return x.t_ns >= kGapStartNs && x.t_ns < kGapStartNs + gap_ms * kMs;
-                             }),
-              d.imu.end());
-  Run::State x0;
-  Run::Filter::Covariance p0;
-  mc::initialise(mc::app::simulation_prior(s, data, seed), x0, p0);
-  const Run::State truth = truth_of(s);
-  return mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0, d, &truth);
+  return mc::gaptest::calibrate_with_gap(s, seed, kGapStartMs, gap_ms);
 }
 
 // The chi-square quantile p of k degrees of freedom (Wilson-Hilferty: within 0.1 % at k >= 48).
@@ -80,12 +54,6 @@ void expect_gap_survived(std::int64_t gap_ms, std::uint64_t restarts) {
   EXPECT_LT(nees_sum / n, chi2_quantile(0.975, dof) / n);
 }
 
-// The largest |error| / sigma over a run's calibration states.
-double worst_sigmas(const Run& run) {
-  const auto row = run.history.back();
-  return (row.error.array().abs() / row.sigma.array()).maxCoeff();
-}
-
 // Random-family rigs 7-26 (slow and fast sweeps, wall and floor mirrors, 20-60 Hz cameras) with
 // the gap at 30 s: every run lies within 4 sigma of the truth in every calibration state or says
 // consistent: false, as the campaigns judge a run (montecarlo's unflagged beyond 4 sigma). With
@@ -98,8 +66,8 @@ void expect_each_run_right_or_flagged(std::int64_t gap_ms, std::uint64_t restart
     SCOPED_TRACE("random seed " + std::to_string(seed));
     EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
     EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
-    EXPECT_TRUE(worst_sigmas(run) <= 4.0 || !mc::app::consistent(run.result))
-        << worst_sigmas(run) << " sigmas, NEES " << run.history.back().nees;
+    EXPECT_TRUE(mc::gaptest::worst_sigmas(run) <= 4.0 || !mc::app::consistent(run.result))
+        << mc::gaptest::worst_sigmas(run) << " sigmas, NEES " << run.history.back().nees;
   }
 }
 
