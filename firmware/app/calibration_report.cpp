@@ -262,6 +262,7 @@ void add_verdict(std::string& t, const ReportData& d) {
   const CalibrationResult& r = d.result;
   t += verdict_line(r) + "\n";
   for (const std::string& w : result_warnings(r)) t += "  WARNING: " + w + "\n";
+  for (const std::string& w : d.input_warnings) t += "  WARNING (the input): " + w + "\n";
   t += format(
       "  self-check: %d pass(es); normalised innovation squared per dof %.3f over %llu dof (about "
       "1: the markers fit as the covariance says); sigma_ratio %.3f (at least %.1f); last "

@@ -76,6 +76,9 @@ struct ReportData {
   Eigen::Vector3d accel_bias_sigma = Eigen::Vector3d::Zero(),
                   gyro_bias_sigma = Eigen::Vector3d::Zero();  // final
   firmware::LoopCounters loop{};  // what the last pass met on its streams: IMU gaps, restarts
+  // What the checks of the input found doubtful but not wrong (calibrate: a noise density unlike
+  // the data's, ...), said beside the verdict: the self-check cannot see them.
+  std::vector<std::string> input_warnings;
 };
 
 template <int NK>
@@ -116,13 +119,15 @@ bool write_report(files::OutputSet& out, const std::string& dir, const ReportDat
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title);
 
 // camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
-// a run, in dir, written as one set.
+// a run, in dir, written as one set; input_warnings: ReportData's.
 template <int NK>
 bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
                                   const std::string& title, bool from_earlier,
-                                  const ReportPlots& plots, std::string& error) {
+                                  const ReportPlots& plots, std::string& error,
+                                  const std::vector<std::string>& input_warnings = {}) {
   ReportData report = report_data(run, title);
   report.from_earlier = from_earlier;
+  report.input_warnings = input_warnings;
   files::OutputSet out;
   return add_run_outputs(out, dir, run, error) && write_report(out, dir, report, plots, error) &&
          out.commit(error);

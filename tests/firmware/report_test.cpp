@@ -121,4 +121,18 @@ TEST(Report, ExcitationSaysTheImuGapsAndRestarts) {
   EXPECT_NE(text.find("7 frames behind the filter skipped"), std::string::npos) << text;
 }
 
+// What the input checks warned of stands beside the verdict, which the self-check alone sets.
+TEST(Report, TheInputsWarningsStandBesideTheVerdict) {
+  mirrorcal::app::ReportData d =
+      mirrorcal::app::report_data_without_history(mirrorcal::app::CalibrationResult{}, "test");
+  d.input_warnings = {"imu.yaml: gyroscope_noise_density: 14 times more than the data's"};
+  const std::string text = mirrorcal::app::report_text(d);
+  const std::size_t verdict = text.find("VERDICT"), calibration = text.find("CALIBRATION");
+  const std::size_t warning = text.find(
+      "WARNING (the input): imu.yaml: gyroscope_noise_density: 14 times more than the data's");
+  ASSERT_NE(warning, std::string::npos) << text;
+  EXPECT_LT(verdict, warning);
+  EXPECT_LT(warning, calibration);
+}
+
 }  // namespace
