@@ -54,6 +54,7 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
   d.pixel_sigma = run.pixel_sigma;
   d.prior_sigma = run.prior_sigma;
   d.has_truth = run.has_truth;
+  d.loop = run.loop_counters;
   if (run.history.empty()) return d;
   d.final_nees = run.history.back().nees;
   d.settled_from_s =
@@ -64,32 +65,34 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
     d.accel_bias_sigma(i) = std::sqrt(run.covariance(State::kBa + i, State::kBa + i));
     d.gyro_bias_sigma(i) = std::sqrt(run.covariance(State::kBg + i, State::kBg + i));
   }
+  static_assert(L <= kMaxReportStates, "a report row holds every calibration state");
   const std::vector<ParamInfo>& params = run.result.params;
   const State last = run.history.back().state;
   const Eigen::Quaterniond q0 = run.history.front().state.q_n_b;
   for (std::size_t k = 0; k < run.history.size(); ++k) {
     const HistoryRow<typename SimRun<NK>::Filter> row = run.history[k];
-    const double t = double(row.t_ns) * 1e-9;
-    d.t_s.push_back(t);
+    ReportRow out;
+    out.t_s = double(row.t_ns) * 1e-9;
     const Eigen::Matrix<double, L, 1> from_last = row.state.template boxminus_block<B, L>(last);
     for (int j = 0; j < L && std::size_t(j) < params.size(); ++j) {
       const bool rotation = B + j >= State::kPhi && B + j < State::kPi;
       const double value = rotation ? from_last(j) : euclidean_value(row.state, j);
-      d.estimate[std::size_t(j)].push_back(value * params[std::size_t(j)].scale);
-      d.sigma[std::size_t(j)].push_back(row.sigma(j) * params[std::size_t(j)].scale);
+      out.estimate[std::size_t(j)] = value * params[std::size_t(j)].scale;
+      out.sigma[std::size_t(j)] = row.sigma(j) * params[std::size_t(j)].scale;
     }
-    d.accel_bias.push_back(row.state.b_a);
-    d.gyro_bias.push_back(row.state.b_g);
-    d.rotation.push_back(so3::boxminus<double>(row.state.q_n_b, q0));
-    d.normal_position.push_back(row.state.p.z());
-    d.normal_velocity.push_back(row.state.v.z());
+    out.accel_bias = row.state.b_a;
+    out.gyro_bias = row.state.b_g;
+    out.rotation = so3::boxminus<double>(row.state.q_n_b, q0);
+    out.normal_position = row.state.p.z();
+    out.normal_velocity = row.state.v.z();
     const bool final_row = k + 1 == run.history.size();
-    d.markers_seen.push_back(final_row ? -1 : row.markers_seen);
-    d.nis.push_back(row.nis);
-    d.nis_dof.push_back(row.nis_dof);
+    out.markers_seen = final_row ? -1 : row.markers_seen;
+    out.nis = row.nis;
+    out.nis_dof = row.nis_dof;
+    d.rows.push_back(out);
     for (int m = 0; m < State::kMarkers; ++m)
       if (row.residual_valid[std::size_t(m)])
-        d.residuals.push_back({t, m, row.residual[std::size_t(m)].x(),
+        d.residuals.push_back({out.t_s, m, row.residual[std::size_t(m)].x(),
                                row.residual[std::size_t(m)].y(), k >= run.gate_after_frames});
   }
   return d;
@@ -104,25 +107,91 @@ ReportData report_data_without_history(const CalibrationResult& r, const std::st
   ReportData d;
   d.title = title;
   d.result = r;
-  d.estimate.resize(r.params.size());
-  d.sigma.resize(r.params.size());
   return d;
 }
 
-SampleStats sample_stats(std::vector<double> values) {
+double kth_smallest(const Sample& sample, std::size_t k) {
+  // Bins a pass counts into, and the values left in play that are sorted in memory instead.
+  constexpr std::size_t kBins = 4096, kBatch = 65536;
+  // Each level narrows the values in play to one bin of the level before.
+  struct Level {
+    double lo = 0.0, span = 1.0;
+    std::size_t bin = 0;
+    std::size_t of(double x) const {
+      const double b = std::floor((x - lo) / span * double(kBins));
+      return b > 0.0 ? std::min(kBins - 1, std::size_t(b)) : 0;  // the greatest in the last
+    }
+  };
+  std::vector<Level> levels;
+  const auto in_play = [&levels](double x) {
+    for (const Level& l : levels)
+      if (l.of(x) != l.bin) return false;
+    return true;
+  };
+  double lo = INFINITY, hi = -INFINITY;
+  std::size_t n = 0;
+  sample([&](double x) {
+    lo = std::min(lo, x);
+    hi = std::max(hi, x);
+    ++n;
+  });
+  std::vector<std::size_t> count(kBins);
+  std::vector<double> least(kBins), greatest(kBins);
+  // Every level leaves fewer values in play: the least falls in the first bin, the greatest in
+  // the last.
+  while (lo < hi && n > kBatch) {
+    const Level level{lo, hi - lo, 0};
+    std::fill(count.begin(), count.end(), 0);
+    std::fill(least.begin(), least.end(), INFINITY);
+    std::fill(greatest.begin(), greatest.end(), -INFINITY);
+    sample([&](double x) {
+      if (!in_play(x)) return;
+      const std::size_t b = level.of(x);
+      ++count[b];
+      least[b] = std::min(least[b], x);
+      greatest[b] = std::max(greatest[b], x);
+    });
+    std::size_t b = 0;
+    for (; k >= count[b]; ++b) k -= count[b];
+    levels.push_back({lo, hi - lo, b});
+    n = count[b];
+    lo = least[b];
+    hi = greatest[b];
+  }
+  if (!(lo < hi)) return lo;  // every value in play is the same
+  std::vector<double> batch;
+  batch.reserve(n);
+  sample([&](double x) {
+    if (in_play(x)) batch.push_back(x);
+  });
+  std::nth_element(batch.begin(), batch.begin() + std::ptrdiff_t(k), batch.end());
+  return batch[k];
+}
+
+SampleStats sample_stats(const Sample& sample) {
   SampleStats s;
-  s.n = values.size();
-  if (values.empty()) return s;
-  double sum = 0.0;
-  for (double v : values) sum += v;
+  double sum = 0.0, max = -INFINITY;
+  sample([&](double v) {
+    ++s.n;
+    sum += v;
+    max = std::max(max, v);
+  });
+  if (s.n == 0) return s;
+  s.max = max;
   s.mean = sum / double(s.n);
   double squares = 0.0;
-  for (double v : values) squares += (v - s.mean) * (v - s.mean);
+  sample([&](double v) { squares += (v - s.mean) * (v - s.mean); });
   s.std = std::sqrt(squares / double(s.n));
-  std::sort(values.begin(), values.end());
-  s.median = s.n % 2 == 1 ? values[s.n / 2] : 0.5 * (values[s.n / 2 - 1] + values[s.n / 2]);
-  s.max = values.back();
+  s.median = s.n % 2 == 1
+                 ? kth_smallest(sample, s.n / 2)
+                 : 0.5 * (kth_smallest(sample, s.n / 2 - 1) + kth_smallest(sample, s.n / 2));
   return s;
+}
+
+SampleStats sample_stats(const std::vector<double>& values) {
+  return sample_stats([&values](const std::function<void(double)>& f) {
+    for (double v : values) f(v);
+  });
 }
 
 namespace {
@@ -133,54 +202,53 @@ int marker_count(const ReportData& d) {
 
 // The residual's length |(du, dv)| of each settled sample of marker m (all markers: m < 0; with
 // the samples before the estimate settled: all_frames).
-std::vector<double> residual_lengths(const ReportData& d, int m, bool all_frames = false) {
-  std::vector<double> v;
-  for (const ResidualSample& r : d.residuals)
-    if ((m < 0 || r.marker == m) && (r.settled || all_frames)) v.push_back(std::hypot(r.du, r.dv));
-  return v;
+Sample residual_lengths(const ReportData& d, int m, bool all_frames = false) {
+  return [&d, m, all_frames](const std::function<void(double)>& f) {
+    for (const ResidualSample r : d.residuals)
+      if ((m < 0 || r.marker == m) && (r.settled || all_frames)) f(std::hypot(r.du, r.dv));
+  };
 }
 
 // The normalised innovation squared summed over windows of kNisWindowFrames frames with markers
-// used (the last window may be shorter).
+// used (the last window may be shorter), handed to f in time order.
 struct NisWindow {
   double t_s = 0.0;  // its middle
   double nis = 0.0;
   int dof = 0;
 };
-std::vector<NisWindow> nis_windows(const ReportData& d) {
-  std::vector<NisWindow> windows;
+void for_each_nis_window(const ReportData& d, const std::function<void(const NisWindow&)>& f) {
   NisWindow w;
   int frames = 0;
   double first_t = 0.0, last_t = 0.0;
   const auto close = [&] {
     w.t_s = 0.5 * (first_t + last_t);
-    windows.push_back(w);
+    f(w);
     w = NisWindow{};
     frames = 0;
   };
-  for (std::size_t k = 0; k < d.nis.size(); ++k) {
-    if (d.nis_dof[k] <= 0) continue;
-    if (frames == 0) first_t = d.t_s[k];
-    last_t = d.t_s[k];
-    w.nis += d.nis[k];
-    w.dof += d.nis_dof[k];
+  for (const ReportRow row : d.rows) {
+    if (row.nis_dof <= 0) continue;
+    if (frames == 0) first_t = row.t_s;
+    last_t = row.t_s;
+    w.nis += row.nis;
+    w.dof += row.nis_dof;
     if (++frames == kNisWindowFrames) close();
   }
   if (frames > 0) close();
-  return windows;
 }
 
 // The acceleration along the mirror's normal, from the velocity estimates about 0.1 s apart.
-std::vector<double> normal_acceleration(const ReportData& d) {
-  std::vector<double> a;
-  std::size_t i = 0;
-  for (std::size_t j = 1; j < d.t_s.size(); ++j) {
-    const double dt = d.t_s[j] - d.t_s[i];
-    if (dt < 0.1) continue;
-    a.push_back((d.normal_velocity[j] - d.normal_velocity[i]) / dt);
-    i = j;
-  }
-  return a;
+Sample normal_acceleration(const ReportData& d) {
+  return [&d](const std::function<void(double)>& f) {
+    ReportRow from = d.rows.front();
+    for (std::size_t j = 1; j < d.rows.size(); ++j) {
+      const ReportRow to = d.rows[j];
+      const double dt = to.t_s - from.t_s;
+      if (dt < 0.1) continue;
+      f((to.normal_velocity - from.normal_velocity) / dt);
+      from = to;
+    }
+  };
 }
 
 std::string verdict_line(const CalibrationResult& r) {
@@ -194,6 +262,7 @@ void add_verdict(std::string& t, const ReportData& d) {
   const CalibrationResult& r = d.result;
   t += verdict_line(r) + "\n";
   for (const std::string& w : result_warnings(r)) t += "  WARNING: " + w + "\n";
+  for (const std::string& w : d.input_warnings) t += "  WARNING (the input): " + w + "\n";
   t += format(
       "  self-check: %d pass(es); normalised innovation squared per dof %.3f over %llu dof (about "
       "1: the markers fit as the covariance says); sigma_ratio %.3f (at least %.1f); last "
@@ -248,7 +317,7 @@ void add_calibration(std::string& t, const ReportData& d) {
   }
   t +=
       "(rotations: the angles a, b, c; their sigma is of the rotation error vector's components)\n";
-  if (d.has_truth && !d.t_s.empty())
+  if (d.has_truth && !d.rows.empty())
     t += format(
         "NEES of the %zu calibration states against the truth: %.2f (95 %% interval "
         "%.2f..%.2f)\n",
@@ -264,15 +333,19 @@ void add_residual_row(std::string& t, const char* label, const SampleStats& s, d
 }
 
 void add_residuals(std::string& t, const ReportData& d) {
-  const std::size_t settled = residual_lengths(d, -1).size();
-  const auto first_settled = std::find_if(d.residuals.begin(), d.residuals.end(),
-                                          [](const ResidualSample& r) { return r.settled; });
+  double first_settled_s = 0.0, squares = 0.0;
+  std::size_t settled = 0;
+  for (const ResidualSample r : d.residuals) {
+    if (!r.settled) continue;
+    if (settled++ == 0) first_settled_s = r.t_s;
+    squares += r.du * r.du + r.dv * r.dv;
+  }
   t += format(
       "REPROJECTION RESIDUALS (|measured - predicted| of each marker in each frame of the final "
       "pass, at the estimate after that frame's update; from %.2f s, once the estimate settled "
       "and the gate is on; gated markers included; pixel sigma %.3f px; residuals.csv lists "
       "them all)\n",
-      first_settled == d.residuals.end() ? 0.0 : first_settled->t_s, d.pixel_sigma);
+      first_settled_s, d.pixel_sigma);
   t += format("%-10s %8s %9s %9s %9s %9s   %9s %9s %9s %9s\n", "marker", "n", "mean px", "median",
               "std", "max", "mean sig", "median", "std", "max");
   for (int m = 0; m < marker_count(d); ++m)
@@ -280,9 +353,6 @@ void add_residuals(std::string& t, const ReportData& d) {
                      d.pixel_sigma);
   add_residual_row(t, "all", sample_stats(residual_lengths(d, -1)), d.pixel_sigma);
   add_residual_row(t, "+settling", sample_stats(residual_lengths(d, -1, true)), d.pixel_sigma);
-  double squares = 0.0;
-  for (const ResidualSample& r : d.residuals)
-    if (r.settled) squares += r.du * r.du + r.dv * r.dv;
   const double rms = settled == 0 ? 0.0 : std::sqrt(squares / (2.0 * double(settled)));
   t += format(
       "RMS per coordinate: %.4f px = %.4f sigma (about 1 when the pixel sigma is right: a 2-D "
@@ -291,15 +361,16 @@ void add_residuals(std::string& t, const ReportData& d) {
 }
 
 void add_nis(std::string& t, const ReportData& d) {
-  const std::vector<NisWindow> windows = nis_windows(d);
   double nis = 0.0;
   long dof = 0;
   int outside = 0;
-  for (const NisWindow& w : windows) {
+  std::size_t windows = 0;
+  for_each_nis_window(d, [&](const NisWindow& w) {
+    ++windows;
     nis += w.nis;
     dof += w.dof;
     if (w.nis < chi2_quantile(0.025, w.dof) || w.nis > chi2_quantile(0.975, w.dof)) ++outside;
-  }
+  });
   t += "NORMALISED INNOVATION SQUARED (markers used once the gate is on, final pass)\n";
   if (dof == 0) {
     t += "none: no frame was used with the gate on\n\n";
@@ -309,13 +380,14 @@ void add_nis(std::string& t, const ReportData& d) {
       "per dof %.4f over %ld dof (95 %% band %.4f..%.4f); windows of %d frames outside their 95 "
       "%% band: %d of %zu (about 5 %% for a consistent filter)\n\n",
       nis / double(dof), dof, chi2_quantile(0.025, double(dof)) / double(dof),
-      chi2_quantile(0.975, double(dof)) / double(dof), kNisWindowFrames, outside, windows.size());
+      chi2_quantile(0.975, double(dof)) / double(dof), kNisWindowFrames, outside, windows);
 }
 
 void add_biases(std::string& t, const ReportData& d) {
-  if (d.accel_bias.empty()) return;
-  const Eigen::Vector3d& a = d.accel_bias.back();
-  const Eigen::Vector3d g = d.gyro_bias.back() * kDeg;
+  if (d.rows.empty()) return;
+  const ReportRow last = d.rows.back();
+  const Eigen::Vector3d& a = last.accel_bias;
+  const Eigen::Vector3d g = last.gyro_bias * kDeg;
   const Eigen::Vector3d sg = d.gyro_bias_sigma * kDeg;
   t += "IMU BIASES (final estimate +- 1-sigma)\n";
   t += format("accelerometer [m/s^2]: x %.5f +- %.5f, y %.5f +- %.5f, z %.5f +- %.5f\n", a(0),
@@ -325,40 +397,50 @@ void add_biases(std::string& t, const ReportData& d) {
 }
 
 void add_excitation(std::string& t, const ReportData& d) {
-  if (d.t_s.empty()) return;
+  if (d.rows.empty()) return;
   t += "EXCITATION (what the motion offered the calibration)\n";
   std::vector<int> per_count(std::size_t(marker_count(d)) + 1, 0);
   int frames = 0, markers = 0;
-  for (int n : d.markers_seen) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+  double p_lo = INFINITY, p_hi = -INFINITY;
+  for (const ReportRow row : d.rows) {
+    lo = lo.cwiseMin(row.rotation);
+    hi = hi.cwiseMax(row.rotation);
+    p_lo = std::min(p_lo, row.normal_position);
+    p_hi = std::max(p_hi, row.normal_position);
+    const int n = row.markers_seen;
     if (n < 0) continue;
     ++frames;
     markers += n;
     if (std::size_t(n) < per_count.size()) ++per_count[std::size_t(n)];
   }
-  t += format("%.2f s, %d frames, %.2f markers per frame (frames with", d.t_s.back() - d.t_s[0],
-              frames, frames > 0 ? double(markers) / frames : 0.0);
+  t += format("%.2f s, %d frames, %.2f markers per frame (frames with",
+              d.rows.back().t_s - d.rows.front().t_s, frames,
+              frames > 0 ? double(markers) / frames : 0.0);
   for (std::size_t n = 0; n < per_count.size(); ++n)
     t += format(" %zu: %d%s", n, per_count[n], n + 1 < per_count.size() ? "," : ")\n");
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
-  for (const Eigen::Vector3d& r : d.rotation) {
-    lo = lo.cwiseMin(r);
-    hi = hi.cwiseMax(r);
-  }
+  const firmware::LoopCounters& l = d.loop;
+  t += format(
+      "IMU: %llu samples, %llu gaps (%llu too long to cross: the motion restarted, the calibration "
+      "kept), %llu frames behind the filter skipped\n",
+      static_cast<unsigned long long>(l.imu_samples), static_cast<unsigned long long>(l.imu_gaps),
+      static_cast<unsigned long long>(l.imu_restarts),
+      static_cast<unsigned long long>(l.frames_before_filter));
   const Eigen::Vector3d range = (hi - lo) * kDeg;
   t += format(
       "rotation range about the IMU's axes (from the first pose): x %.1f, y %.1f, z %.1f deg\n",
       range(0), range(1), range(2));
-  const auto [p_lo, p_hi] = std::minmax_element(d.normal_position.begin(), d.normal_position.end());
-  const std::vector<double> a = normal_acceleration(d);
+  std::size_t a_count = 0;
   double a_squares = 0.0, a_max = 0.0;
-  for (double x : a) {
+  normal_acceleration(d)([&](double x) {
+    ++a_count;
     a_squares += x * x;
     a_max = std::max(a_max, std::abs(x));
-  }
+  });
   t += format(
       "along the mirror's normal: position range %.1f cm, acceleration RMS %.3f m/s^2, largest "
       "%.3f m/s^2\n",
-      100.0 * (*p_hi - *p_lo), a.empty() ? 0.0 : std::sqrt(a_squares / double(a.size())), a_max);
+      100.0 * (p_hi - p_lo), a_count == 0 ? 0.0 : std::sqrt(a_squares / double(a_count)), a_max);
   std::string weak;
   const std::vector<ParamInfo>& params = d.result.params;
   const std::size_t from_earlier = d.from_earlier ? 7 + 3 * d.result.markers.size() : 0;
@@ -390,7 +472,7 @@ std::string report_text(const ReportData& d) {
   std::string t = "mirrorcal calibration report: " + d.title + "\n\n";
   add_verdict(t, d);
   add_calibration(t, d);
-  if (d.t_s.empty()) {
+  if (d.rows.empty()) {
     t += "No frame was calibrated from: no residuals, innovations or excitation to report.\n";
     return t;
   }
@@ -449,7 +531,7 @@ void write_histogram(std::ostream& h, const ReportData& d) {
     const double at = std::floor(x / kHistogramBin) + kHistogramBins / 2;
     if (at >= 0.0 && at < kHistogramBins) bins[std::size_t(at)] += 1.0;
   };
-  for (const ResidualSample& r : d.residuals) {
+  for (const ResidualSample r : d.residuals) {
     if (!r.settled) continue;
     n += 1.0;
     add(u, r.du / d.pixel_sigma);
@@ -465,7 +547,7 @@ void write_plot_data(const std::string& dir, const ReportData& d) {
   // residuals.dat: one block per marker (gnuplot's "index"), its settled residuals.
   std::ofstream r(dir + "/residuals.dat");
   for (int m = 0; m < marker_count(d); ++m) {
-    for (const ResidualSample& s : d.residuals)
+    for (const ResidualSample s : d.residuals)
       if (s.marker == m && s.settled)
         r << s.t_s << ' ' << s.du << ' ' << s.dv << ' ' << std::hypot(s.du, s.dv) << '\n';
     r << "\n\n";
@@ -475,34 +557,35 @@ void write_plot_data(const std::string& dir, const ReportData& d) {
   // series.dat: t, then estimate and sigma of each state, accel bias xyz, gyro bias xyz (deg/s),
   // rotation from the first pose xyz (deg), position along the normal (cm), markers seen.
   std::ofstream s(dir + "/series.dat");
-  for (std::size_t k = 0; k < d.t_s.size(); ++k) {
-    s << d.t_s[k];
-    for (std::size_t j = 0; j < d.estimate.size(); ++j)
-      s << ' ' << d.estimate[j][k] << ' ' << d.sigma[j][k];
-    for (int i = 0; i < 3; ++i) s << ' ' << d.accel_bias[k](i);
-    for (int i = 0; i < 3; ++i) s << ' ' << d.gyro_bias[k](i) * kDeg;
-    for (int i = 0; i < 3; ++i) s << ' ' << d.rotation[k](i) * kDeg;
-    s << ' ' << 100.0 * d.normal_position[k] << ' ';
-    if (d.markers_seen[k] >= 0)
-      s << d.markers_seen[k];
+  for (const ReportRow row : d.rows) {
+    s << row.t_s;
+    for (std::size_t j = 0; j < d.result.params.size(); ++j)
+      s << ' ' << row.estimate[j] << ' ' << row.sigma[j];
+    for (int i = 0; i < 3; ++i) s << ' ' << row.accel_bias(i);
+    for (int i = 0; i < 3; ++i) s << ' ' << row.gyro_bias(i) * kDeg;
+    for (int i = 0; i < 3; ++i) s << ' ' << row.rotation(i) * kDeg;
+    s << ' ' << 100.0 * row.normal_position << ' ';
+    if (row.markers_seen >= 0)
+      s << row.markers_seen;
     else
       s << "NaN";
     s << '\n';
   }
   std::ofstream n(dir + "/nis.dat");
-  for (const NisWindow& w : nis_windows(d))
+  for_each_nis_window(d, [&n](const NisWindow& w) {
     n << w.t_s << ' ' << w.nis / w.dof << ' ' << chi2_quantile(0.025, w.dof) / w.dof << ' '
       << chi2_quantile(0.975, w.dof) / w.dof << '\n';
+  });
 }
 
 // The range of state j's +-3 sigma band once the estimate settled, with a margin: the first
 // frames' wide band would hide the rest.
 std::pair<double, double> settled_band(const ReportData& d, std::size_t j) {
   double lo = INFINITY, hi = -INFINITY;
-  for (std::size_t k = 0; k < d.t_s.size(); ++k) {
-    if (d.t_s[k] < d.settled_from_s) continue;
-    lo = std::min(lo, d.estimate[j][k] - 3.0 * d.sigma[j][k]);
-    hi = std::max(hi, d.estimate[j][k] + 3.0 * d.sigma[j][k]);
+  for (const ReportRow row : d.rows) {
+    if (row.t_s < d.settled_from_s) continue;
+    lo = std::min(lo, row.estimate[j] - 3.0 * row.sigma[j]);
+    hi = std::max(hi, row.estimate[j] + 3.0 * row.sigma[j]);
   }
   if (!(lo < hi)) return {-1.0, 1.0};
   const double margin = 0.1 * (hi - lo);
@@ -610,7 +693,7 @@ std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
 // The report's plots as PNG bytes with their captions; empty, with a reason, if none.
 std::vector<std::pair<Figure, std::string>> draw_plots(const ReportData& d, std::string& why) {
   std::vector<std::pair<Figure, std::string>> drawn;
-  if (d.t_s.empty()) {
+  if (d.rows.empty()) {
     why = "no frame was calibrated from";
     return drawn;
   }
@@ -705,7 +788,7 @@ bool write_residuals_csv(files::OutputSet& out, const std::string& path, const R
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
   std::fprintf(o, "#time [s],marker,du [px],dv [px],settled\n");
-  for (const ResidualSample& r : d.residuals)
+  for (const ResidualSample r : d.residuals)
     std::fprintf(o, "%.9f,%d,%.17g,%.17g,%d\n", r.t_s, r.marker + 1, r.du, r.dv, r.settled ? 1 : 0);
   return true;
 }

@@ -5,6 +5,8 @@
 // (base64 PNG: one self-contained file); residuals.csv the residuals the statistics are of.
 #pragma once
 
+#include <array>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -12,6 +14,7 @@
 
 #include "mirrorcal/sim_host/files.hpp"
 #include "outputs.hpp"
+#include "record_store.hpp"
 #include "sim_run.hpp"
 
 namespace mirrorcal::app {
@@ -36,8 +39,27 @@ struct ResidualSample {
   bool settled = true;
 };
 
-// What the report shows, in SI units unless said otherwise; the series have one entry per history
-// row (each frame, and the final estimate).
+// The most calibration states a report shows: stage 2 with the lens's coefficients (p_b_c, the
+// rotation, M markers, the time offset, fu fv cu cv and four coefficients).
+constexpr int kMaxReportStates = 6 + 3 * kMarkers + 1 + 8;
+
+// One history row as the report plots it: the estimate after one frame (or the final estimate).
+struct ReportRow {
+  double t_s = 0.0;
+  // Each calibration state in display units (ParamInfo::scale); the rotation as the components of
+  // log(R_final^T R), deg.
+  std::array<double, kMaxReportStates> estimate{}, sigma{};
+  Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero(), gyro_bias = Eigen::Vector3d::Zero();
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero();   // log(R_n_b(0)^T R_n_b(t)), rad
+  double normal_position = 0.0, normal_velocity = 0.0;  // along the mirror's normal (z of n)
+  int markers_seen = -1;                                // in the row's frame; -1: the final row
+  double nis = 0.0;
+  int nis_dof = 0;
+};
+
+// What the report shows, in SI units unless said otherwise. Its series (a row per history row:
+// each frame, and the final estimate; each marker's residual in each frame) are held in temporary
+// files like the history itself (record_store.hpp): memory does not grow with the recording.
 struct ReportData {
   std::string title;  // the command and what it ran on
   CalibrationResult result;
@@ -48,31 +70,38 @@ struct ReportData {
   bool from_earlier = false;
   bool has_truth = false;
   double final_nees = 0.0;  // against the truth, if any
-  std::vector<ResidualSample> residuals;
-  std::vector<double> t_s;
+  RecordStore<ResidualSample> residuals{"the report's residuals"};
+  RecordStore<ReportRow> rows{"the report's series"};
   double settled_from_s = 0.0;  // the first frame after those the estimate needed to settle
-  // Each calibration state in display units (ParamInfo::scale); the rotation as the components of
-  // log(R_final^T R), deg.
-  std::vector<std::vector<double>> estimate, sigma;  // [param][row]
-  std::vector<Eigen::Vector3d> accel_bias, gyro_bias;
   Eigen::Vector3d accel_bias_sigma = Eigen::Vector3d::Zero(),
                   gyro_bias_sigma = Eigen::Vector3d::Zero();  // final
-  std::vector<Eigen::Vector3d> rotation;  // log(R_n_b(0)^T R_n_b(t)), rad: from the first pose
-  std::vector<double> normal_position, normal_velocity;  // along the mirror's normal (z of n)
-  std::vector<int> markers_seen;  // in the row's frame; -1: the final row, no frame
-  std::vector<double> nis;
-  std::vector<int> nis_dof;
+  firmware::LoopCounters loop{};  // what the last pass met on its streams: IMU gaps, restarts
+  // What the checks of the input found doubtful but not wrong (calibrate: a noise density unlike
+  // the data's, ...), said beside the verdict: the self-check cannot see them.
+  std::vector<std::string> input_warnings;
 };
 
 template <int NK>
 ReportData report_data(const SimRun<NK>& run, const std::string& title);
 
-// Mean, median, standard deviation and maximum of a sample (all 0 when it is empty).
+// A sample visited value by value: sample(f) calls f with each of its values (not NaN), in the
+// same order each time it is called (one pass over a file-backed store, or over a vector).
+using Sample = std::function<void(const std::function<void(double)>&)>;
+
+// The k-th smallest (0-based, k < the sample's size) of a sample's values, exactly, in memory that
+// does not grow with the sample: each pass counts the values into bins between the least and the
+// greatest value still in play and keeps the bin that holds the k-th, until at most a batch of
+// values is left, which is sorted.
+double kth_smallest(const Sample& sample, std::size_t k);
+
+// Mean, median (exact), standard deviation and maximum of a sample (all 0 when it is empty), in
+// passes over it (memory bounded whatever its size).
 struct SampleStats {
   std::size_t n = 0;
   double mean = 0.0, median = 0.0, std = 0.0, max = 0.0;
 };
-SampleStats sample_stats(std::vector<double> values);
+SampleStats sample_stats(const Sample& sample);
+SampleStats sample_stats(const std::vector<double>& values);
 
 // Whether report.html gets plots (gnuplot), and PNGs drawn already (sim's error plots) to embed.
 struct ReportPlots {
@@ -90,13 +119,15 @@ bool write_report(files::OutputSet& out, const std::string& dir, const ReportDat
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title);
 
 // camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
-// a run, in dir, written as one set.
+// a run, in dir, written as one set; input_warnings: ReportData's.
 template <int NK>
 bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
                                   const std::string& title, bool from_earlier,
-                                  const ReportPlots& plots, std::string& error) {
+                                  const ReportPlots& plots, std::string& error,
+                                  const std::vector<std::string>& input_warnings = {}) {
   ReportData report = report_data(run, title);
   report.from_earlier = from_earlier;
+  report.input_warnings = input_warnings;
   files::OutputSet out;
   return add_run_outputs(out, dir, run, error) && write_report(out, dir, report, plots, error) &&
          out.commit(error);

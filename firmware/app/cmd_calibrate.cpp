@@ -111,7 +111,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   for (const std::string& w : result_warnings(run.result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
-                                    ReportPlots{}, err))
+                                    ReportPlots{}, err, rec.warnings))
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "

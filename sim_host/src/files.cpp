@@ -1,8 +1,10 @@
 #include "mirrorcal/sim_host/files.hpp"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -76,7 +78,41 @@ void sync_folder(const std::string& dir) {
   ::close(fd);
 }
 
+// The signals that end a program and that a user or a service manager sends (Ctrl-C, kill, a
+// closed terminal, Ctrl-backslash) wait while a set's files are renamed into place: one that comes
+// then is noted, and raised again once the last file is in place, so that it stops the program
+// before the first rename or after the last, never between them (SIGKILL still can). Handlers,
+// not a blocked mask: a signal sent to the process may be delivered to any of its threads.
+class TerminationDeferred {
+ public:
+  TerminationDeferred() {
+    pending_ = 0;
+    struct sigaction note {};
+    note.sa_handler = [](int signal) { pending_ = signal; };
+    sigemptyset(&note.sa_mask);
+    for (std::size_t i = 0; i < kSignals.size(); ++i) ::sigaction(kSignals[i], &note, &before_[i]);
+  }
+  ~TerminationDeferred() {
+    for (std::size_t i = 0; i < kSignals.size(); ++i)
+      ::sigaction(kSignals[i], &before_[i], nullptr);
+    if (pending_ != 0) ::raise(pending_);  // as it would have been handled
+  }
+  TerminationDeferred(const TerminationDeferred&) = delete;
+  TerminationDeferred& operator=(const TerminationDeferred&) = delete;
+
+ private:
+  static constexpr std::array<int, 4> kSignals = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
+  static inline volatile std::sig_atomic_t pending_ = 0;
+  std::array<struct sigaction, kSignals.size()> before_{};
+};
+
+void (*between_renames_for_test)() = nullptr;
+
 }  // namespace
+
+void OutputSet::set_between_renames_for_test(void (*hook)()) {
+  between_renames_for_test = hook;
+}
 
 struct OutputSet::File {
   std::string path, temporary;
@@ -134,10 +170,12 @@ bool OutputSet::commit(std::string& error) {
   });
   for (auto& file : files_)
     if (!file->flush_and_sync()) return discard(file->path, error);
+  const TerminationDeferred deferred;
   for (auto& file : files_) {
     if (::rename(file->temporary.c_str(), file->path.c_str()) != 0)
       return discard(file->path, error);
     file->renamed = true;
+    if (between_renames_for_test != nullptr) between_renames_for_test();
   }
   for (auto& file : files_) sync_folder(folder_of(file->path));
   files_.clear();

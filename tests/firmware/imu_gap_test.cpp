@@ -1,50 +1,25 @@
 // IMU gaps survived: the IMU silent for 100-200 ms (a USB hiccup) is propagated across with the
 // uncertainty of the signal it did not give, and the calibration stays consistent; silent for
 // longer (400 ms, 5 s), the motion states restart and the calibration goes on as consistent.
-// Full calibrations (run_loop) of the paper scenario and of random-family rigs, the gap at 30 s.
+// Full calibrations (run_loop) of the paper scenario and of random-family rigs, the gap at 30 s;
+// and twenty more random rigs, each either within 4 sigma in every state or flagged.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cmath>
+#include <string>
 #include <vector>
 
-#include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
+#include "imu_gap_run.hpp"
 
 namespace mc = mirrorcal;
-using Run = mc::app::SimRun<0>;
+using mc::gaptest::Run;
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
-constexpr std::int64_t kGapStartNs = 30'000 * kMs;
+constexpr std::int64_t kGapStartMs = 30'000;
 
-// The true calibration of a scenario, for the NEES.
-Run::State truth_of(const mc::sim::Scenario& s) {
-  Run::State t;
-  t.p_b_c = s.truth.p_b_c;
-  t.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < mc::app::kMarkers; ++i)
-    t.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
-  t.t_d = s.truth.t_d;
-  return t;
-}
-
-// What `mirrorcal calibrate` makes of the recording of seed with the IMU rows of gap_ms from 30 s
-// removed.
 Run calibrate_with_gap(const mc::sim::Scenario& s, std::uint64_t seed, std::int64_t gap_ms) {
-  const mc::sim::SimData data = mc::sim::simulate(s, seed);
-  mc::app::LoopData d = mc::app::loop_data(s, data);
-  d.imu.erase(std::remove_if(d.imu.begin(), d.imu.end(),
-                             [&](const mc::ImuSample& x) {
-                               return x.t_ns >= kGapStartNs && x.t_ns < kGapStartNs + gap_ms * kMs;
-                             }),
-              d.imu.end());
-  Run::State x0;
-  Run::Filter::Covariance p0;
-  mc::initialise(mc::app::simulation_prior(s, data, seed), x0, p0);
-  const Run::State truth = truth_of(s);
-  return mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0, d, &truth);
+  return mc::gaptest::calibrate_with_gap(s, seed, kGapStartMs, gap_ms);
 }
 
 // The chi-square quantile p of k degrees of freedom (Wilson-Hilferty: within 0.1 % at k >= 48).
@@ -79,6 +54,23 @@ void expect_gap_survived(std::int64_t gap_ms, std::uint64_t restarts) {
   EXPECT_LT(nees_sum / n, chi2_quantile(0.975, dof) / n);
 }
 
+// Random-family rigs 7-26 (slow and fast sweeps, wall and floor mirrors, 20-60 Hz cameras) with
+// the gap at 30 s: every run lies within 4 sigma of the truth in every calibration state or says
+// consistent: false, as the campaigns judge a run (montecarlo's unflagged beyond 4 sigma). With
+// the Gauss-Newton refinement off (Passes{2, 4, false}: the free passes alone, as before it came
+// in) three of the twenty end beyond 4 sigma unflagged after 400 ms (rig 11: 18 sigma, NEES 1719,
+// where it was 7.6 sigma without the gap; rigs 22 and 25: 5.0 and 10.8).
+void expect_each_run_right_or_flagged(std::int64_t gap_ms, std::uint64_t restarts) {
+  for (std::uint64_t seed = 7; seed <= 26; ++seed) {
+    const Run run = calibrate_with_gap(mc::sim::random_scenario(seed), seed, gap_ms);
+    SCOPED_TRACE("random seed " + std::to_string(seed));
+    EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
+    EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
+    EXPECT_TRUE(mc::gaptest::worst_sigmas(run) <= 4.0 || !mc::app::consistent(run.result))
+        << mc::gaptest::worst_sigmas(run) << " sigmas, NEES " << run.history.back().nees;
+  }
+}
+
 }  // namespace
 
 TEST(ImuGap, Of100MsIsPropagatedAcrossAndTheCalibrationStaysConsistent) {
@@ -96,4 +88,16 @@ TEST(ImuGap, Of400MsRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
 
 TEST(ImuGap, Of5SRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
   expect_gap_survived(5000, 1);
+}
+
+TEST(ImuGap, Of200MsOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged(200, 0);
+}
+
+TEST(ImuGap, Of400MsOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged(400, 1);
+}
+
+TEST(ImuGap, Of2SOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged(2000, 1);
 }

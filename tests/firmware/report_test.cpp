@@ -3,7 +3,11 @@
 // base64 of its embedded plots.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
+#include <string>
+#include <vector>
 
 #include "calibration_report.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
@@ -68,7 +72,67 @@ TEST(Report, SampleStatisticsOfKnownSamples) {
   EXPECT_DOUBLE_EQ(s.std, std::sqrt(1.25));
   EXPECT_DOUBLE_EQ(s.max, 4.0);
   EXPECT_DOUBLE_EQ(sample_stats({5.0, 1.0, 9.0}).median, 5.0);
-  EXPECT_EQ(sample_stats({}).n, 0u);
+  EXPECT_EQ(sample_stats(std::vector<double>{}).n, 0u);
+}
+
+// The report's medians are exact however many residuals there are: kth_smallest, which keeps a
+// bounded batch in memory and narrows the rest down pass by pass, against a full sort, on samples
+// beyond its batch (65536 values) with long runs of equal values, a heavy tail and negatives.
+TEST(Report, KthSmallestIsExactOnSamplesLargerThanItsBatch) {
+  using mirrorcal::app::kth_smallest;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::cauchy_distribution<double> cauchy(0.0, 1.0);
+  for (int kind = 0; kind < 3; ++kind) {
+    std::vector<double> values(200'001);
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      if (kind == 0) values[i] = std::hypot(normal(rng), normal(rng));  // residual lengths
+      if (kind == 1) values[i] = cauchy(rng);
+      if (kind == 2) values[i] = double(i % 7 == 0 ? 3 : std::int64_t(normal(rng) * 2.0));
+    }
+    int passes = 0;
+    const mirrorcal::app::Sample sample = [&](const std::function<void(double)>& f) {
+      ++passes;
+      for (double v : values) f(v);
+    };
+    std::vector<double> sorted = values;
+    std::sort(sorted.begin(), sorted.end());
+    for (std::size_t k : {std::size_t(0), std::size_t(1), values.size() / 2, values.size() - 1,
+                          std::size_t(12345), std::size_t(187654)}) {
+      passes = 0;
+      EXPECT_EQ(kth_smallest(sample, k), sorted[k]) << "kind " << kind << " k " << k;
+      EXPECT_LE(passes, 8) << "kind " << kind << " k " << k;
+    }
+    EXPECT_EQ(mirrorcal::app::sample_stats(sample).median, sorted[values.size() / 2]);
+  }
+}
+
+// The report says the IMU's gaps and restarts (issue: hiccups counted and reported).
+TEST(Report, ExcitationSaysTheImuGapsAndRestarts) {
+  mirrorcal::app::ReportData d =
+      mirrorcal::app::report_data_without_history(mirrorcal::app::CalibrationResult{}, "test");
+  d.rows.push_back(mirrorcal::app::ReportRow{});
+  d.loop.imu_samples = 1200;
+  d.loop.imu_gaps = 3;
+  d.loop.imu_restarts = 1;
+  d.loop.frames_before_filter = 7;
+  const std::string text = mirrorcal::app::report_text(d);
+  EXPECT_NE(text.find("IMU: 1200 samples, 3 gaps (1 too long to cross"), std::string::npos) << text;
+  EXPECT_NE(text.find("7 frames behind the filter skipped"), std::string::npos) << text;
+}
+
+// What the input checks warned of stands beside the verdict, which the self-check alone sets.
+TEST(Report, TheInputsWarningsStandBesideTheVerdict) {
+  mirrorcal::app::ReportData d =
+      mirrorcal::app::report_data_without_history(mirrorcal::app::CalibrationResult{}, "test");
+  d.input_warnings = {"imu.yaml: gyroscope_noise_density: 14 times more than the data's"};
+  const std::string text = mirrorcal::app::report_text(d);
+  const std::size_t verdict = text.find("VERDICT"), calibration = text.find("CALIBRATION");
+  const std::size_t warning = text.find(
+      "WARNING (the input): imu.yaml: gyroscope_noise_density: 14 times more than the data's");
+  ASSERT_NE(warning, std::string::npos) << text;
+  EXPECT_LT(verdict, warning);
+  EXPECT_LT(warning, calibration);
 }
 
 }  // namespace

@@ -126,6 +126,42 @@ TEST(OutputSet, AWriterKilledAfterItsCommitLeavesTheNewFilesComplete) {
   EXPECT_EQ(slurp(tmp.path + "/b.txt"), "new b, cut here, and complete\n");
 }
 
+// SIGTERM, SIGINT, SIGHUP or SIGQUIT coming between two renames of a commit (raised there by the
+// test hook) stop the writer only once every file is in place: the new set whole, never some
+// files of each. Before, the writer died after the first rename, a new a.txt beside the old b.txt.
+TEST(OutputSet, ATerminationSignalBetweenItsRenamesStopsTheWriterAfterTheLast) {
+  for (const int signal : {SIGTERM, SIGINT, SIGHUP, SIGQUIT}) {
+    const TempDir tmp("set-signal-between-renames");
+    for (const char* name : {"a", "b", "c"}) spit(tmp.path + "/" + name + ".txt", "old");
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      const rlimit no_core{0, 0};  // SIGQUIT's default action dumps one
+      setrlimit(RLIMIT_CORE, &no_core);
+      static int raised;
+      raised = signal;
+      mc::files::OutputSet::set_between_renames_for_test([] {
+        mc::files::OutputSet::set_between_renames_for_test(nullptr);  // once, after the first
+        ::raise(raised);
+      });
+      std::string err;
+      mc::files::OutputSet set;
+      for (const char* name : {"a", "b", "c"}) {
+        std::FILE* f = set.add(tmp.path + "/" + name + ".txt", err);
+        if (f == nullptr) _exit(1);
+        std::fputs("new", f);
+      }
+      set.commit(err);
+      _exit(0);  // not reached: the signal ends the writer when the commit ends
+    }
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == signal) << strsignal(signal);
+    for (const char* name : {"a", "b", "c"})
+      EXPECT_EQ(slurp(tmp.path + "/" + name + ".txt"), "new") << name << ", " << strsignal(signal);
+  }
+}
+
 TEST(OutputSet, AFileThatCannotBeCreatedIsNamed) {
   const TempDir tmp("set-no-folder");
   std::string err;
