@@ -191,11 +191,9 @@ struct MirrorState {
     add<B, L, kBa>(b_a, d);
     add<B, L, kBg>(b_g, d);
     add<B, L, kP>(p, d);
-    if constexpr (covers<B, L, kTheta, 3>())
-      q_n_b = so3::boxplus<S>(q_n_b, d.template segment<3>(kTheta - B));
+    if constexpr (covers<B, L, kTheta, 3>()) rotate(q_n_b, d.template segment<3>(kTheta - B));
     add<B, L, kPbc>(p_b_c, d);
-    if constexpr (covers<B, L, kPhi, 3>())
-      q_b_c = so3::boxplus<S>(q_b_c, d.template segment<3>(kPhi - B));
+    if constexpr (covers<B, L, kPhi, 3>()) rotate(q_b_c, d.template segment<3>(kPhi - B));
     add<B, L, kPi>(markers, d);
     if constexpr (covers<B, L, kTd, 1>()) t_d += d(kTd - B);
     if constexpr (NK > 0) add<B, L, kK>(intrinsics, d);
@@ -220,6 +218,11 @@ struct MirrorState {
   }
 
  private:
+  // q boxplus d, skipped when d is zero (where it would only renormalise q): most of the update's
+  // sigma points leave both rotations as they are, the Cholesky factor being lower triangular.
+  static void rotate(Quat<S>& q, const Vec3<S>& d) {
+    if (d != Vec3<S>::Zero()) q = so3::boxplus<S>(q, d);
+  }
   // Whether block [B, B+L) holds component [O, O+D); a block may not split a component.
   template <int B, int L, int O, int D>
   static constexpr bool covers() {
