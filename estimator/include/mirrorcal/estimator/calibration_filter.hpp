@@ -245,7 +245,7 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   f.left_multiply(fp_dd_t, p_dd);
   const ImuNoise noise =
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
-  p_dd += imu_process_noise<S>(noise, dt);
+  add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum
   if (!p_dd.allFinite() || !fp.template rightCols<C>().allFinite() || !x.v.allFinite() ||
       !x.p.allFinite() || !x.q_n_b.coeffs().allFinite()) {
     ++counters_.failures;
