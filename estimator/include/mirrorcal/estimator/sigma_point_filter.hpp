@@ -46,9 +46,11 @@ T& thread_workspace() {
 }
 
 // Small dense kernels for the update's fixed sizes (a block of 15-30 states, 2M measurement
-// rows). Eigen's LLT and triangular solves run general blocked kernels, whose calls and packing
-// cost more than the arithmetic at these sizes (at M = 3, 22 states: Eigen's factorisation about
-// 11k instructions, and as much again for the solves). These loops run along contiguous columns.
+// rows). Eigen's triangular solves run general blocked kernels, whose calls and packing cost more
+// than the arithmetic at these sizes (at M = 3, 22 states and 6 rows, about 7k instructions for
+// the regression's solve against 4k here). The factorisation costs about the same either way
+// (12k at 22 states, 5k at 15): this one leaves the factor a plain matrix, and lets predict's
+// check use the same code. These loops run along contiguous columns.
 
 // The lower Cholesky factor of m, in place, its strict upper triangle zeroed (left-looking, one
 // column at a time); false if m is not positive definite (or holds a NaN).
