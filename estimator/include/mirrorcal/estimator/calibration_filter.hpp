@@ -135,17 +135,17 @@ class CalibrationFilter {
   const CalibrationConfig& config() const { return config_; }
   const FilterCounters& counters() const { return counters_; }
   Pinhole<S> intrinsics() const { return intrinsics_of(filter_.mean(), fixed_); }
-  // Bytes of thread_workspace (one per configuration and thread, outside the object) that predict
-  // and update use.
+  // Bytes of thread_workspace (one per configuration and thread, outside the object) that update
+  // and restart_motion use (predict changes the covariance in place).
   static constexpr std::size_t workspace_bytes() {
     return Filter::template update_workspace_bytes<State::kMeasuredDim, 2 * M>() +
-           sizeof(PredictWorkspace);
+           sizeof(RestartWorkspace);
   }
 
  private:
-  // Predict's new covariance (kDim^2 scalars: 69 KB at M = 24, double) in thread_workspace, off
-  // the stack.
-  struct PredictWorkspace {
+  // restart_motion's new covariance (kDim^2 scalars: 69 KB at M = 24, double) in
+  // thread_workspace, off the stack.
+  struct RestartWorkspace {
     Covariance next;
   };
 
@@ -228,8 +228,8 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   static_assert(State::kDynamicBegin == 0, "the IMU block leads the error state");
   ++counters_.predicts;
   const Covariance& p = filter_.covariance();
-  if (Eigen::LLT<Eigen::Matrix<S, D, D>>(p.template topLeftCorner<D, D>()).info() !=
-      Eigen::Success) {
+  Eigen::Matrix<S, D, D> factor = p.template topLeftCorner<D, D>();
+  if (!cholesky_in_place(factor)) {
     ++counters_.failures;
     return FilterStatus::kCovarianceNotPositiveDefinite;
   }
@@ -243,19 +243,15 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   const Eigen::Matrix<S, D, D> fp_dd_t = fp.template leftCols<D>().transpose();
   Eigen::Matrix<S, D, D> p_dd;
   f.left_multiply(fp_dd_t, p_dd);
-  Covariance& next = thread_workspace<PredictWorkspace>().next;
-  next = p;
   const ImuNoise noise =
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
-  next.template topLeftCorner<D, D>() = p_dd + imu_process_noise<S>(noise, dt);
-  next.template topRightCorner<D, C>() = fp.template rightCols<C>();
-  next.template bottomLeftCorner<C, D>() = fp.template rightCols<C>().transpose();
-  if (!next.template topRows<D>().allFinite() || !x.v.allFinite() || !x.p.allFinite() ||
-      !x.q_n_b.coeffs().allFinite()) {
+  add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum
+  if (!p_dd.allFinite() || !fp.template rightCols<C>().allFinite() || !x.v.allFinite() ||
+      !x.p.allFinite() || !x.q_n_b.coeffs().allFinite()) {
     ++counters_.failures;
     return FilterStatus::kNonFinite;
   }
-  filter_.reset(x, next);
+  filter_.template reset_leading<D>(x, p_dd, fp.template rightCols<C>());
   if (keep_steps_) {
     Eigen::Matrix<S, D, D> moved;
     f.left_multiply(since_update_, moved);
@@ -271,7 +267,7 @@ template <typename S, int M, int NK>
 void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
   State x = filter_.mean();
   x.v.setZero();
-  Covariance& p = thread_workspace<PredictWorkspace>().next;
+  Covariance& p = thread_workspace<RestartWorkspace>().next;
   p = filter_.covariance();
   const MotionRange& r = config_.restart;
   const auto restart = [&p](int begin, double sigma) {

@@ -191,11 +191,9 @@ struct MirrorState {
     add<B, L, kBa>(b_a, d);
     add<B, L, kBg>(b_g, d);
     add<B, L, kP>(p, d);
-    if constexpr (covers<B, L, kTheta, 3>())
-      q_n_b = so3::boxplus<S>(q_n_b, d.template segment<3>(kTheta - B));
+    if constexpr (covers<B, L, kTheta, 3>()) rotate(q_n_b, d.template segment<3>(kTheta - B));
     add<B, L, kPbc>(p_b_c, d);
-    if constexpr (covers<B, L, kPhi, 3>())
-      q_b_c = so3::boxplus<S>(q_b_c, d.template segment<3>(kPhi - B));
+    if constexpr (covers<B, L, kPhi, 3>()) rotate(q_b_c, d.template segment<3>(kPhi - B));
     add<B, L, kPi>(markers, d);
     if constexpr (covers<B, L, kTd, 1>()) t_d += d(kTd - B);
     if constexpr (NK > 0) add<B, L, kK>(intrinsics, d);
@@ -220,6 +218,11 @@ struct MirrorState {
   }
 
  private:
+  // q boxplus d, skipped when d is zero (where it would only renormalise q): most of the update's
+  // sigma points leave both rotations as they are, the Cholesky factor being lower triangular.
+  static void rotate(Quat<S>& q, const Vec3<S>& d) {
+    if (d != Vec3<S>::Zero()) q = so3::boxplus<S>(q, d);
+  }
   // Whether block [B, B+L) holds component [O, O+D); a block may not split a component.
   template <int B, int L, int O, int D>
   static constexpr bool covers() {
@@ -326,18 +329,26 @@ void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
 // (sigma^2 dt^3/3) with their correlation (sigma^2 dt^2/2); white gyro noise into theta; the bias
 // random walks into the biases. The noise is isotropic, so rotating it into n changes nothing.
 template <typename S>
-Eigen::Matrix<S, 15, 15> imu_process_noise(const ImuNoise& n, double dt) {
-  Eigen::Matrix<S, 15, 15> q = Eigen::Matrix<S, 15, 15>::Zero();
+void add_imu_process_noise(const ImuNoise& n, double dt, Eigen::Matrix<S, 15, 15>& p) {
   const double sa2 = n.accel_noise_density * n.accel_noise_density;
   const double sg2 = n.gyro_noise_density * n.gyro_noise_density;
-  const auto i3 = Mat3<S>::Identity();
-  q.template block<3, 3>(0, 0) = S(sa2 * dt) * i3;                                        // v
-  q.template block<3, 3>(3, 3) = S(n.accel_random_walk * n.accel_random_walk * dt) * i3;  // b_a
-  q.template block<3, 3>(6, 6) = S(n.gyro_random_walk * n.gyro_random_walk * dt) * i3;    // b_g
-  q.template block<3, 3>(9, 9) = S(sa2 * dt * dt * dt / 3.0) * i3;                        // p
-  q.template block<3, 3>(0, 9) = S(sa2 * dt * dt / 2.0) * i3;
-  q.template block<3, 3>(9, 0) = S(sa2 * dt * dt / 2.0) * i3;
-  q.template block<3, 3>(12, 12) = S(sg2 * dt) * i3;  // theta
+  const auto add = [&p](int row, int col, double q) {  // q I on one 3x3 block
+    for (int i = 0; i < 3; ++i) p(row + i, col + i) += S(q);
+  };
+  add(0, 0, sa2 * dt);                                        // v
+  add(3, 3, n.accel_random_walk * n.accel_random_walk * dt);  // b_a
+  add(6, 6, n.gyro_random_walk * n.gyro_random_walk * dt);    // b_g
+  add(9, 9, sa2 * dt * dt * dt / 3.0);                        // p
+  add(0, 9, sa2 * dt * dt / 2.0);
+  add(9, 0, sa2 * dt * dt / 2.0);
+  add(12, 12, sg2 * dt);  // theta
+}
+
+// The same as a matrix.
+template <typename S>
+Eigen::Matrix<S, 15, 15> imu_process_noise(const ImuNoise& n, double dt) {
+  Eigen::Matrix<S, 15, 15> q = Eigen::Matrix<S, 15, 15>::Zero();
+  add_imu_process_noise<S>(n, dt, q);
   return q;
 }
 

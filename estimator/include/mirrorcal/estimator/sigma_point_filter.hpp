@@ -45,6 +45,55 @@ T& thread_workspace() {
   return *workspace;
 }
 
+// Small dense kernels for the update's fixed sizes (a block of 15-30 states, 2M measurement
+// rows). Eigen's triangular solves run general blocked kernels, whose calls and packing cost more
+// than the arithmetic at these sizes (at M = 3, 22 states and 6 rows, about 7k instructions for
+// the regression's solve against 4k here). The factorisation costs about the same either way
+// (12k at 22 states, 5k at 15): this one leaves the factor a plain matrix, and lets predict's
+// check use the same code. These loops run along contiguous columns.
+
+// The lower Cholesky factor of m, in place, its strict upper triangle zeroed (left-looking, one
+// column at a time); false if m is not positive definite (or holds a NaN).
+template <class Mat>
+bool cholesky_in_place(Mat& m) {
+  using S = typename Mat::Scalar;
+  constexpr int n = Mat::RowsAtCompileTime;
+  for (int j = 0; j < n; ++j) {
+    for (int k = 0; k < j; ++k) {
+      const S f = m(j, k);
+      for (int i = j; i < n; ++i) m(i, j) -= m(i, k) * f;
+    }
+    if (!(m(j, j) > S(0))) return false;
+    const S d = std::sqrt(m(j, j));
+    m(j, j) = d;
+    for (int i = j + 1; i < n; ++i) m(i, j) /= d;
+    for (int i = 0; i < j; ++i) m(i, j) = S(0);
+  }
+  return true;
+}
+
+// x <- l^-T x for a lower triangular l: back substitution, column by column of x.
+template <class Lower, class Rhs>
+void solve_lower_transposed(const Lower& l, Rhs& x) {
+  constexpr int n = Lower::RowsAtCompileTime;
+  for (int c = 0; c < x.cols(); ++c)
+    for (int i = n - 1; i >= 0; --i) {
+      typename Lower::Scalar sum = x(i, c);
+      for (int k = i + 1; k < n; ++k) sum -= l(k, i) * x(k, c);
+      x(i, c) = sum / l(i, i);
+    }
+}
+
+// x <- x l^-T for a lower triangular l (x l^T = rhs, forward over the columns of x).
+template <class Lower, class Rhs>
+void solve_right_lower_transposed(const Lower& l, Rhs& x) {
+  constexpr int n = Lower::RowsAtCompileTime;
+  for (int j = 0; j < n; ++j) {
+    for (int k = 0; k < j; ++k) x.col(j) -= l(j, k) * x.col(k);
+    x.col(j) /= l(j, j);
+  }
+}
+
 // Scaled unscented transform (Julier 2002). With n the dimension of the sampled block:
 //   lambda = alpha^2 (n + kappa) - n, sigma points at the mean and at +-gamma times the columns of
 //   the Cholesky factor, gamma = sqrt(n + lambda) = alpha sqrt(n + kappa), mean weights
@@ -160,6 +209,19 @@ class SigmaPointFilter {
     mean_ = mean;
     if (&cov != &cov_) cov_ = cov;  // reset(x, covariance()) keeps the covariance
     symmetrise(cov_);
+  }
+  // A new mean, and new rows and columns [0, D) of the covariance: the block's own covariance
+  // (symmetrised) and its cross-covariance with the states after it, whose covariance stays.
+  // What a predict that moves only the leading block needs, in place: reset() with the same
+  // covariance gives the same bits, from two copies of the N x N matrix and a pass over it.
+  template <int D>
+  void reset_leading(const State& mean, const Eigen::Matrix<Scalar, D, D>& p_dd,
+                     const Eigen::Matrix<Scalar, D, N - D>& p_dc) {
+    mean_ = mean;
+    for (int j = 0; j < D; ++j)
+      for (int i = j; i < D; ++i) cov_(i, j) = cov_(j, i) = Scalar(0.5) * (p_dd(i, j) + p_dd(j, i));
+    cov_.template topRightCorner<D, N - D>() = p_dc;
+    cov_.template bottomLeftCorner<N - D, D>() = p_dc.transpose();
   }
   const State& mean() const { return mean_; }
   const Covariance& covariance() const { return cov_; }
@@ -301,10 +363,8 @@ class SigmaPointFilter {
 
     // Gate each block on its own marginal innovation covariance.
     ZVec innovation = z - ms.z_centre;
-    if (linearise_at != nullptr) {  // z ~ h(ref) + A (x - ref), A = (P_bb^-1 P_bz)^T
-      ws.g.noalias() = ms.llt_p.solve(ms.p_bz);
-      innovation.noalias() -= ws.g.transpose() * own.template boxminus_block<B, L>(*linearise_at);
-    }
+    if (linearise_at != nullptr)  // z ~ h(ref) + A (x - ref), A = (P_bb^-1 P_bz)^T
+      innovation.noalias() -= ms.reg.transpose() * own.template boxminus_block<B, L>(*linearise_at);
     ZMat& s = ws.s;
     s = ms.p_zz;
     s.diagonal() += r_diag;
@@ -340,17 +400,21 @@ class SigmaPointFilter {
       result.nis = static_cast<double>(nu_used.dot(llt_s.solve(nu_used)));  // inert blocks add 0
     }
 
-    // A step that fails after others were applied must not leave them applied.
+    // A step that fails after others were applied must not leave them applied. A failed step
+    // changes nothing (apply_update), so the covariance is kept only before a step that is not the
+    // last: an ordinary update, one step, copies no N x N matrix.
     const State mean_before = mean_;
-    Covariance& cov_before = ws.cov_before;
-    cov_before = cov_;
+    bool kept = false;
+    const auto restore = [&] {
+      mean_ = mean_before;
+      if (kept) cov_ = ws.cov_before;
+    };
     Scalar remaining = 1;  // of the measurement's information
     int steps = 0;
     for (int k = 0; remaining > 0; ++k) {
       if (k > 0) {
         if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ws)) {
-          mean_ = mean_before;
-          cov_ = cov_before;
+          restore();
           result.status = FilterStatus::kCovarianceNotPositiveDefinite;
           return result;
         }
@@ -363,13 +427,20 @@ class SigmaPointFilter {
           k + 1 >= params_.max_steps || !(most < remaining) || linearise_at != nullptr;
       const Scalar beta = last ? remaining : most;
       remaining -= beta;
-      s = ms.p_zz;
-      s.diagonal() += r_diag / beta;
-      const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ws, innovation, ok);
+      if (!last && !kept) {
+        ws.cov_before = cov_;
+        kept = true;
+      }
+      // One step with the whole measurement: S is s_used, factored above for the NIS.
+      const bool factored = k == 0 && beta == Scalar(1);
+      if (!factored) {
+        s = ms.p_zz;
+        s.diagonal() += r_diag / beta;
+      }
+      const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ws, innovation, ok, factored);
       ++steps;
       if (st != FilterStatus::kOk) {
-        mean_ = mean_before;
-        cov_ = cov_before;
+        restore();
         result.status = st;
         return result;
       }
@@ -396,39 +467,33 @@ class SigmaPointFilter {
   }
 
   // The unscented transform of the measurement: its prediction h at the mean (z_centre), its
-  // spread about it (without noise), the cross-covariance with the sampled block, and that
-  // block's Cholesky factorisation.
+  // spread about it (without noise), the regression of the measurement on the sampled block
+  // (P_bb^-1 P_bz, with P_bz the cross-covariance), and that block's Cholesky factorisation.
   template <int L, int Z>
   struct MeasurementSample {
     Eigen::Matrix<Scalar, Z, Z> p_zz;
-    Eigen::Matrix<Scalar, L, Z> p_bz;
-    Eigen::LLT<Eigen::Matrix<Scalar, L, L>> llt_p;
+    Eigen::Matrix<Scalar, L, Z> reg;
+    Eigen::Matrix<Scalar, L, L> chol;      // lower Cholesky factor of the sampled block
     Eigen::Matrix<Scalar, Z, 1> z_centre;  // h at the centre
     Eigen::Matrix<Scalar, Z, L> z_plus;    // h at the + sigma points
   };
 
   // The update's matrices of the sampled block (L) and measurement (Z) sizes and of the state's,
-  // in thread_workspace: the measurement sample, the intermediate products of the transform, the
-  // innovation covariance, the covariance kept for a failed step, the gain and the new covariance.
-  // Each product is evaluated into one of them where Eigen would otherwise make a temporary on the
-  // stack, by the same kernel: the results are those of the expressions bit for bit.
+  // in thread_workspace: the measurement sample, the transform's deviations, the innovation
+  // covariance, the covariance kept for a multi-step update and the gain's factor W.
   template <int L, int Z>
   struct UpdateWorkspace {
     MeasurementSample<L, Z> ms;
-    SigmaWeights<Scalar, L> w;                  // of this update's sigma points
-    Eigen::Matrix<Scalar, L, L> chol;           // lower Cholesky factor of the sampled block
-    Eigen::Matrix<Scalar, Z, L> z_minus, a, b;  // h at the - sigma points; the transform's a, b
-    Eigen::Matrix<Scalar, Z, Z> aa, bb;         // a a^T, b b^T
-    Eigen::Matrix<Scalar, L, Z> chol_at;        // chol a^T
-    Eigen::Matrix<Scalar, Z, Z> s, s_used;      // innovation covariance; with unused blocks inert
+    SigmaWeights<Scalar, L> w;            // of this update's sigma points
+    Eigen::Matrix<Scalar, Z, L> z_minus;  // h at the - sigma points
+    // The transform's a and b (see UnscentedParams) transposed: a column per measurement row, so
+    // that the products read contiguous columns.
+    Eigen::Matrix<Scalar, L, Z> a_t, b_t;
+    Eigen::Matrix<Scalar, Z, Z> s, s_used;  // innovation covariance; with unused blocks inert
     Eigen::LLT<Eigen::Matrix<Scalar, Z, Z>> llt_s;
     Covariance cov_before;
-    Eigen::Matrix<Scalar, L, Z> g;  // P_bb^-1 P_bz
-    Eigen::Matrix<Scalar, N, Z> p_xz, gain;
-    // Row-major: the type Eigen gives the solution for a transposed right-hand side, whose
-    // triangular solves then run in the same order.
-    Eigen::Matrix<Scalar, Z, N, Eigen::RowMajor> gain_t;
-    Covariance cov_new;
+    Eigen::Matrix<Scalar, L, Z> reg_w;  // the regression times L_S^-T
+    Eigen::Matrix<Scalar, Z, N> w_t;    // W^T, W = P_xz L_S^-T
   };
 
   template <int B, int L, int kRows, int kBlocks, class Measure>
@@ -439,10 +504,9 @@ class SigmaPointFilter {
     using BlockVec = Eigen::Matrix<Scalar, L, 1>;
     using ZVec = Eigen::Matrix<Scalar, Z, 1>;
     MeasurementSample<L, Z>& ms = ws.ms;
-    ms.llt_p.compute(cov_.template block<L, L>(B, B));
-    if (ms.llt_p.info() != Eigen::Success) return false;
-    ws.chol = ms.llt_p.matrixL();
-    const auto& chol = ws.chol;
+    ms.chol = cov_.template block<L, L>(B, B);
+    if (!cholesky_in_place(ms.chol)) return false;
+    const auto& chol = ms.chol;
     const SigmaWeights<Scalar, L>& w = ws.w;
 
     ZVec z0 = ZVec::Zero();
@@ -466,22 +530,24 @@ class SigmaPointFilter {
       z_plus.template middleRows<kRows>(b * kRows).setZero();
       z_minus.template middleRows<kRows>(b * kRows).setZero();
     }
-    auto& a = ws.a;
-    auto& b = ws.b;
-    a = Scalar(0.5) * (z_plus - z_minus);
-    b = Scalar(0.5) * (z_plus + z_minus) - z0.replicate(1, L);
+    auto& a_t = ws.a_t;
+    auto& b_t = ws.b_t;
+    a_t = Scalar(0.5) * (z_plus - z_minus).transpose();
+    b_t = (Scalar(0.5) * (z_plus + z_minus) - z0.replicate(1, L)).transpose();
     // The prediction is h at the mean, and p_zz the sigma points' mean square deviation from it:
-    // inv_gamma2 (a a^T + b b^T), each product evaluated as Eigen evaluates it inside that
-    // expression. Not the transform's mean h0 + sum(b) / gamma^2: that shift is the curvature of h
-    // averaged over the prior, right on average over draws of the truth but the same error in
-    // every frame for one truth, and a filter that takes each frame as independent evidence adds
-    // it up (from the truth with the random family's priors, marker errors of 3-5 sigma after two
-    // seconds of frames; see SigmaPointFilter's header).
-    ws.aa.noalias() = a * a.transpose();
-    ws.bb.noalias() = b * b.transpose();
-    ms.p_zz = w.inv_gamma2 * (ws.aa + ws.bb);
-    ws.chol_at.noalias() = chol * a.transpose();
-    ms.p_bz = ws.chol_at / w.gamma;  // sum of w (chi - x)(z - z0)^T
+    // inv_gamma2 (a a^T + b b^T). Not the transform's mean h0 + sum(b) / gamma^2: that shift is the
+    // curvature of h averaged over the prior, right on average over draws of the truth but the same
+    // error in every frame for one truth, and a filter that takes each frame as independent
+    // evidence adds it up (from the truth with the random family's priors, marker errors of 3-5
+    // sigma after two seconds of frames; see SigmaPointFilter's header).
+    for (int j = 0; j < Z; ++j)  // symmetric: each pair once
+      for (int i = j; i < Z; ++i)
+        ms.p_zz(i, j) = ms.p_zz(j, i) =
+            w.inv_gamma2 * (a_t.col(i).dot(a_t.col(j)) + b_t.col(i).dot(b_t.col(j)));
+    // The cross-covariance is P_bz = sum of w (chi - x)(z - z0)^T = chol a^T / gamma, so the
+    // regression P_bb^-1 P_bz = chol^-T a^T / gamma: one triangular solve.
+    ms.reg = a_t / w.gamma;
+    solve_lower_transposed(chol, ms.reg);
     ms.z_centre = z0;
     return true;
   }
@@ -499,8 +565,7 @@ class SigmaPointFilter {
                        UpdateWorkspace<L, kRows * kBlocks>& ws) const {
     using ZVec = Eigen::Matrix<Scalar, kRows * kBlocks, 1>;
     MeasurementSample<L, kRows* kBlocks>& ms = ws.ms;
-    ws.chol = ms.llt_p.matrixL();
-    const auto& chol = ws.chol;
+    const auto& chol = ms.chol;
     const SigmaWeights<Scalar, L>& w = ws.w;
     for (int i = 0; i < L; ++i) {
       for (int j = i + 1; j < L; ++j) {
@@ -546,31 +611,40 @@ class SigmaPointFilter {
     }
   }
 
+  // One Kalman step with the innovation covariance in ws.s (factored into ws.llt_s already if
+  // `factored`). With S = L_S L_S^T and W = P_xz L_S^-T, the gain is K = W L_S^-1, so
+  // dx = W (L_S^-1 nu) and P - K P_xz^T = P - W W^T: one triangular solve of the regression's
+  // Z columns, one product with the block's rows of P, and a symmetric rank-Z update of P in
+  // place, each entry once (exactly symmetric, no copy). A step that fails changes nothing.
   template <int B, int L, int kRows, int kBlocks>
   FilterStatus apply_update(UpdateWorkspace<L, kRows * kBlocks>& ws,
                             Eigen::Matrix<Scalar, kRows * kBlocks, 1>& innovation,
-                            const std::array<bool, kBlocks>& ok) {
+                            const std::array<bool, kBlocks>& ok, bool factored) {
     MeasurementSample<L, kRows* kBlocks>& ms = ws.ms;
     make_inert<kRows, kBlocks>(ok, ws.s, innovation);
     for (int b = 0; b < kBlocks; ++b)
-      if (!ok[b]) ms.p_bz.template middleCols<kRows>(b * kRows).setZero();
+      if (!ok[b]) ms.reg.template middleCols<kRows>(b * kRows).setZero();
     auto& llt_s = ws.llt_s;
-    llt_s.compute(ws.s);
-    if (llt_s.info() != Eigen::Success) return FilterStatus::kInnovationNotPositiveDefinite;
-    // P_xz for the whole state: P[:, block] P_bb^-1 P_bz (the regression carries the rest).
-    ws.g.noalias() = ms.llt_p.solve(ms.p_bz);
-    ws.p_xz.noalias() = cov_.template middleCols<L>(B) * ws.g;
-    ws.gain_t.noalias() = llt_s.solve(ws.p_xz.transpose());  // the gain, transposed
-    ws.gain = ws.gain_t.transpose();
-    const auto& gain = ws.gain;
-    const ErrorVector dx = gain * innovation;
-    Covariance& cov_new = ws.cov_new;
-    cov_new.noalias() = cov_ - gain * ws.p_xz.transpose();  // cov_ copied, then the product
-    symmetrise(cov_new);
-    if (!dx.allFinite() || !cov_new.allFinite() || !(cov_new.diagonal().array() > Scalar(0)).all())
-      return FilterStatus::kNonFinite;
+    if (!factored) {
+      llt_s.compute(ws.s);
+      if (llt_s.info() != Eigen::Success) return FilterStatus::kInnovationNotPositiveDefinite;
+    }
+    // P_xz = P[:, block] P_bb^-1 P_bz (the regression carries the rest of the state), so
+    // W^T = (reg L_S^-T)^T P[block, :], P being symmetric.
+    ws.reg_w = ms.reg;
+    solve_right_lower_transposed(llt_s.matrixLLT(), ws.reg_w);  // its lower triangle is L_S
+    auto& w_t = ws.w_t;
+    // Each entry a dot product of two contiguous columns (Eigen's blocked product packs both).
+    w_t.noalias() = ws.reg_w.transpose().lazyProduct(cov_.template middleRows<L>(B));
+    llt_s.matrixL().solveInPlace(innovation);
+    const ErrorVector dx = w_t.transpose() * innovation;
+    if (!dx.allFinite() || !w_t.allFinite()) return FilterStatus::kNonFinite;
+    // Every variance must stay positive; then |W_i . W_j| < sqrt(P_ii P_jj) bounds every entry.
+    for (int i = 0; i < N; ++i)
+      if (!(cov_(i, i) - w_t.col(i).squaredNorm() > Scalar(0))) return FilterStatus::kNonFinite;
     mean_.template boxplus_block<0, N>(dx);
-    cov_ = cov_new;
+    for (int j = 0; j < N; ++j)
+      for (int i = j; i < N; ++i) cov_(j, i) = cov_(i, j) -= w_t.col(i).dot(w_t.col(j));
     return FilterStatus::kOk;
   }
 
