@@ -53,17 +53,27 @@ double worst_sigmas(const Outcome& oc) {
 }
 
 // Statistics of a group of a family's runs, by parameter group: p_b_c in cm, rotation in deg,
-// markers in mm, the time offset in ms (rows 0-2, 3-5, 6..6+3M-1, 6+3M).
-constexpr std::size_t kGroups = 4;
+// markers in mm, the time offset in ms (rows 0-2, 3-5, 6..6+3M-1, 6+3M), and in stage 2 the
+// camera's fu fv cu cv (skew) in px and the lens's coefficients in thousandths (from lens_row).
+constexpr std::size_t kGroups = 6;
+constexpr std::size_t kTimeRow = 6 + 3 * kMarkers;
+constexpr std::size_t kLensRow = kTimeRow + 5;  // after fu fv cu cv (NK = 8: skew held)
+const char* const kGroupName[kGroups] = {"p_b_c [cm]",     "rot_b_c [deg]",   "markers [mm]",
+                                         "timeshift [ms]", "intrinsics [px]", "lens [1e-3]"};
 struct GroupStats {
   using PerGroup = std::array<double, kGroups>;
+  std::size_t lens_row = SIZE_MAX;  // the first lens coefficient's row, if stage 2 has them
   std::vector<double> nees;
   int beyond = 0, flagged = 0, missed = 0;  // beyond 4 sigma; consistent: false; both but flagged
   PerGroup sq{}, var{}, lim{}, count{}, sq_ok{}, lim_ok{};  // _ok: consistent runs
 
-  static std::size_t group_of(std::size_t row) {
-    constexpr std::size_t kTimeRow = 6 + 3 * kMarkers;
-    return row < 3 ? 0 : row < 6 ? 1 : row < kTimeRow ? 2 : 3;
+  std::size_t group_of(std::size_t row) const {
+    return row < 3           ? 0
+           : row < 6         ? 1
+           : row < kTimeRow  ? 2
+           : row == kTimeRow ? 3
+           : row < lens_row  ? 4
+                             : 5;
   }
   void add(const Outcome& oc) {
     nees.push_back(oc.nees);
@@ -93,12 +103,14 @@ struct GroupStats {
   static double unit(std::size_t k) { return k == 2 ? 10.0 : 1.0; }  // markers in mm
   PerGroup rms() const {
     PerGroup r{};
-    for (std::size_t k = 0; k < kGroups; ++k) r[k] = unit(k) * std::sqrt(sq[k] / count[k]);
+    for (std::size_t k = 0; k < kGroups; ++k)
+      r[k] = count[k] > 0 ? unit(k) * std::sqrt(sq[k] / count[k]) : 0.0;
     return r;
   }
   PerGroup sigma() const {
     PerGroup r{};
-    for (std::size_t k = 0; k < kGroups; ++k) r[k] = unit(k) * std::sqrt(var[k] / count[k]);
+    for (std::size_t k = 0; k < kGroups; ++k)
+      r[k] = count[k] > 0 ? unit(k) * std::sqrt(var[k] / count[k]) : 0.0;
     return r;
   }
   // The RMS error over the RMS of what the data can hold (data_limit_sigmas()): 1 is the limit.
@@ -113,14 +125,18 @@ struct GroupStats {
 };
 
 // A random family's campaign: no common truth, so statistics of the errors by parameter group
-// (p_b_c, rotation, markers: rows 0-2, 3-5, 6..), over all runs and by each axis the family draws
-// (mirror, motion, camera rate, pixel noise, prior width), into summary.csv (f) and on stdout.
-void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_hi, std::FILE* f) {
+// (groups of them: stage 1's four, and the camera's and the lens's in stage 2), over all runs and
+// by each axis the family draws (mirror, motion, camera rate, pixel noise, prior width), into
+// summary.csv (f) and on stdout. Stage 1's columns come first, in stage 1's order; stage 2 adds
+// the RMS error and sigma of its groups at the end of each row. Only stage 1 has the data's limit.
+void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std::size_t lens_row,
+                   double nees_lo, double nees_hi, std::FILE* f) {
+  const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
   struct Group {
     std::string axis, value;
     std::function<bool(const sim::Scenario&)> has;
   };
-  const std::vector<Group> groups = {
+  std::vector<Group> groups = {
       {"all", "all", [](const sim::Scenario&) { return true; }},
       {"mirror", "wall", [](const sim::Scenario& s) { return s.mirror == "wall"; }},
       {"mirror", "floor", [](const sim::Scenario& s) { return s.mirror == "floor"; }},
@@ -136,49 +152,64 @@ void report_family(const std::vector<Outcome>& out, double nees_lo, double nees_
       {"marker prior", "6.5-10 cm",
        [](const sim::Scenario& s) { return s.priors.marker >= 0.065; }},
   };
+  if (groups_used > 4) {  // stage 2: the camera's prior too
+    groups.push_back({"camera prior", "20-60 px",
+                      [](const sim::Scenario& s) { return s.priors.intrinsics[0] < 60.0; }});
+    groups.push_back({"camera prior", "60-100 px",
+                      [](const sim::Scenario& s) { return s.priors.intrinsics[0] >= 60.0; }});
+  }
   std::fprintf(f,
                "axis,value,runs,nees_mean,nees_median,runs_beyond_4_sigma,flagged,"
                "unflagged_beyond_4_sigma,rms_p_b_c [cm],rms_rot_b_c [deg],rms_markers [mm],"
                "rms_timeshift [ms],sigma_p_b_c [cm],sigma_rot_b_c [deg],sigma_markers [mm],"
                "sigma_timeshift [ms],over_limit_p_b_c,over_limit_rot_b_c,over_limit_markers,"
                "over_limit_timeshift,consistent_over_limit_p_b_c,consistent_over_limit_rot_b_c,"
-               "consistent_over_limit_markers,consistent_over_limit_timeshift\n");
-  std::printf(
-      "\n%-13s %-11s %4s %6s %6s %5s %4s %6s | %8s %8s %8s %8s | %8s %8s %8s %8s | %23s "
-      "| %23s\n",
-      "axis", "value", "runs", "NEES", "median", ">4sig", "flag", "missed", "p cm", "rot deg",
-      "mark mm", "t_d ms", "s p", "s rot", "s mark", "s t_d", "RMS / limit", "consistent / lim");
+               "consistent_over_limit_markers,consistent_over_limit_timeshift");
+  for (std::size_t k = 4; k < groups_used; ++k)
+    std::fprintf(f, ",rms_%s,sigma_%s", kGroupName[k], kGroupName[k]);
+  std::fprintf(f, "\n");
+  std::printf("\n%-13s %-11s %4s %6s %6s %5s %4s %6s |", "axis", "value", "runs", "NEES", "median",
+              ">4sig", "flag", "missed");
+  for (std::size_t k = 0; k < groups_used; ++k) std::printf(" %15s", kGroupName[k]);
+  if (has_limit) std::printf(" | %23s | %23s", "RMS / limit", "consistent / lim");
+  std::printf("\n");
   for (const Group& g : groups) {
     GroupStats st;
+    st.lens_row = lens_row;
     for (const Outcome& oc : out)
       if (g.has(oc.scenario)) st.add(oc);
     if (st.nees.empty()) continue;
     const auto rms = st.rms(), sig = st.sigma(), lim = st.over_limit(false),
                lim_ok = st.over_limit(true);
     const double mean = st.mean_nees(), med = median(st.nees);
-    std::printf(
-        "%-13s %-11s %4zu %6.1f %6.1f %5d %4d %6d | %8.3f %8.4f %8.3f %8.4f | %8.3f %8.4f %8.3f "
-        "%8.4f | %5.2f %5.2f %5.2f %5.2f | %5.2f %5.2f %5.2f %5.2f\n",
-        g.axis.c_str(), g.value.c_str(), st.nees.size(), mean, med, st.beyond, st.flagged,
-        st.missed, rms[0], rms[1], rms[2], rms[3], sig[0], sig[1], sig[2], sig[3], lim[0], lim[1],
-        lim[2], lim[3], lim_ok[0], lim_ok[1], lim_ok[2], lim_ok[3]);
+    std::printf("%-13s %-11s %4zu %6.1f %6.1f %5d %4d %6d |", g.axis.c_str(), g.value.c_str(),
+                st.nees.size(), mean, med, st.beyond, st.flagged, st.missed);
+    for (std::size_t k = 0; k < groups_used; ++k) std::printf(" %7.4f/%-7.4f", rms[k], sig[k]);
+    if (has_limit)
+      std::printf(" | %5.2f %5.2f %5.2f %5.2f | %5.2f %5.2f %5.2f %5.2f", lim[0], lim[1], lim[2],
+                  lim[3], lim_ok[0], lim_ok[1], lim_ok[2], lim_ok[3]);
+    std::printf("\n");
     std::fprintf(f,
                  "%s,%s,%zu,%.4f,%.4f,%d,%d,%d,%.5f,%.5f,%.5f,%.6f,%.5f,%.5f,%.5f,%.6f,%.4f,%.4f,"
-                 "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n",
+                 "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f",
                  g.axis.c_str(), g.value.c_str(), st.nees.size(), mean, med, st.beyond, st.flagged,
                  st.missed, rms[0], rms[1], rms[2], rms[3], sig[0], sig[1], sig[2], sig[3], lim[0],
                  lim[1], lim[2], lim[3], lim_ok[0], lim_ok[1], lim_ok[2], lim_ok[3]);
+    for (std::size_t k = 4; k < groups_used; ++k) std::fprintf(f, ",%.5f,%.5f", rms[k], sig[k]);
+    std::fprintf(f, "\n");
   }
   std::fprintf(f, "# nees_99_lo=%.4f nees_99_hi=%.4f\n", nees_lo, nees_hi);
   std::printf(
-      "(RMS errors and root-mean-square reported sigmas by parameter group; >4sig: runs with a "
+      "(by parameter group: RMS error / root-mean-square reported sigma; >4sig: runs with a "
       "state beyond 4 sigma, flag: runs that said consistent: false, missed: runs beyond 4 sigma "
-      "that did not; RMS / limit: the RMS error over the RMS of what the data can hold, the "
-      "sigmas of a filter linearised at the truth on noise-free data, for p, rotation, markers, "
-      "time offset; "
-      "consistent / lim: the same over the runs that said consistent: true; NEES of the %d "
-      "calibration states, its 99 %% interval over the runs %.2f..%.2f)\n",
-      7 + 3 * kMarkers, nees_lo, nees_hi);
+      "that did not;%s NEES of the calibration states, its 99 %% interval over the runs "
+      "%.2f..%.2f)\n",
+      has_limit ? " RMS / limit: the RMS error over the RMS of what the data can hold, the sigmas "
+                  "of a filter linearised at the truth on noise-free data, for p, rotation, "
+                  "markers, time offset; consistent / lim: the same over the runs that said "
+                  "consistent: true;"
+                : "",
+      nees_lo, nees_hi);
 }
 
 }  // namespace
@@ -210,7 +241,6 @@ int cmd_montecarlo(int argc, char** argv) {
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const sim::Scenario s = scenario_for(seed);
   const bool family = s.name == "random";  // a rig of its own for every run
-  if (family && intrinsics) fail("--scenario random runs stage 1 (not yet with --intrinsics)");
   const std::uint64_t runs = parse_count(o, "runs", 0, 1);
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
@@ -262,7 +292,7 @@ int cmd_montecarlo(int argc, char** argv) {
         oc.refinement_step = r.result.refinement_step_sigmas;
         oc.failures = r.filter_counters.failures;
         oc.series = error_series(r.history, r.result.params);
-        if (family) {
+        if (family && !intrinsics) {  // stage 1's limit (stage 2's is not computed yet)
           const std::vector<double> limit = data_limit_sigmas(rs, run_seed);
           for (std::size_t j = 0; j < limit.size(); ++j)
             oc.limit.push_back(limit[j] * r.result.params[j].scale);
@@ -343,7 +373,8 @@ int cmd_montecarlo(int argc, char** argv) {
         "%.2f..%.2f), median of the runs %.2f: %s\n",
         np, (unsigned long long)runs, nees, lo99, hi99, median(each),
         nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
-    report_family(out, lo99, hi99, summary);
+    const std::size_t groups_used = !intrinsics ? 4 : lens ? 6 : 5;
+    report_family(out, groups_used, lens ? kLensRow : SIZE_MAX, lo99, hi99, summary);
   } else {
     std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
                 !intrinsics ? " and II"

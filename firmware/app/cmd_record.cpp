@@ -131,9 +131,12 @@ int record_devices(const Options& o, const std::string& dir) {
 // With images, each frame's image is drawn too (the renderer of sim --frames, GREY): a spot for
 // each marker of features.csv at the very pixel listed there (its pixel noise included), so the
 // images hold the same data as features.csv and a calibration from either sees the same.
+// With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
+// guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
+// true ones.
 void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
-                               bool hold_skew, RecordingFolder& folder, const std::string& sub,
-                               bool images = false) {
+                               bool hold_skew, bool lens, RecordingFolder& folder,
+                               const std::string& sub, bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
@@ -164,18 +167,21 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   sensors.imu = s.imu;
   sensors.imu_rate_hz = s.imu_rate_hz;
   sensors.intrinsics = s.truth.intrinsics;  // stage 1 calibrates with a calibrated camera
+  if (lens) sensors.intrinsics.coeffs = prior.intrinsics.coeffs;
   sensors.width = s.truth.width;
   sensors.height = s.truth.height;
   // intrinsics: calibrate estimates them too, from the prior's guess (the paper's Table III
   // errors) rather than camchain.yaml's calibrated camera.
-  const sim::RecordingPriors priors =
-      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, intrinsics, hold_skew);
+  sim::RecordingPriors priors =
+      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, intrinsics, hold_skew || lens);
+  priors.estimate_distortion = lens;
   sim::RecordingTruth truth;
   truth.p_b_c = s.truth.p_b_c;
   truth.q_b_c = s.truth.q_b_c;
   truth.features_c = s.truth.markers;
   truth.intrinsics = s.truth.intrinsics;
   truth.t_d = s.truth.t_d;
+  truth.has_distortion = lens;
   if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
     folder.fail_with(err);
@@ -195,7 +201,8 @@ int cmd_record(int argc, char** argv) {
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   const Options o =
-      parse(argc, argv, 2, with_value, {"intrinsics", "hold-skew", "two-stage", "force", "images"});
+      parse(argc, argv, 2, with_value,
+            {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"});
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
   const std::string dir = o.get("out", "");
   if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
@@ -204,6 +211,13 @@ int cmd_record(int argc, char** argv) {
     fail("--hold-skew applies with --intrinsics or --two-stage");
   if (two_stage && o.flag("intrinsics"))
     fail("--two-stage records stage 1 without and stage 2 with the intrinsics; drop --intrinsics");
+  // --estimate-distortion: the recording (stage 2's) asks calibrate to estimate the lens's
+  // coefficients too (mirrorcal.yaml's estimate_distortion), skew held as with --hold-skew.
+  const bool lens = o.flag("estimate-distortion");
+  if (lens && ((!o.flag("intrinsics") && !two_stage) || o.get("distortion", "none") == "none"))
+    fail(
+        "--estimate-distortion applies with --intrinsics or --two-stage and --distortion "
+        "radtan|equidistant");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   sim::Scenario s = hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
@@ -219,21 +233,23 @@ int cmd_record(int argc, char** argv) {
   RecordingFolder folder(dir, o.flag("force"));
   const bool images = o.flag("images");
   if (!two_stage) {
-    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, folder, "", images);
+    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "", images);
     folder.commit();
     return 0;
   }
   // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
   // together.
   const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  write_simulated_recording(s, seed, false, false, folder, "/stage1", images);
-  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, folder,
-                            "/stage2", images);
+  write_simulated_recording(s, seed, false, false, false, folder, "/stage1", images);
+  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, lens,
+                            folder, "/stage2", images);
   folder.commit();
   std::printf(
-      "calibrate them as `sim --intrinsics%s --seed %llu` does (the same bytes):\n"
+      "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
       "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",
-      hold_skew ? " --hold-skew" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
+      hold_skew ? " --hold-skew" : "", o.flag("distortion") ? " --distortion " : "",
+      o.flag("distortion") ? o.get("distortion", "").c_str() : "",
+      lens ? " --estimate-distortion" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
       stage2.c_str());
   return 0;
 }

@@ -56,6 +56,8 @@ const std::vector<Command>& commands() {
        "              [--intrinsics [--hold-skew]]\n"
        "              [--two-stage [--hold-skew]]  (DIR/stage1 and DIR/stage2 of sim "
        "--intrinsics)\n"
+       "              [--estimate-distortion]  (with either and --distortion: mirrorcal.yaml\n"
+       "              asks for the lens's coefficients too, camchain.yaml holds their guess)\n"
        "              [--images]  (the camera frames too, as PNG in mav0/cam0/data/: the\n"
        "              markers of features.csv drawn as sim --frames draws them)\n"
        "              [--duration S]  (S seconds of the simulated motion; default 60)\n"

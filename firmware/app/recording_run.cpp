@@ -48,9 +48,10 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
       truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
     truth.t_d = r.truth.t_d;
     if constexpr (NK > 0) {
-      // truth.yaml has no lens: a simulated recording's camchain.yaml holds the true one.
+      // truth.yaml names the lens's coefficients when camchain.yaml holds a guess of them;
+      // otherwise a simulated recording's camchain.yaml holds the true ones.
       Pinhole<double> k = r.truth.intrinsics;
-      k.coeffs = r.sensors.intrinsics.coeffs;
+      if (!r.truth.has_distortion) k.coeffs = r.sensors.intrinsics.coeffs;
       const std::array<double, NK> v = camera_parameters<NK>(k);
       for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[static_cast<std::size_t>(j)];
     }

@@ -547,6 +547,9 @@ bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::stri
   const auto k = as_array(t.intrinsics);
   y += "intrinsics: " + list(k.data(), 5) + "  # fu, fv, cu, cv, skew\n";
   y += "timeshift_cam_imu: " + number(t.t_d) + "  # s\n";
+  if (t.has_distortion)
+    y += "distortion_coeffs: " + list(t.intrinsics.coeffs.data(), 4) +
+         "  # the lens's (camchain.yaml holds the guess)\n";
   return files::write_file(dir + "/truth.yaml", y, error);
 }
 
@@ -559,7 +562,9 @@ bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingT
     return false;
   out.intrinsics = {k[0], k[1], k[2], k[3], k[4]};
   out.t_d = 0.0;
-  return !y.has("timeshift_cam_imu") || y.number("timeshift_cam_imu", out.t_d);
+  if (y.has("timeshift_cam_imu") && !y.number("timeshift_cam_imu", out.t_d)) return false;
+  out.has_distortion = y.has("distortion_coeffs");
+  return !out.has_distortion || y.numbers("distortion_coeffs", 4, out.intrinsics.coeffs.data());
 }
 
 bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,

@@ -220,6 +220,10 @@ Scenario random_scenario(std::uint64_t seed) {
   p.velocity = 0.2;
   // Drawn last, so that the draws above are those of the family before it had a time offset.
   r.t_d = d.uniform(-0.03, 0.03);
+  // The camera's prior (stage 2): one 1-sigma for fu, fv, cu, cv and skew, from a focal length
+  // known from the lens's datasheet and a principal point guessed at the image centre (20 px) to
+  // the paper's 100 px. Drawn after the time offset, so that stage 1's draws stay as they were.
+  p.intrinsics.fill(d.uniform(20.0, 100.0));
   return s;
 }
 

@@ -289,6 +289,28 @@ TEST(Lens, RadtanOnTheAxesIsTheOddPolynomialPlusTheTangentialTerms) {
   EXPECT_NEAR(uv.y(), 790.0 * -0.05 + 240.0, 1e-12);
 }
 
+// Beyond about 60 deg off the axis (r^2 = 3) the radtan polynomial describes no lens: the model
+// holds its radial factor there, so that a point far outside the field projects along its ray
+// scaled by the factor at the field's edge (EuRoC's lens: r = 3 at 3 * 0.82, not at 13.6), and
+// the projection stays continuous across the edge.
+TEST(Lens, RadtanHoldsItsRadialFactorBeyondSixtyDegrees) {
+  const double k1 = -0.28340811, k2 = 0.07395907;
+  const Pinhole<double> k{1.0, 1.0, 0.0, 0.0, 0.0, Distortion::kRadtan, {k1, k2, 0.0, 0.0}};
+  const double edge = std::sqrt(3.0), factor = 1.0 + 3.0 * (k1 + 3.0 * k2);
+  for (const double r : {edge * 1.000001, 2.0, 3.0, 10.0}) {
+    Eigen::Vector2d uv;
+    ASSERT_TRUE(project<double>(k, Eigen::Vector3d(0.6 * r, 0.8 * r, 1.0), uv));
+    EXPECT_NEAR(uv.norm(), r * factor, 1e-12 * r) << r;
+    EXPECT_NEAR(std::atan2(uv.y(), uv.x()), std::atan2(0.8, 0.6), 1e-12) << r;
+  }
+  // Continuous at the edge: just inside, the polynomial itself.
+  const double r = edge * 0.999999, r2 = r * r;
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(project<double>(k, Eigen::Vector3d(r, 0.0, 1.0), uv));
+  EXPECT_NEAR(uv.x(), r * (1.0 + r2 * (k1 + r2 * k2)), 1e-15);
+  EXPECT_NEAR(uv.x(), edge * factor, 1e-5);
+}
+
 // ---------------------------------------------------------------------------------------------
 // MirrorState manifold
 

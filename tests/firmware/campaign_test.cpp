@@ -228,4 +228,45 @@ TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
   std::filesystem::remove_all(dir);
 }
 
+// The random family's stage 2 (--intrinsics --hold-skew: each rig's camera guessed within its own
+// 20-100 px prior, skew held): ten rigs consistent over the 20 states (100 rigs: average NEES
+// 20.79, none beyond 4 sigma, README), no run beyond 4 sigma that did not say so, and the camera's
+// RMS error within twice its reported sigma.
+TEST(Campaign, TenRandomRigsOfStageTwoAreConsistent) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("mirrorcal-random2-" + std::to_string(getpid()));
+  const std::string cmd = std::string(MIRRORCAL_BIN) +
+                          " montecarlo --scenario random --intrinsics --hold-skew --runs 10 "
+                          "--jobs 2 --seed 11 --no-plots --out " +
+                          dir.string() + " > " + (dir.string() + ".log") + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(dir / "summary.csv");
+  ASSERT_TRUE(in) << "no summary.csv";
+  std::string line;
+  std::getline(in, line);
+  ASSERT_NE(line.find(",rms_intrinsics [px],sigma_intrinsics [px]"), std::string::npos) << line;
+  std::getline(in, line);
+  std::stringstream ss(line);
+  std::vector<std::string> cell;
+  for (std::string c; std::getline(ss, c, ',');) cell.push_back(c);
+  ASSERT_EQ(cell.size(), 26u);
+  ASSERT_EQ(cell[0], "all");
+  const int runs = std::stoi(cell[2]), missed = std::stoi(cell[7]);
+  const double mean = std::stod(cell[3]), rms_k = std::stod(cell[24]),
+               sigma_k = std::stod(cell[25]);
+  std::printf(
+      "random, stage 2: NEES average %.2f, %d unflagged beyond 4 sigma, fu fv cu cv %.3f px "
+      "RMS against a reported %.3f\n",
+      mean, missed, rms_k, sigma_k);
+  EXPECT_EQ(runs, 10);
+  const double lo = mirrorcal::app::chi2_quantile(0.0005, 20.0 * runs) / runs;
+  const double hi = mirrorcal::app::chi2_quantile(0.9995, 20.0 * runs) / runs;
+  EXPECT_GT(mean, lo);
+  EXPECT_LT(mean, hi);
+  EXPECT_EQ(missed, 0);
+  EXPECT_GT(rms_k, 0.0);
+  EXPECT_LT(rms_k, 2.0 * sigma_k);
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace

@@ -260,11 +260,13 @@ TEST(Cli, EstimateDistortionEstimatesTheLensCoefficientsAndWritesThem) {
 }
 
 // The paper's two stages on recordings: `record --two-stage` writes the two minutes `sim
-// --intrinsics` calibrates, and calibrating the second --from the first gives sim's bytes.
+// --intrinsics` calibrates, and calibrating the second --from the first gives sim's bytes; with
+// --estimate-distortion too (stage 2's camchain.yaml holds the lens's guess, truth.yaml the lens).
 TEST(Cli, TwoStagesOnRecordingsGiveTheBytesOfSimWithIntrinsics) {
   TempDir dir("cli-two-stage");
   const std::string& d = dir.path;
-  for (const std::string hold : {"", " --hold-skew"}) {
+  for (const std::string hold :
+       {"", " --hold-skew", " --hold-skew --distortion radtan --estimate-distortion"}) {
     SCOPED_TRACE(hold);
     Result r =
         run_mirrorcal("sim --intrinsics" + hold + " --seed 5 --no-plots --out " + d + "/sim", d);

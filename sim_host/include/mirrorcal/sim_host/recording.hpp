@@ -93,6 +93,9 @@ struct RecordingTruth {
   std::vector<Eigen::Vector3d> features_c;
   double t_d = 0.0;  // timeshift_cam_imu (s); 0 in files written before it was simulated
   Pinhole<double> intrinsics{};
+  // The lens's true coefficients (intrinsics.coeffs), when camchain.yaml holds a guess of them
+  // (a recording for estimate_distortion); otherwise camchain.yaml's are the truth.
+  bool has_distortion = false;
 };
 
 // What the input checks and the loop need to know of a recording's streams, gathered in one
