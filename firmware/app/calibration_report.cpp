@@ -138,8 +138,9 @@ double kth_smallest(const Sample& sample, std::size_t k) {
   std::vector<std::size_t> count(kBins);
   std::vector<double> least(kBins), greatest(kBins);
   // Every level leaves fewer values in play: the least falls in the first bin, the greatest in
-  // the last.
-  while (lo < hi && n > kBatch) {
+  // the last. Values too far apart to bin (an infinite span) and a pass that narrows nothing end
+  // the narrowing: what is in play is then sorted in memory, larger than a batch, but it ends.
+  while (lo < hi && n > kBatch && std::isfinite(hi - lo)) {
     const Level level{lo, hi - lo, 0};
     std::fill(count.begin(), count.end(), 0);
     std::fill(least.begin(), least.end(), INFINITY);
@@ -153,6 +154,7 @@ double kth_smallest(const Sample& sample, std::size_t k) {
     });
     std::size_t b = 0;
     for (; k >= count[b]; ++b) k -= count[b];
+    if (count[b] == n) break;
     levels.push_back({lo, hi - lo, b});
     n = count[b];
     lo = least[b];
@@ -205,7 +207,10 @@ int marker_count(const ReportData& d) {
 Sample residual_lengths(const ReportData& d, int m, bool all_frames = false) {
   return [&d, m, all_frames](const std::function<void(double)>& f) {
     for (const ResidualSample r : d.residuals)
-      if ((m < 0 || r.marker == m) && (r.settled || all_frames)) f(std::hypot(r.du, r.dv));
+      if ((m < 0 || r.marker == m) && (r.settled || all_frames)) {
+        const double length = std::hypot(r.du, r.dv);
+        if (std::isfinite(length)) f(length);  // the statistics' samples are numbers
+      }
   };
 }
 

@@ -21,6 +21,12 @@ GroupUncertainty worst_direction(const Eigen::Matrix3d& p, const Eigen::Matrix3d
   return g;
 }
 
+// The markers the camera showed the filter: used, gated or not predictable.
+std::uint64_t markers_seen(const LiveFeedback::Filter& filter) {
+  const FilterCounters& c = filter.counters();
+  return c.markers_used + c.markers_gated + c.markers_invalid;
+}
+
 int most_perpendicular_axis(const Eigen::Vector3d& d) {
   int axis = 0;
   for (int i = 1; i < 3; ++i)
@@ -94,16 +100,20 @@ void LiveFeedback::publish(std::int64_t t_ns, const Filter& filter) {
     started_ = true;
     window_start_ns_ = t_ns;
     last_q_ = q;
-    markers_at_window_start_ = filter.counters().markers_used;
+    markers_at_window_start_ = markers_seen(filter);
+    depth_low_ = depth_high_ = filter.state().p.z();
     return;
   }
   turned_rad_ += last_q_.angularDistance(q);
   last_q_ = q;
+  depth_low_ = std::min(depth_low_, filter.state().p.z());
+  depth_high_ = std::max(depth_high_, filter.state().p.z());
   if (static_cast<double>(t_ns - window_start_ns_) * 1e-9 < kWindowS) return;
   close_window(static_cast<double>(t_ns) * 1e-9, filter);
   window_start_ns_ = t_ns;
   turned_rad_ = 0.0;
-  markers_at_window_start_ = filter.counters().markers_used;
+  markers_at_window_start_ = markers_seen(filter);
+  depth_low_ = depth_high_ = filter.state().p.z();
 }
 
 void LiveFeedback::close_window(double t_s, const Filter& filter) {
@@ -117,17 +127,20 @@ void LiveFeedback::close_window(double t_s, const Filter& filter) {
   double worst = 0.0;
   for (int g = 0; g < kCalibrationGroups; ++g) {
     const auto k = static_cast<std::size_t>(g);
-    settled[k] = have_previous_ && u[k].sigma > (1.0 - fall) * previous_[k].sigma;
     const double ratio = u[k].sigma / std::max(u[k].prior_sigma, 1e-300);
+    // A direction the motion never excited does not fall either: settled also needs the data to
+    // have told at least half of what the prior did not know.
+    settled[k] =
+        have_previous_ && u[k].sigma > (1.0 - fall) * previous_[k].sigma && ratio < kSettledRatio;
     if (!settled[k] && ratio >= worst) {
       worst = ratio;
       advised = g;
     }
   }
   Verdict verdict = Verdict::kUncertain;
-  if (filter.counters().markers_used == markers_at_window_start_)
+  if (markers_seen(filter) == markers_at_window_start_)
     verdict = Verdict::kNoMarkers;
-  else if (turned_rad_ * 180.0 / M_PI < kMovedDeg)
+  else if (turned_rad_ * 180.0 / M_PI < kMovedDeg && depth_high_ - depth_low_ < kMovedM)
     verdict = Verdict::kStill;
   else if (advised < 0)
     verdict = Verdict::kConverged;
@@ -142,7 +155,6 @@ void LiveFeedback::close_window(double t_s, const Filter& filter) {
 void LiveFeedback::print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
                          const std::array<bool, kCalibrationGroups>& settled) {
   if (out_ == nullptr) return;
-  ++lines_;
   std::fprintf(out_, "live %.0f s: ", t_s);
   // Each group's sigma in the unit a user reads it in, and its share of the prior's.
   const auto figures = [&](bool only_unsettled) {
@@ -176,8 +188,10 @@ void LiveFeedback::print(double t_s, Verdict verdict, int advised, const Calibra
       break;
     }
     case Verdict::kConverged:
-      std::fprintf(out_, "converged (no sigma fell by %.0f %% over %.0f s of motion): ",
-                   100.0 * kSettledFall, kWindowS);
+      std::fprintf(out_,
+                   "converged (every sigma below %.0f %% of its prior, none fell by %.0f %% over "
+                   "%.0f s of motion): ",
+                   100.0 * kSettledRatio, 100.0 * kSettledFall, kWindowS);
       figures(false);
       std::fprintf(out_, "; you may stop\n");
       break;

@@ -54,22 +54,27 @@ const char* group_name(CalibrationGroup group);
 // The sink `run`'s live loop publishes to: every kWindowS of IMU time it compares each group's
 // sigma with the window before and prints a line to `out` when the verdict changes (on a terminal
 // also every window): the groups still uncertain and the motion for the worst of them, or that the
-// calibration has converged (no sigma fell by more than kSettledFall over a window in which the rig
-// moved and the markers were seen; twice that to leave the verdict again). Allocates nothing: it
+// calibration has converged (every sigma below kSettledRatio of its prior's, and none fell by more
+// than kSettledFall over a window in which the rig moved and the markers were seen; twice that to
+// leave the verdict again). Allocates nothing: it
 // runs inside the loop.
 class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, kMarkers, 0>> {
  public:
   using Filter = CalibrationFilter<double, kMarkers, 0>;
   static constexpr double kWindowS = 5.0;
   static constexpr double kSettledFall = 0.05;
+  // And its sigma below this share of the prior's: a direction the motion never excited stays
+  // near its prior and does not fall either, which must not read as converged.
+  static constexpr double kSettledRatio = 0.5;
   // A window with less rotation than this (total angle turned, deg) cannot show convergence: a rig
   // held still gains nothing, and its sigmas stop falling for that reason alone.
   static constexpr double kMovedDeg = 20.0;
+  // Or moved towards or away from the mirror by this much (m; the range of the distance, which
+  // the mirror observes, unlike the position along it).
+  static constexpr double kMovedM = 0.05;
 
   LiveFeedback(const Filter::Covariance& p0, std::FILE* out, bool every_window);
   void publish(std::int64_t t_ns, const Filter& filter) override;
-  bool converged() const { return verdict_ == Verdict::kConverged; }
-  int lines() const { return lines_; }
 
  private:
   enum class Verdict : std::uint8_t { kNone, kNoMarkers, kStill, kUncertain, kConverged };
@@ -84,12 +89,12 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   std::int64_t window_start_ns_ = 0;
   Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();
   double turned_rad_ = 0.0;
+  double depth_low_ = 0.0, depth_high_ = 0.0;  // the IMU's distance from the mirror (n's z)
   std::uint64_t markers_at_window_start_ = 0;
   bool have_previous_ = false;
   CalibrationUncertainty previous_{};
   Verdict verdict_ = Verdict::kNone;
   int advised_ = -1;
-  int lines_ = 0;
 };
 
 }  // namespace mirrorcal::app

@@ -44,9 +44,10 @@ std::vector<std::string> lines_of(const std::string& text) {
 }
 
 // The paper scenario's calibration through the loop with the feedback as its sink; motion scaled
-// by `motion` (0: held still in front of the mirror). With `allocations`, the heap allocations the
-// loop made once it ran.
-std::string live_run(double motion, double seconds, long* allocations = nullptr) {
+// by `motion` (0: held still in front of the mirror), or turning about the body's x axis alone
+// (`one_axis`). With `allocations`, the heap allocations the loop made once it ran.
+std::string live_run(double motion, double seconds, long* allocations = nullptr,
+                     bool one_axis = false) {
   mc::sim::Scenario s = mc::sim::paper_scenario();
   s.duration_s = seconds;
   const auto scale = [&](std::vector<mc::sim::Sine>& terms) {
@@ -55,6 +56,11 @@ std::string live_run(double motion, double seconds, long* allocations = nullptr)
   for (auto& axis : s.motion.position) scale(axis);
   for (auto& axis : s.motion.angles) scale(axis);
   scale(s.motion.about_normal);
+  if (one_axis) {
+    s.motion.angles[1].clear();
+    s.motion.angles[2].clear();
+    s.motion.about_normal.clear();
+  }
   const mc::sim::SimData d = mc::sim::simulate(s, 5);
   Filter f(mc::app::scenario_config(s));
   Filter::State x;
@@ -173,4 +179,17 @@ TEST(LiveFeedback, AllocatesNothingInTheLoop) {
   const std::vector<std::string> lines = lines_of(live_run(1.0, 30.0, &allocations));
   EXPECT_GE(lines.size(), 5u);
   EXPECT_EQ(allocations, 0);
+}
+
+// A rig turned about one axis only tells nothing of the lever arm along it: that direction never
+// falls, which must not read as converged; the feedback keeps asking for other rotations.
+TEST(LiveFeedback, MotionAboutOneAxisIsNeverCalledConverged) {
+  const std::vector<std::string> lines = lines_of(live_run(1.0, 90.0, nullptr, true));
+  ASSERT_GE(lines.size(), 3u);
+  bool asked_to_turn = false;
+  for (const std::string& line : lines) {
+    EXPECT_EQ(line.find("converged"), std::string::npos) << line;
+    asked_to_turn = asked_to_turn || line.find("for the camera position: ") != std::string::npos;
+  }
+  EXPECT_TRUE(asked_to_turn) << lines.back();
 }

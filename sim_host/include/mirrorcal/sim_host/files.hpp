@@ -30,8 +30,10 @@ class OutputSet {
   std::FILE* add(const std::string& path, std::string& error);
   // Flushes and syncs every file, then renames each over its path; if any cannot be written
   // (a full disk), none is renamed and error names that file. A set that failed is discarded.
-  // SIGINT, SIGTERM, SIGHUP and SIGQUIT wait until the renames are done: the files left are the
-  // earlier set or the new one, not some of each.
+  // SIGINT, SIGTERM, SIGHUP and SIGQUIT wait until the renames are done, so that a signal does
+  // not leave some of each set. A rename that fails part-way (or SIGKILL, or a power cut, between
+  // two renames) does leave a mix: each file whole, the earlier ones new. One thread at a time:
+  // the deferral swaps the process's handlers.
   bool commit(std::string& error);
   // For tests: hook is called after each file is renamed into place (nullptr: none).
   static void set_between_renames_for_test(void (*hook)());
