@@ -113,7 +113,7 @@ TEST(Report, KthSmallestEndsOnValuesTooFarApartToBin) {
   using mirrorcal::app::kth_smallest;
   std::mt19937_64 rng(6);
   std::normal_distribution<double> normal(0.0, 1.0);
-  for (const double extreme : {INFINITY, 1e308}) {
+  for (const double extreme : {double(INFINITY), 1e308}) {
     std::vector<double> values(100'001);
     for (double& v : values) v = normal(rng);
     values[17] = extreme;
