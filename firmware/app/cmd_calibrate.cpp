@@ -4,11 +4,12 @@
 #include <cstdio>
 #include <string>
 
-#include "calibration_report.hpp"
+#include "build_tools.hpp"
 #include "cli.hpp"
+#include "mirrorcal/calibration/recording_run.hpp"
+#include "mirrorcal/calibration/report.hpp"
+#include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
-#include "recording_run.hpp"
-#include "report.hpp"
 
 namespace mirrorcal::app {
 
@@ -111,7 +112,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   for (const std::string& w : result_warnings(run.result))
     std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
-                                    ReportPlots{}, err, rec.warnings))
+                                    report_plots(), err, rec.warnings))
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "

@@ -3,8 +3,8 @@
 #include <string>
 
 #include "cli.hpp"
+#include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
-#include "outputs.hpp"
 
 namespace mirrorcal::app {
 

@@ -12,11 +12,14 @@
 
 #include "cli.hpp"
 #include "loop_options.hpp"
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/calibration/statistics.hpp"
+#include "mirrorcal/evaluation/paper_tables.hpp"
+#include "mirrorcal/evaluation/plots.hpp"
+#include "mirrorcal/evaluation/rendered_markers.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "plots.hpp"
-#include "report.hpp"
-#include "sim_frames.hpp"
-#include "sim_run.hpp"
+#include "sim_options.hpp"
 
 namespace mirrorcal::app {
 
@@ -236,7 +239,8 @@ int cmd_montecarlo(int argc, char** argv) {
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
   // draws each run's rig from the run's seed.
   const auto scenario_for = [&](std::uint64_t run_seed) {
-    return hold_skew ? without_skew(scenario_option(o, run_seed)) : scenario_option(o, run_seed);
+    return hold_skew ? sim::without_skew(scenario_option(o, run_seed))
+                     : scenario_option(o, run_seed);
   };
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const sim::Scenario s = scenario_for(seed);

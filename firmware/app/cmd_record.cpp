@@ -9,10 +9,11 @@
 
 #include "cli.hpp"
 #include "devices.hpp"
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
-#include "sim_run.hpp"
 
 namespace mirrorcal::app {
 
@@ -139,7 +140,7 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
                                const std::string& sub, bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
-  const Prior<kMarkers> prior = simulation_prior(s, data, seed);
+  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
 
   std::string err;
   sim::RecordingWriter writer;
@@ -220,7 +221,8 @@ int cmd_record(int argc, char** argv) {
         "radtan|equidistant");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  sim::Scenario s = hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  sim::Scenario s =
+      hold_skew ? sim::without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
   // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.
   if (o.flag("duration")) {
     const std::string text = o.get("duration", "");
@@ -241,8 +243,8 @@ int cmd_record(int argc, char** argv) {
   // together.
   const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
   write_simulated_recording(s, seed, false, false, false, folder, "/stage1", images);
-  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, lens,
-                            folder, "/stage2", images);
+  write_simulated_recording(s, sim::derive_seed(seed, sim::kStage2SeedStream), true, hold_skew,
+                            lens, folder, "/stage2", images);
   folder.commit();
   std::printf(
       "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"

@@ -12,16 +12,17 @@
 #include <string>
 #include <vector>
 
-#include "calibration_report.hpp"
+#include "build_tools.hpp"
 #include "cli.hpp"
 #include "devices.hpp"
 #include "live_feedback.hpp"
 #include "loop_options.hpp"
+#include "mirrorcal/calibration/recording_run.hpp"
+#include "mirrorcal/calibration/report.hpp"
+#include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
-#include "outputs.hpp"
-#include "recording_run.hpp"
 #include "run_config.hpp"
 
 namespace mirrorcal::app {
@@ -90,7 +91,7 @@ class LoggedImu final : public hal::ImuSource {
 class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
                             public hal::MarkerRelabeler<kMarkers> {
  public:
-  LoggedMarkers(drivers::DetectingMarkerSource<kMarkers>& inner, SessionLog& log)
+  LoggedMarkers(detection::DetectingMarkerSource<kMarkers>& inner, SessionLog& log)
       : inner_(inner), log_(log) {}
   hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override { return inner_.poll(frame); }
   void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
@@ -102,7 +103,7 @@ class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
   std::int64_t detection_ns() const override { return inner_.detection_ns(); }
 
  private:
-  drivers::DetectingMarkerSource<kMarkers>& inner_;
+  detection::DetectingMarkerSource<kMarkers>& inner_;
   SessionLog& log_;
 };
 
@@ -240,7 +241,7 @@ int cmd_run(int argc, char** argv) {
   files::OutputSet out;
   if (!write_camchain_imucam(out, s.out + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(out, s.out + "/mirrorcal-result.yaml", result, error) ||
-      !write_report(out, s.out, report, ReportPlots{}, error) || !out.commit(error))
+      !write_report(out, s.out, report, report_plots(), error) || !out.commit(error))
     fail(error, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, report.txt, report.html, "

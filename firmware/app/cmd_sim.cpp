@@ -10,14 +10,18 @@
 #include <type_traits>
 #include <vector>
 
-#include "calibration_report.hpp"
+#include "build_tools.hpp"
 #include "cli.hpp"
 #include "loop_options.hpp"
+#include "mirrorcal/calibration/report.hpp"
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/calibration/statistics.hpp"
+#include "mirrorcal/evaluation/paper_tables.hpp"
+#include "mirrorcal/evaluation/plots.hpp"
+#include "mirrorcal/evaluation/rendered_markers.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "plots.hpp"
-#include "report.hpp"
-#include "sim_frames.hpp"
-#include "sim_run.hpp"
+#include "sim_options.hpp"
 
 namespace mirrorcal::app {
 
@@ -45,7 +49,7 @@ int cmd_sim(int argc, char** argv) {
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
   const std::uint64_t seed = parse_count(o, "seed", 1, 0);
   const sim::Scenario s =
-      o.flag("hold-skew") ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+      o.flag("hold-skew") ? sim::without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
   const Passes passes = passes_option(o);
@@ -102,23 +106,21 @@ int cmd_sim(int argc, char** argv) {
     for (const std::string& w : result_warnings(run.result))
       std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
     // The error plots first: the report embeds them.
-    ReportPlots report_plots;
-    report_plots.draw = !o.flag("no-plots");
-    if (report_plots.draw) {
+    ReportPlots figures = report_plots(!o.flag("no-plots"));
+    if (figures.draw) {
       const std::vector<ErrorSeries> series = {error_series(run.history, params)};
-      report_plots.extra_pngs =
-          plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params, series,
-                      chi2_quantile(0.025, double(params.size())),
-                      chi2_quantile(0.975, double(params.size())), err);
-      if (report_plots.extra_pngs.empty())
+      figures.extra_pngs = plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params,
+                                       series, chi2_quantile(0.025, double(params.size())),
+                                       chi2_quantile(0.975, double(params.size())), err);
+      if (figures.extra_pngs.empty())
         std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
-      for (const auto& p : report_plots.extra_pngs) std::printf("plot: %s\n", p.c_str());
+      for (const auto& p : figures.extra_pngs) std::printf("plot: %s\n", p.c_str());
     }
     const std::string title =
         "mirrorcal sim, scenario " + s.name + ", seed " + std::to_string(seed) +
         (intrinsics ? one_stage ? ", intrinsics in one stage" : ", intrinsics in stage 2 (reported)"
                     : "");
-    if (!write_run_outputs_and_report(dir, run, title, intrinsics && !one_stage, report_plots, err))
+    if (!write_run_outputs_and_report(dir, run, title, intrinsics && !one_stage, figures, err))
       fail(err, 1);
     std::printf(
         "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "

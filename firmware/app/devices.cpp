@@ -38,15 +38,15 @@ std::unique_ptr<Camera> open_camera(const RunSettings& s, int width, int height)
   camera->watchdog = std::make_unique<drivers::FrameWatchdog>(
       camera->capture, camera->clock, spec.device,
       drivers::FrameWatchdog::timeout_for(period > 0 ? period : 50'000'000));
-  camera->markers = std::make_unique<drivers::DetectingMarkerSource<kMarkers>>(
-      *camera->watchdog, drivers::DetectionConfig<kMarkers>{}, width, height);
+  camera->markers = std::make_unique<detection::DetectingMarkerSource<kMarkers>>(
+      *camera->watchdog, detection::DetectionConfig<kMarkers>{}, width, height);
   return camera;
 }
 
 void print_camera_counters(const Camera& camera) {
   const hal::FrameCounters f = camera.capture.counters();
-  const drivers::DetectionCounters& d = camera.markers->counters();
-  const drivers::IdentifierCounters id = camera.markers->identifier_counters();
+  const detection::DetectionCounters& d = camera.markers->counters();
+  const detection::IdentifierCounters id = camera.markers->identifier_counters();
   std::printf(
       "camera: %llu frames, %llu dropped, %llu corrupt (skipped), %llu restarts; timestamps %s, "
       "%s\n",

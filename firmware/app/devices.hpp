@@ -10,7 +10,8 @@
 #include <string>
 
 #include "cli.hpp"
-#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/drivers/frame_watchdog.hpp"
 #include "mirrorcal/drivers/gpio_lines.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
@@ -19,7 +20,6 @@
 #include "mirrorcal/hal/sources.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "run_config.hpp"
-#include "sim_run.hpp"
 
 namespace mirrorcal::app {
 
@@ -31,7 +31,7 @@ struct Camera {
   drivers::V4l2Capture capture;
   drivers::MonotonicClock clock;
   std::unique_ptr<drivers::FrameWatchdog> watchdog;
-  std::unique_ptr<drivers::DetectingMarkerSource<kMarkers>> markers;
+  std::unique_ptr<detection::DetectingMarkerSource<kMarkers>> markers;
 };
 
 // The settings of a command on the devices: --config FILE, then the command line (kRunKeys). An

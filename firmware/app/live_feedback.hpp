@@ -10,9 +10,9 @@
 
 #include <Eigen/Core>
 
+#include "mirrorcal/calibration/run.hpp"  // kMarkers
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/firmware/loop.hpp"
-#include "sim_run.hpp"  // kMarkers
 
 namespace mirrorcal::app {
 

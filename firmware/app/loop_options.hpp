@@ -1,6 +1,6 @@
 // Options of the commands that run the loop (sim, and run on the board): the timing budget
 // (--profile, --budget-imu-us, --budget-frame-us) and real-time scheduling (--rt-priority, --mlock,
-// --cpu); and the rendered frames of the simulated runs (--frames and its settings).
+// --cpu), and the passes over the data.
 #pragma once
 
 #include <cstdint>
@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "cli.hpp"
+#include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/firmware/timing.hpp"
-#include "sim_run.hpp"
 
 namespace mirrorcal::app {
 
@@ -27,11 +27,6 @@ void apply_realtime_options(const Options& o);
 std::unique_ptr<firmware::LoopProfiler> make_profiler(const Options& o, hal::Clock& clock,
                                                       std::int64_t imu_period_ns,
                                                       std::int64_t frame_period_ns);
-
-// --frames, --format grey|yuyv, --spot-noise PX and --pixel-sigma PX of sim and montecarlo; fails
-// on a format that is not one, a noise that is negative or a sigma that is not positive, or any of
-// them without --frames.
-FrameMode frame_mode_option(const Options& o);
 
 // --passes N of sim and montecarlo: exactly N passes, 1 <= N <= kMaxRequestedPasses (each replays
 // the whole recording); without it, the default (Passes{}).

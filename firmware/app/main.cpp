@@ -3,13 +3,12 @@
 #include <cstdio>
 #include <string>
 
+#include "build_tools.hpp"
 #include "cli.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::app {
 
-int cmd_sim(int argc, char** argv);
-int cmd_montecarlo(int argc, char** argv);
 int cmd_record(int argc, char** argv);
 int cmd_calibrate(int argc, char** argv);
 int cmd_run(int argc, char** argv);

@@ -256,4 +256,9 @@ bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out
   return false;
 }
 
+Scenario without_skew(Scenario s) {
+  s.truth.intrinsics.skew = 0.0;
+  return s;
+}
+
 }  // namespace mirrorcal::sim

@@ -1,7 +1,8 @@
 #include "recording.hpp"
 
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop.hpp"
-#include "sim_run.hpp"
 
 namespace mirrorcal::bench {
 

@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "alloc_counter.hpp"
-#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/estimator/prior.hpp"
 #include "mirrorcal/firmware/marker_prediction.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
@@ -67,7 +67,7 @@ TEST(DetectionNoHeap, PollPredictAndRelabelDoNotAllocate) {
     mc::sim::RenderConfig rc;
     rc.format = format;
     PrerenderedFrames frames(s, rc, 40);
-    mc::drivers::DetectingMarkerSource<M> source(frames, {}, s.truth.width, s.truth.height);
+    mc::detection::DetectingMarkerSource<M> source(frames, {}, s.truth.width, s.truth.height);
 
     using Filter = mc::CalibrationFilter<double, M, 0>;
     mc::CalibrationConfig cfg;

@@ -9,13 +9,13 @@
 #include <cstdio>
 #include <vector>
 
-#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 
 namespace mc = mirrorcal;
-using mc::drivers::Blob;
-using mc::drivers::BlobDetector;
+using mc::detection::Blob;
+using mc::detection::BlobDetector;
 
 namespace {
 
@@ -49,8 +49,8 @@ struct Canvas {
   std::vector<std::uint8_t> image;
 };
 
-mc::drivers::IdentifierConfig<M> identifier_config() {
-  mc::drivers::IdentifierConfig<M> c;
+mc::detection::IdentifierConfig<M> identifier_config() {
+  mc::detection::IdentifierConfig<M> c;
   const mc::sim::RenderConfig rc;
   for (int i = 0; i < M; ++i) c.brightness[i] = rc.brightness[i];
   return c;
@@ -113,9 +113,9 @@ TEST(BlobDetector, AccuracyAndTimeOnRenderedPaperFrames) {
     mc::sim::RenderConfig rc;
     rc.format = format;
     mc::sim::RenderedFrameSource frames(s, rc, 21);
-    mc::drivers::DetectionConfig<M> cfg;
+    mc::detection::DetectionConfig<M> cfg;
     cfg.identify = identifier_config();
-    mc::drivers::DetectingMarkerSource<M> source(frames, cfg, s.truth.width, s.truth.height);
+    mc::detection::DetectingMarkerSource<M> source(frames, cfg, s.truth.width, s.truth.height);
     double sum_sq = 0.0;
     int labelled = 0, drawn = 0, wrong = 0;
     mc::MarkerFrame<M> f;
@@ -253,7 +253,7 @@ TEST(MarkerIdentifier, SpuriousBlobsAreNotTakenForMarkers) {
       Blob b[8];
       const int n = det.detect(v, b, 8);
       ASSERT_EQ(n, 4);
-      mc::drivers::MarkerIdentifier<M> id(identifier_config());
+      mc::detection::MarkerIdentifier<M> id(identifier_config());
       // The filter's prediction is off by a pixel or two, as it is in motion.
       std::array<Eigen::Vector2d, M> predicted = truth;
       for (auto& p : predicted) p += Eigen::Vector2d(1.5, -1.0);
@@ -291,7 +291,7 @@ TEST(MarkerIdentifier, CrossingMarkersAreNeverSwapped) {
     predicted[0] += Eigen::Vector2d(0.8, 0.6);
     predicted[1] += Eigen::Vector2d(-0.8, 0.6);
     const auto pred = prediction_at(predicted, 1.0);
-    mc::drivers::MarkerIdentifier<M> id(identifier_config());
+    mc::detection::MarkerIdentifier<M> id(identifier_config());
     mc::MarkerFrame<M> f;
     id.identify(b, n, &pred, f);
     for (int i = 0; i < M; ++i) {
@@ -320,7 +320,7 @@ TEST(MarkerIdentifier, BrightnessNamesMarkersWithoutAPrediction) {
   BlobDetector det({}, 640, 480);
   Blob b[8];
   const int n = det.detect(v, b, 8);
-  mc::drivers::MarkerIdentifier<M> id(identifier_config());
+  mc::detection::MarkerIdentifier<M> id(identifier_config());
   mc::MarkerFrame<M> f;
   id.identify(b, n, nullptr, f);
   for (int i = 0; i < M; ++i) {
@@ -330,7 +330,7 @@ TEST(MarkerIdentifier, BrightnessNamesMarkersWithoutAPrediction) {
   // With equal brightness and no prediction nothing can be told apart: nothing is labelled.
   auto equal = identifier_config();
   equal.brightness = {1.0, 1.0, 1.0};
-  mc::drivers::MarkerIdentifier<M> blind(equal);
+  mc::detection::MarkerIdentifier<M> blind(equal);
   blind.identify(b, n, nullptr, f);
   EXPECT_FALSE(f.seen[0] || f.seen[1] || f.seen[2]);
 }
@@ -362,9 +362,9 @@ TEST(DetectingMarkerSource, FramesTheDeviceFlaggedCorruptAreSkippedAndCounted) {
     frames.views[k].t_ns = static_cast<std::int64_t>(k) * 16'666'667;
   frames.views[1].flags = mc::hal::kFrameCorrupt;
 
-  mc::drivers::DetectionConfig<M> config;
+  mc::detection::DetectionConfig<M> config;
   config.identify = identifier_config();
-  mc::drivers::DetectingMarkerSource<M> source(frames, config, 640, 480);
+  mc::detection::DetectingMarkerSource<M> source(frames, config, 640, 480);
   for (const std::int64_t expected_t : {std::int64_t{0}, std::int64_t{2 * 16'666'667}}) {
     mc::MarkerFrame<M> f;
     ASSERT_EQ(source.poll(f), mc::hal::SourceStatus::kOk);
@@ -386,7 +386,7 @@ TEST(MarkerIdentifier, WithoutAPredictionTheBrightestBlobsAreTheCandidates) {
   // still be found and no dim spot taken for one. Blobs as the detector reports them, the dim ones
   // a quarter of the dimmest marker (a third would fit the brightness ratios one step down).
   const mc::sim::RenderConfig rc;
-  constexpr int kDim = mc::drivers::MarkerIdentifier<M>::kCandidates + 2;
+  constexpr int kDim = mc::detection::MarkerIdentifier<M>::kCandidates + 2;
   std::vector<Blob> blobs;
   for (int k = 0; k < kDim; ++k) {
     Blob dim;
@@ -406,7 +406,7 @@ TEST(MarkerIdentifier, WithoutAPredictionTheBrightestBlobsAreTheCandidates) {
     marker.spread = 1.5;
     blobs.push_back(marker);
   }
-  mc::drivers::MarkerIdentifier<M> id(identifier_config());
+  mc::detection::MarkerIdentifier<M> id(identifier_config());
   mc::MarkerFrame<M> f;
   const auto counts = id.identify(blobs.data(), static_cast<int>(blobs.size()), nullptr, f);
   for (int i = 0; i < M; ++i) {
@@ -432,7 +432,7 @@ TEST(MarkerIdentifier, SpotsCutByTheImageEdgeAreWithheld) {
   int truncated = 0;
   for (int j = 0; j < n; ++j) truncated += b[j].truncated ? 1 : 0;
   EXPECT_EQ(truncated, 2);
-  mc::drivers::MarkerIdentifier<M> id(identifier_config());
+  mc::detection::MarkerIdentifier<M> id(identifier_config());
   const auto pred = prediction_at(truth, 1.0);
   mc::MarkerFrame<M> f;
   const auto counts = id.identify(b, n, &pred, f);

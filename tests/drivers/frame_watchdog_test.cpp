@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/drivers/frame_watchdog.hpp"
 
 namespace mirrorcal::drivers {
@@ -108,7 +108,7 @@ TEST(FrameWatchdog, TheMarkerSourceOverItFailsWithTheMessage) {
   ScriptedFrames frames;
   ManualClock clock;
   FrameWatchdog watchdog(frames, clock, "/dev/video7", 1'000 * kMs);
-  DetectingMarkerSource<3> markers(watchdog, DetectionConfig<3>{}, 64, 48);
+  detection::DetectingMarkerSource<3> markers(watchdog, detection::DetectionConfig<3>{}, 64, 48);
   MarkerFrame<3> m;
   frames.frame_ready = true;
   ASSERT_EQ(markers.poll(m), hal::SourceStatus::kOk);

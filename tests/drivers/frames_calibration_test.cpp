@@ -5,8 +5,9 @@
 #include <cmath>
 #include <cstdio>
 
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
-#include "sim_run.hpp"
 
 namespace mc = mirrorcal;
 

@@ -16,7 +16,7 @@
 
 #include <unistd.h>
 
-#include "report.hpp"
+#include "mirrorcal/calibration/statistics.hpp"
 
 namespace {
 

@@ -8,9 +8,10 @@
 #include <cmath>
 #include <cstdio>
 
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop_impl.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
 
 namespace mc = mirrorcal;
 using FilterF = mc::CalibrationFilter<float, 3, 0>;

@@ -6,8 +6,9 @@
 #include <algorithm>
 #include <cstdint>
 
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
 
 namespace mirrorcal::gaptest {
 
@@ -38,7 +39,7 @@ inline Run calibrate_with_gap(const sim::Scenario& s, std::uint64_t seed, std::i
               d.imu.end());
   Run::State x0;
   Run::Filter::Covariance p0;
-  initialise(app::simulation_prior(s, data, seed), x0, p0);
+  initialise(sim::simulation_prior<app::kMarkers>(s, data, seed), x0, p0);
   const Run::State truth = truth_of(s);
   return app::run_loop<0>(app::scenario_config(s), x0, p0, d, &truth, {}, {}, passes);
 }

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "imu_gap_run.hpp"
-#include "outputs.hpp"
+#include "mirrorcal/calibration/result.hpp"
 
 namespace mc = mirrorcal;
 using mc::gaptest::kMs;

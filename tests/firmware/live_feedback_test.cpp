@@ -11,6 +11,7 @@
 #include "alloc_counter.hpp"
 #include "live_feedback.hpp"
 #include "mirrorcal/estimator/so3.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 

@@ -9,10 +9,11 @@
 #include <vector>
 
 #include "alloc_counter.hpp"
-#include "history.hpp"
+#include "mirrorcal/calibration/history.hpp"
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
 
 namespace mc = mirrorcal;
 

@@ -8,9 +8,10 @@
 #include <string>
 #include <vector>
 
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
 
 namespace mc = mirrorcal;
 using Filter = mc::CalibrationFilter<double, 3, 0>;
@@ -256,7 +257,7 @@ TEST(TwoStages, IntrinsicsConvergeFromGuesses100PxOff) {
 // Stage 2 holding skew (NK = 4) on a camera without it: the skew stays exactly where it was put,
 // the other four converge as with skew estimated.
 TEST(TwoStages, HoldingSkewKeepsItAtZeroAndCalibratesTheRest) {
-  const mc::sim::Scenario s = mc::app::without_skew(mc::sim::paper_scenario());
+  const mc::sim::Scenario s = mc::sim::without_skew(mc::sim::paper_scenario());
   const auto run = mc::app::run_two_stage_simulation<4>(s, 4);
   expect_stage2_calibrated(run, 4);
   EXPECT_EQ(run.result.params.back().name, "cv");

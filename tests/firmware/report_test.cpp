@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "calibration_report.hpp"
+#include "mirrorcal/calibration/report.hpp"
+#include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
-#include "report.hpp"
 
 namespace {
 

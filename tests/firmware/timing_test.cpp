@@ -13,10 +13,11 @@
 #include <string>
 #include <vector>
 
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/firmware/timing.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_run.hpp"
 
 namespace mc = mirrorcal;
 using mc::firmware::DurationHistogram;

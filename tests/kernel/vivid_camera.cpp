@@ -22,14 +22,15 @@
 #include <vector>
 
 #include "guest_check.hpp"
-#include "mirrorcal/drivers/detecting_marker_source.hpp"
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/drivers/frame_watchdog.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/v4l2.hpp"
+#include "mirrorcal/evaluation/rendered_markers.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
-#include "sim_frames.hpp"
-#include "sim_run.hpp"
 #include "vivid_setup.hpp"
 
 namespace mc = mirrorcal;
@@ -378,10 +379,11 @@ int calibrate(mc::hal::PixelFormat format) {
   }
   std::printf("set up in %.1f s\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count());
-  mc::drivers::DetectingMarkerSource<mc::app::kMarkers> camera(
+  mc::detection::DetectingMarkerSource<mc::app::kMarkers> camera(
       frames, mc::app::detection_config(rc), 640, 480);
   using Run = mc::app::SimRun<0>;
-  const mc::Prior<mc::app::kMarkers> prior = mc::app::simulation_prior(s, data, kSeed);
+  const mc::Prior<mc::app::kMarkers> prior =
+      mc::sim::simulation_prior<mc::app::kMarkers>(s, data, kSeed);
   Run::State x0, truth;
   Run::Filter::Covariance p0;
   mc::initialise(prior, x0, p0);
@@ -412,7 +414,7 @@ int calibrate(mc::hal::PixelFormat format) {
   const double pos0 = before.error.segment<3>(0).norm(), pos1 = after.error.segment<3>(0).norm();
   const double rot0 = before.error.segment<3>(3).norm(), rot1 = after.error.segment<3>(3).norm();
   const double mk0 = before.error.segment<9>(6).norm(), mk1 = after.error.segment<9>(6).norm();
-  const mc::drivers::IdentifierCounters id = camera.identifier_counters();
+  const mc::detection::IdentifierCounters id = camera.identifier_counters();
   std::printf(
       "%s: %llu frames through the kernel (%llu skipped by it), %llu markers labelled, %llu used "
       "by the filter; %.1f s\nerror prior -> final: p_b_c %.2f -> %.2f cm, R_b_c %.3f -> %.3f deg, "

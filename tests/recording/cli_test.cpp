@@ -19,10 +19,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "mirrorcal/drivers/blob_detector.hpp"
+#include "mirrorcal/calibration/recording_run.hpp"
+#include "mirrorcal/detection/blob_detector.hpp"
+#include "mirrorcal/evaluation/process.hpp"
 #include "mirrorcal/sim_host/files.hpp"
-#include "process.hpp"
-#include "recording_run.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -990,8 +990,8 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   ASSERT_TRUE(mc::sim::read_recording(rec, mc::app::kMarkers, listed_frames, err)) << err;
   auto source = images.streams->open_images();
   ASSERT_NE(source, nullptr);
-  mc::drivers::BlobDetector detector(mc::drivers::BlobConfig{}, 640, 480);
-  std::vector<mc::drivers::Blob> blobs(16);
+  mc::detection::BlobDetector detector(mc::detection::BlobConfig{}, 640, 480);
+  std::vector<mc::detection::Blob> blobs(16);
   double sum_sq = 0.0;
   std::size_t matched = 0, k = 0;
   mc::hal::FrameView view;

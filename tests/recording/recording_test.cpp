@@ -4,7 +4,7 @@
 
 #include <cstring>
 
-#include "outputs.hpp"
+#include "mirrorcal/calibration/result.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -69,7 +69,7 @@ TEST(Recording, StreamsReadBackBitIdentical) {
 TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 4);
-  const auto prior = mc::app::simulation_prior(s, data, 4);
+  const auto prior = mc::sim::simulation_prior<mc::app::kMarkers>(s, data, 4);
   const TempDir tmp("priors");
   const std::string& dir = tmp.path;
   std::string err;

@@ -16,7 +16,7 @@
 
 #include <unistd.h>
 
-#include "process.hpp"
+#include "mirrorcal/evaluation/process.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;

@@ -5,8 +5,8 @@
 #include <algorithm>
 
 #include "alloc_counter.hpp"
+#include "mirrorcal/calibration/recording_run.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
-#include "recording_run.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;

@@ -118,4 +118,7 @@ Kinematics kinematics(const Motion& m, double t);
 // Rotation about a coordinate axis (0 = x, 1 = y, 2 = z) by angle rad.
 Eigen::Matrix3d axis_rotation(int axis, double angle);
 
+// The scenario with a camera that has no skew (most cameras), for --hold-skew.
+Scenario without_skew(Scenario s);
+
 }  // namespace mirrorcal::sim

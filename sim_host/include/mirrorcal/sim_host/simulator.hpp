@@ -90,6 +90,14 @@ Prior<M> draw_prior(const Scenario& s, const SimData& data, std::uint64_t seed) 
   return pr;
 }
 
+// The prior a simulated run with this seed starts from (a user's guesses, drawn around the truth),
+// and the seed of a second minute of data (stage 2 of a two-stage run: derive_seed(seed, this)).
+template <int M>
+Prior<M> simulation_prior(const Scenario& s, const SimData& data, std::uint64_t seed) {
+  return draw_prior<M>(s, data, derive_seed(seed, 100));
+}
+constexpr std::uint64_t kStage2SeedStream = 300;
+
 // Replays recorded or simulated IMU samples.
 class VectorImuSource final : public hal::ImuSource {
  public:

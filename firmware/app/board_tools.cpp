@@ -1,0 +1,34 @@
+// The board's build of the program: no simulation commands, no plots (firmware/evaluation is the
+// host's; a board has neither gnuplot nor a use for Monte Carlo campaigns).
+#include <cstdio>
+
+#include "build_tools.hpp"
+
+namespace mirrorcal::app {
+
+namespace {
+
+int host_only(const char* command) {
+  std::fprintf(stderr,
+               "mirrorcal %s: not in the board's build of mirrorcal; run it with the host's build "
+               "(docs/usage.md)\n",
+               command);
+  return 2;
+}
+
+}  // namespace
+
+int cmd_sim(int, char**) {
+  return host_only("sim");
+}
+int cmd_montecarlo(int, char**) {
+  return host_only("montecarlo");
+}
+
+ReportPlots report_plots(bool draw) {
+  ReportPlots plots;
+  plots.draw = draw;
+  return plots;
+}
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,16 @@
+// What the host's build of the program has and the board's does not (firmware/evaluation, which
+// the board's program does not link): the sim and montecarlo commands, and report.html's plots.
+// host_tools.cpp or board_tools.cpp defines these (MIRRORCAL_HOST_TOOLS).
+#pragma once
+
+#include "mirrorcal/calibration/report.hpp"
+
+namespace mirrorcal::app {
+
+int cmd_sim(int argc, char** argv);
+int cmd_montecarlo(int argc, char** argv);
+
+// How report.html gets its plots in this build (draw: false for --no-plots).
+ReportPlots report_plots(bool draw = true);
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,14 @@
+#include "build_tools.hpp"
+
+#include "mirrorcal/evaluation/report_plots.hpp"
+
+namespace mirrorcal::app {
+
+ReportPlots report_plots(bool draw) {
+  ReportPlots plots;
+  plots.draw = draw;
+  plots.drawer = draw_report_figures;
+  return plots;
+}
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,15 @@
+// Options of the host's simulation commands (sim, montecarlo): the rendered frames of the
+// simulated runs (--frames and its settings).
+#pragma once
+
+#include "cli.hpp"
+#include "mirrorcal/evaluation/simulated_run.hpp"
+
+namespace mirrorcal::app {
+
+// --frames, --format grey|yuyv, --spot-noise PX and --pixel-sigma PX of sim and montecarlo; fails
+// on a format that is not one, a noise that is negative or a sigma that is not positive, or any of
+// them without --frames.
+FrameMode frame_mode_option(const Options& o);
+
+}  // namespace mirrorcal::app

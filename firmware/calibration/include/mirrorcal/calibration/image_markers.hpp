@@ -1,0 +1,38 @@
+// The markers of a recording's images, found by the board's detection: what `calibrate` runs on
+// when a recording holds images instead of (or beside) features.csv.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+
+#include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/detection/detecting_marker_source.hpp"
+
+namespace mirrorcal::app {
+
+// The marker source of a calibration from a recording's images: the board's detection on each
+// image (the default DetectionConfig, as `run` and `record` on the board use), labelled by
+// brightness when polled and by the filter's prediction when the loop relabels it. On destruction
+// it leaves how detection went in report, if it met at least as many frames as the one before
+// (so report ends with the last pass over all the data, not a shorter stretch of it).
+class ImageMarkers final : public hal::MarkerSource<kMarkers>,
+                           public hal::MarkerRelabeler<kMarkers> {
+ public:
+  ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
+               DetectionReport* report);
+  ~ImageMarkers() override;
+  hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override;
+  void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
+               MarkerFrame<kMarkers>& frame) override;
+  const char* error() const override { return detect_.error(); }
+  std::int64_t detection_ns() const override { return detect_.detection_ns(); }
+
+ private:
+  std::unique_ptr<hal::FrameSource> frames_;
+  detection::DetectingMarkerSource<kMarkers> detect_;
+  DetectionReport* report_;
+  std::uint64_t frames_seen_ = 0, labelled_ = 0;
+  double read_seconds_ = 0.0;
+};
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,88 @@
+#include "mirrorcal/calibration/recording_run.hpp"
+
+namespace mirrorcal::app {
+
+CalibrationConfig recording_config(const sim::Recording& r) {
+  CalibrationConfig c;
+  c.gravity_n = r.priors.gravity_n;
+  c.imu = r.sensors.imu;
+  c.pixel_sigma = r.priors.pixel_sigma;
+  c.intrinsics = r.sensors.intrinsics;
+  return c;
+}
+
+LoopData recording_loop_data(const sim::Recording& r) {
+  LoopData d;
+  d.imu = r.imu;
+  d.frames = r.frames;
+  d.streams = r.streams;
+  d.stats = r.stats;
+  d.imu_period_ns = imu_period_ns(r.sensors.imu_rate_hz);
+  d.width = r.sensors.width;
+  d.height = r.sensors.height;
+  if (r.from_images) d.image_detection = std::make_shared<DetectionReport>();
+  return d;
+}
+
+template <int NK>
+bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& error,
+                         const std::function<void(double)>& progress,
+                         const sim::CalibrationStart* from) {
+  Prior<kMarkers> prior;
+  if (!sim::to_prior(r.priors, prior, error)) return false;
+  typename SimRun<NK>::State x0;
+  typename SimRun<NK>::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  if (from != nullptr) start_from(*from, x0, p0);  // read_calibration_start checked its M
+  // A simulated recording's truth: each history row gets the error and NEES against it.
+  typename SimRun<NK>::State truth;
+  if (r.has_truth) {
+    if (r.truth.features_c.size() != static_cast<std::size_t>(kMarkers)) {
+      error = "truth.yaml lists " + std::to_string(r.truth.features_c.size()) +
+              " markers; this build calibrates M = " + std::to_string(kMarkers);
+      return false;
+    }
+    truth.p_b_c = r.truth.p_b_c;
+    truth.q_b_c = r.truth.q_b_c;
+    for (int i = 0; i < kMarkers; ++i)
+      truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
+    truth.t_d = r.truth.t_d;
+    if constexpr (NK > 0) {
+      // truth.yaml names the lens's coefficients when camchain.yaml holds a guess of them;
+      // otherwise a simulated recording's camchain.yaml holds the true ones.
+      Pinhole<double> k = r.truth.intrinsics;
+      if (!r.truth.has_distortion) k.coeffs = r.sensors.intrinsics.coeffs;
+      const std::array<double, NK> v = camera_parameters<NK>(k);
+      for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[static_cast<std::size_t>(j)];
+    }
+  }
+  const LoopData data = recording_loop_data(r);
+  run = run_loop<NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
+  if (r.streams && !r.streams->error().empty()) {
+    error = r.streams->error();
+    return false;
+  }
+  if (data.image_detection) {  // the markers the detection labelled are the data's
+    run.detection = *data.image_detection;
+    run.features_found = true;
+    run.result.markers_observed = run.detection.markers_labelled;
+  }
+  run.result.rostopic = r.sensors.rostopic;
+  run.result.recording_fingerprint = r.fingerprint;
+  return true;
+}
+
+template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
+template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::string&,
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
+template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
+template bool calibrate_recording<8>(const sim::Recording&, SimRun<8>&, std::string&,
+                                     const std::function<void(double)>&,
+                                     const sim::CalibrationStart*);
+
+}  // namespace mirrorcal::app

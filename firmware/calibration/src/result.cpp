@@ -1,0 +1,559 @@
+#include "mirrorcal/calibration/result.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
+
+namespace mirrorcal::app {
+
+std::array<const char*, 4> distortion_coeff_names(Distortion lens) {
+  if (lens == Distortion::kEquidistant) return {"k1", "k2", "k3", "k4"};
+  return {"k1", "k2", "p1", "p2"};
+}
+
+std::vector<ParamInfo> calibration_params(int markers, int intrinsics, Distortion lens) {
+  constexpr double kCm = 100.0, kDeg = 180.0 / M_PI;
+  std::vector<ParamInfo> p;
+  for (const char* a : {"x", "y", "z"}) p.push_back({std::string("p_") + a, "cm", kCm});
+  for (const char* a : {"x", "y", "z"}) p.push_back({std::string("rot_") + a, "deg", kDeg});
+  for (int i = 0; i < markers; ++i)
+    for (const char* a : {"x", "y", "z"})
+      p.push_back({"f" + std::to_string(i + 1) + "_" + a, "cm", kCm});
+  p.push_back({"timeshift_cam_imu", "ms", 1e3});
+  const char* k[5] = {"fu", "fv", "cu", "cv", "skew"};
+  for (int j = 0; j < std::min(intrinsics, 5); ++j) p.push_back({k[j], "px", 1.0});
+  if (intrinsics == 8) {
+    p.pop_back();  // no skew: the lens's coefficients follow cv
+    // Shown in thousandths (p2 of EuRoC's lens is 1.8e-5); the files keep them as they are.
+    for (const char* c : distortion_coeff_names(lens)) p.push_back({c, "1e-3", 1e3});
+  }
+  return p;
+}
+
+namespace {
+
+void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* indent) {
+  for (int i = 0; i < 4; ++i)
+    std::fprintf(f, "%s- [%.12f, %.12f, %.12f, %.12f]\n", indent, t(i, 0), t(i, 1), t(i, 2),
+                 t(i, 3));
+}
+
+// The camera's pose in the IMU frame: maps camera coordinates into the IMU's.
+Eigen::Matrix4d t_imu_cam(const CalibrationResult& r) {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = r.q_b_c.toRotationMatrix();
+  t.topRightCorner<3, 1>() = r.p_b_c;
+  return t;
+}
+
+Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
+  const Eigen::Matrix3d r_c_b = r.q_b_c.toRotationMatrix().transpose();
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = r_c_b;
+  t.topRightCorner<3, 1>() = -r_c_b * r.p_b_c;
+  return t;
+}
+
+// First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
+// refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
+void write_yaml_header(std::FILE* o, const char* what) {
+  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n", what);
+}
+
+// Skew is where a tool has no slot for it: said in a comment rather than silently dropped.
+void write_skew_note(std::FILE* o, const Pinhole<double>& k, const char* indent,
+                     const char* tools) {
+  std::fprintf(o, "%s# skew %.6f px (u = fu x + skew y + cu): %s\n", indent, k.skew, tools);
+}
+
+// cam0 of Kalibr's camchain-imucam.yaml, with the transform under the key OpenVINS prefers
+// (T_imu_cam) or Kalibr's (T_cam_imu). Nested keys are indented deeper than their key, as OpenCV
+// requires; comments stand on lines of their own (OpenCV keeps a trailing one in a string).
+void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_cam) {
+  const Pinhole<double>& k = r.intrinsics;
+  std::fprintf(o, "cam0:\n  camera_model: pinhole\n");
+  std::fprintf(o, "  intrinsics: [%.6f, %.6f, %.6f, %.6f]\n", k.fu, k.fv, k.cu, k.cv);
+  write_skew_note(o, k, "  ", "Kalibr and OpenVINS have no skew and drop it");
+  std::fprintf(o, "  # (intrinsics_skew: mirrorcal's own key, which it reads back)\n");
+  std::fprintf(o, "  intrinsics_skew: %.6f\n", k.skew);
+  std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
+               sim::kalibr_lens_name(k.distortion), k.coeffs[0], k.coeffs[1], k.coeffs[2],
+               k.coeffs[3]);
+  std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
+  std::fprintf(o, "  # s per row (a rolling shutter; 0: a global shutter)\n  line_delay: %.9g\n",
+               k.line_delay_s);
+  std::fprintf(o, "  rostopic: %s\n  cam_overlaps: []\n", r.rostopic.c_str());
+  std::fprintf(o, "  # s: t_imu = t_cam + timeshift_cam_imu\n  timeshift_cam_imu: %.9f\n", r.t_d);
+  if (imu_from_cam) {
+    std::fprintf(o, "  # the camera's pose in the IMU frame (R_CtoI, p_CinI)\n  T_imu_cam:\n");
+    write_matrix_rows(o, t_imu_cam(r), "    ");
+  } else {
+    std::fprintf(o, "  # maps IMU coordinates into the camera's\n  T_cam_imu:\n");
+    write_matrix_rows(o, t_cam_imu(r), "    ");
+  }
+}
+
+}  // namespace
+
+bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
+                           const CalibrationResult& r, std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  write_yaml_header(o, "mirrorcal calibration, Kalibr camchain-imucam format");
+  write_imucam_chain(o, r, false);
+  return true;
+}
+
+namespace {
+
+// Markers offered to the filter in the last pass, and those it could not use.
+double markers_offered(const CalibrationResult& r) {
+  return double(r.markers_used + r.markers_gated + r.markers_invalid);
+}
+double markers_rejected(const CalibrationResult& r) {
+  return double(r.markers_gated + r.markers_invalid);
+}
+
+}  // namespace
+
+bool gated_too_many(const CalibrationResult& r) {
+  const double seen = markers_offered(r);
+  return seen > 0.0 && markers_rejected(r) > kSuspectGatedFraction * seen;
+}
+
+bool innovations_too_large(const CalibrationResult& r) {
+  if (r.nis_dof == 0) return false;
+  const double band = std::max(kSuspectNisExcess, 5.0 * std::sqrt(2.0 / double(r.nis_dof)));
+  return r.nis_per_dof > 1.0 + band;
+}
+
+bool suspect(const CalibrationResult& r) {
+  return gated_too_many(r) || innovations_too_large(r) || r.filter_failures > 0;
+}
+
+bool path_gained_false_information(const CalibrationResult& r) {
+  return r.sigma_ratio < kSigmaRatioLimit;
+}
+
+bool refinement_unconverged(const CalibrationResult& r) {
+  return r.refinement_step_sigmas > kRefinementStepLimit;
+}
+
+bool used_too_few(const CalibrationResult& r) {
+  return r.markers_observed > 0 &&
+         double(r.markers_used) < kMinUsedFraction * double(r.markers_observed);
+}
+
+bool prior_contradicted(const CalibrationResult& r) {
+  return r.prior_offset_sigmas > kPriorContradictedSigmas;
+}
+
+namespace {
+
+std::string fit_warning(const CalibrationResult& r) {
+  const double seen = markers_offered(r);
+  if (seen == 0.0) return "no marker was seen: nothing was calibrated beyond the priors";
+  char text[480];
+  if (r.filter_failures > 0 && !gated_too_many(r)) {
+    std::snprintf(text, sizeof text,
+                  "the filter refused %llu predicts or updates in the last pass (of %d) as "
+                  "numerically broken (a covariance no longer positive definite): the result is "
+                  "not a calibration. Start from better guesses and check the recording.",
+                  static_cast<unsigned long long>(r.filter_failures), r.passes);
+    return text;
+  }
+  if (!gated_too_many(r) && !innovations_too_large(r)) {
+    if (refinement_unconverged(r)) {
+      std::snprintf(text, sizeof text,
+                    "the last Gauss-Newton step of the refinement still moved the calibration by "
+                    "%.1f of its sigmas (a converged one moves well under 1): the linearisation "
+                    "does not hold where the estimate is, and neither the estimate nor its "
+                    "sigmas can be trusted. Move the rig more (tilts and moves toward the "
+                    "mirror), start from better guesses, and check the recording.",
+                    r.refinement_step_sigmas);
+      return text;
+    }
+    if (!path_gained_false_information(r)) return {};
+    std::snprintf(text, sizeof text,
+                  "the filter's own sigmas came down to %.2f of what the data hold along its "
+                  "final estimate: its way there, from guesses far off, gathered information the "
+                  "data do not hold, and the estimate is likely off by more than the sigmas "
+                  "reported. Move the rig more (tilts and moves toward the mirror), start from "
+                  "better guesses, and check the recording.",
+                  r.sigma_ratio);
+    return text;
+  }
+  if (!gated_too_many(r)) {
+    std::snprintf(text, sizeof text,
+                  "the markers fit %.2f times worse than the filter's covariance says (normalised "
+                  "innovation squared per degree of freedom over the last pass, of %d; about 1 "
+                  "for a consistent calibration): it is over-confident or has locked onto a "
+                  "wrong solution. Move the rig more (tilts and moves toward the mirror), start "
+                  "from better guesses, and check the recording.",
+                  r.nis_per_dof, r.passes);
+    return text;
+  }
+  std::snprintf(text, sizeof text,
+                "%.1f %% of the markers were rejected by the 99.9 %% gate or could not be "
+                "predicted in the last pass (of %d) (a consistent calibration rejects about "
+                "0.1 %%): it has most likely locked onto a wrong solution. Start from better "
+                "guesses (or estimate the intrinsics in a second stage, calibrate --from), and "
+                "check the recording.",
+                100.0 * markers_rejected(r) / seen, r.passes);
+  return text;
+}
+
+std::string markers_used_warning(const CalibrationResult& r) {
+  if (!used_too_few(r)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the filter used %llu of the %llu markers in the data (%.1f %%): it calibrated "
+                "on a sliver of the recording. Check that the frames' timestamps lie within the "
+                "IMU data and in its unit (ns), and the camera's resolution.",
+                static_cast<unsigned long long>(r.markers_used),
+                static_cast<unsigned long long>(r.markers_observed),
+                100.0 * double(r.markers_used) / double(r.markers_observed));
+  return text;
+}
+
+std::string prior_warning(const CalibrationResult& r) {
+  if (!prior_contradicted(r)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the estimate of %s lies %.1f of the prior's sigmas from its guess (more than "
+                "%.0f): the prior (mirrorcal.yaml, or --from) claimed far more than it knew, and "
+                "the estimate is pulled towards it. Give that guess a sigma as large as its "
+                "error can be, and calibrate again.",
+                r.prior_offset_state.c_str(), r.prior_offset_sigmas, kPriorContradictedSigmas);
+  return text;
+}
+
+}  // namespace
+
+std::string convergence_warning(const CalibrationResult& r) {
+  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r)})
+    if (!w.empty()) return w;
+  return {};
+}
+
+bool consistent(const CalibrationResult& r) {
+  return convergence_warning(r).empty();
+}
+
+std::string skew_warning(const CalibrationResult& r) {
+  if (r.estimated_intrinsics != 5) return {};
+  double sigma = 0.0;
+  for (std::size_t j = 0; j < r.params.size(); ++j)
+    if (r.params[j].name == "skew") sigma = r.sigma[j];
+  if (!(std::abs(r.intrinsics.skew) > kSignificantSkewSigmas * sigma)) return {};
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "the estimated skew, %.3f px +- %.3f px, is significant (beyond %.0f sigma from "
+                "0): Kalibr, OpenVINS and VINS-Fusion have no skew and will use the camera "
+                "without it (camchain-imucam.yaml states it in a comment). If the camera has "
+                "none, calibrate with --hold-skew.",
+                r.intrinsics.skew, sigma, kSignificantSkewSigmas);
+  return text;
+}
+
+std::vector<std::string> result_warnings(const CalibrationResult& r) {
+  std::vector<std::string> w;
+  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), skew_warning(r)})
+    if (!s.empty()) w.push_back(std::move(s));
+  return w;
+}
+
+bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                       std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  std::fprintf(o,
+               "# mirrorcal result: SI units (m, rad, px); sigma is 1-sigma, rotations as the\n"
+               "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n");
+  std::fprintf(o, "T_cam_imu:\n");
+  write_matrix_rows(o, t_cam_imu(r), "  ");
+  std::fprintf(o, "p_b_c: [%.17g, %.17g, %.17g]\n", r.p_b_c.x(), r.p_b_c.y(), r.p_b_c.z());
+  const Eigen::Matrix3d rbc = r.q_b_c.toRotationMatrix();
+  std::fprintf(o, "R_b_c:\n");
+  for (int i = 0; i < 3; ++i)
+    std::fprintf(o, "  - [%.12f, %.12f, %.12f]\n", rbc(i, 0), rbc(i, 1), rbc(i, 2));
+  std::fprintf(o, "q_b_c_wxyz: [%.17g, %.17g, %.17g, %.17g]\n", r.q_b_c.w(), r.q_b_c.x(),
+               r.q_b_c.y(), r.q_b_c.z());
+  std::fprintf(o, "features_c:\n");
+  for (const auto& m : r.markers)
+    std::fprintf(o, "  - [%.17g, %.17g, %.17g]\n", m.x(), m.y(), m.z());
+  std::fprintf(o, "timeshift_cam_imu: %.17g  # s: t_imu = t_cam + timeshift_cam_imu\n", r.t_d);
+  std::fprintf(o, "intrinsics: [%.6f, %.6f, %.6f, %.6f]\nskew: %.6f\n", r.intrinsics.fu,
+               r.intrinsics.fv, r.intrinsics.cu, r.intrinsics.cv, r.intrinsics.skew);
+  const bool lens_estimated = r.estimated_intrinsics == 8;
+  std::fprintf(o, "distortion_model: %s  # %s\n", to_string(r.intrinsics.distortion),
+               lens_estimated ? "as camchain.yaml gave it, its coefficients estimated"
+                              : "held as camchain.yaml gave it");
+  std::fprintf(o, "distortion_coeffs: [%.17g, %.17g, %.17g, %.17g]\n", r.intrinsics.coeffs[0],
+               r.intrinsics.coeffs[1], r.intrinsics.coeffs[2], r.intrinsics.coeffs[3]);
+  if (lens_estimated) {
+    const std::array<const char*, 4> names = distortion_coeff_names(r.intrinsics.distortion);
+    std::fprintf(o, "distortion_estimate:  # distortion_coeffs by name; 1-sigma under sigma\n");
+    for (std::size_t j = 0; j < 4; ++j)
+      std::fprintf(o, "  %s: %.17g\n", names[j], r.intrinsics.coeffs[j]);
+  }
+  std::fprintf(o, "line_delay: %.17g  # s per row, held as camchain.yaml gave it\n",
+               r.intrinsics.line_delay_s);
+  std::fprintf(o,
+               "intrinsics_estimated: %s\nskew_estimated: %s\ndistortion_estimated: %s\n"
+               "resolution: [%d, %d]\n",
+               r.estimated_intrinsics > 0 ? "true" : "false",
+               r.estimated_intrinsics == 5 ? "true" : "false", lens_estimated ? "true" : "false",
+               r.width, r.height);
+  std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
+  if (!r.recording_fingerprint.empty())
+    std::fprintf(
+        o, "recording_fingerprint: \"%s\"  # of the CSV files calibrated (calibrate --from)\n",
+        r.recording_fingerprint.c_str());
+  std::fprintf(o,
+               "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
+               "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
+               r.passes, static_cast<unsigned long long>(r.markers_used),
+               static_cast<unsigned long long>(r.markers_gated),
+               static_cast<unsigned long long>(r.markers_invalid));
+  if (r.markers_observed > 0)
+    std::fprintf(o, "markers_observed: %llu  # in the data the loop was given\n",
+                 static_cast<unsigned long long>(r.markers_observed));
+  if (!r.prior_offset_state.empty())
+    std::fprintf(o, "prior_offset: %.2f  # sigmas of the prior, at its furthest: %s\n",
+                 r.prior_offset_sigmas, r.prior_offset_state.c_str());
+  std::fprintf(o,
+               "nis_per_dof: %.4f  # last pass, gate on: about 1 when the covariance is right\n"
+               "sigma_ratio: %.4f  # the filter's own sigmas against those reported, at least\n"
+               "refinement_step: %.4f  # the last Gauss-Newton step, in sigmas: well under 1 "
+               "when converged\n",
+               r.nis_per_dof, r.sigma_ratio, r.refinement_step_sigmas);
+  std::fprintf(o,
+               "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
+               "above 1, sigma_ratio below 0.5, refinement_step above 8, under half the markers "
+               "used or a prior "
+               "contradicted by 5 sigma: do not trust it\n",
+               consistent(r) ? "true" : "false");
+  std::fprintf(o, "sigma:\n");
+  for (std::size_t j = 0; j < r.params.size(); ++j)
+    std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
+  std::fprintf(o, "# covariance of the calibration states, rows and columns in sigma's order\n");
+  std::fprintf(o, "covariance:\n");
+  for (long i = 0; i < r.covariance.rows(); ++i) {
+    std::fprintf(o, "  - [");
+    for (long j = 0; j < r.covariance.cols(); ++j)
+      std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
+    std::fprintf(o, "]\n");
+  }
+  return true;
+}
+
+namespace {
+
+// VINS-Fusion's camera file (camodocal's PINHOLE, or KANNALA_BRANDT for an equidistant lens).
+void write_vins_camera(std::FILE* o, const CalibrationResult& r) {
+  const Pinhole<double>& k = r.intrinsics;
+  const std::array<double, 4>& d = k.coeffs;
+  write_yaml_header(o, "mirrorcal calibration: VINS-Fusion camera file (camodocal)");
+  write_skew_note(o, k, "", "VINS-Fusion's camera models have no skew and drop it");
+  const bool fisheye = k.distortion == Distortion::kEquidistant;
+  std::fprintf(o, "model_type: %s\ncamera_name: camera\nimage_width: %d\nimage_height: %d\n",
+               fisheye ? "KANNALA_BRANDT" : "PINHOLE", r.width, r.height);
+  if (fisheye) {
+    // Kannala-Brandt's theta + k2 theta^3 + ... + k5 theta^9 is Kalibr's equidistant k1..k4.
+    std::fprintf(o, "projection_parameters:\n   k2: %.12g\n   k3: %.12g\n   k4: %.12g\n", d[0],
+                 d[1], d[2]);
+    std::fprintf(o, "   k5: %.12g\n   mu: %.6f\n   mv: %.6f\n   u0: %.6f\n   v0: %.6f\n", d[3],
+                 k.fu, k.fv, k.cu, k.cv);
+    return;
+  }
+  std::fprintf(o,
+               "distortion_parameters:\n   k1: %.12g\n   k2: %.12g\n   p1: %.12g\n"
+               "   p2: %.12g\n",
+               d[0], d[1], d[2], d[3]);
+  std::fprintf(o, "projection_parameters:\n   fx: %.6f\n   fy: %.6f\n   cx: %.6f\n   cy: %.6f\n",
+               k.fu, k.fv, k.cu, k.cv);
+}
+
+// The camera-IMU keys of a VINS-Fusion config; camera_file as cam0_calib names it (beside it).
+void write_vins_config(std::FILE* o, const CalibrationResult& r, const std::string& camera_file) {
+  write_yaml_header(o, "mirrorcal calibration: the camera-IMU keys of a VINS-Fusion config");
+  std::fprintf(o,
+               "# (add the IMU noise and feature tracker keys of a VINS-Fusion example config)\n");
+  std::fprintf(o, "imu: 1\nnum_of_cam: 1\nimage0_topic: \"%s\"\ncam0_calib: \"%s\"\n",
+               r.rostopic.c_str(), camera_file.c_str());
+  std::fprintf(o, "image_width: %d\nimage_height: %d\n", r.width, r.height);
+  std::fprintf(o,
+               "# the camera's pose in the IMU (body) frame: p_imu = body_T_cam0 p_cam\n"
+               "estimate_extrinsic: 0\nbody_T_cam0: !!opencv-matrix\n   rows: 4\n   cols: 4\n"
+               "   dt: d\n   data: [");
+  const Eigen::Matrix4d t = t_imu_cam(r);
+  for (int i = 0; i < 16; ++i)
+    std::fprintf(o, "%s%.12f", i == 0 ? "" : i % 4 == 0 ? ",\n           " : ", ", t(i / 4, i % 4));
+  std::fprintf(o, "]\n# s: t_imu = t_cam + td (Kalibr's timeshift_cam_imu)\n");
+  std::fprintf(o, "estimate_td: 0\ntd: %.9f\n", r.t_d);
+}
+
+void write_ros_matrix(std::FILE* o, const char* key, int rows, int cols, const double* v) {
+  std::fprintf(o, "%s:\n  rows: %d\n  cols: %d\n  data: [", key, rows, cols);
+  for (int i = 0; i < rows * cols; ++i) std::fprintf(o, "%s%.12g", i == 0 ? "" : ", ", v[i]);
+  std::fprintf(o, "]\n");
+}
+
+// ROS's camera_info as camera_calibration_parsers reads it; K holds the skew.
+void write_ros_camera_info(std::FILE* o, const CalibrationResult& r) {
+  const Pinhole<double>& k = r.intrinsics;
+  std::fprintf(o, "# mirrorcal calibration: ROS camera_info (camera_calibration_parsers)\n");
+  std::fprintf(o, "image_width: %d\nimage_height: %d\ncamera_name: cam0\n", r.width, r.height);
+  const double kk[9] = {k.fu, k.skew, k.cu, 0.0, k.fv, k.cv, 0.0, 0.0, 1.0};
+  write_ros_matrix(o, "camera_matrix", 3, 3, kk);
+  // plumb_bob is k1 k2 p1 p2 k3 (radtan with k3 = 0); equidistant is k1..k4.
+  const bool fisheye = k.distortion == Distortion::kEquidistant;
+  std::fprintf(o, "distortion_model: %s\n", fisheye ? "equidistant" : "plumb_bob");
+  const double d[5] = {k.coeffs[0], k.coeffs[1], k.coeffs[2], k.coeffs[3], 0.0};
+  write_ros_matrix(o, "distortion_coefficients", 1, fisheye ? 4 : 5, d);
+  const double identity[9] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  write_ros_matrix(o, "rectification_matrix", 3, 3, identity);
+  const double p[12] = {k.fu, k.skew, k.cu, 0.0, 0.0, k.fv, k.cv, 0.0, 0.0, 0.0, 1.0, 0.0};
+  write_ros_matrix(o, "projection_matrix", 3, 4, p);
+}
+
+}  // namespace
+
+bool export_format_from_string(const std::string& name, ExportFormat& format) {
+  if (name == "openvins")
+    format = ExportFormat::kOpenVins;
+  else if (name == "vins-fusion")
+    format = ExportFormat::kVinsFusion;
+  else if (name == "ros-camera-info")
+    format = ExportFormat::kRosCameraInfo;
+  else
+    return false;
+  return true;
+}
+
+std::string vins_camera_file(const std::string& config_path) {
+  const std::filesystem::path p(config_path);
+  return (p.parent_path() / (p.stem().string() + "_cam0.yaml")).string();
+}
+
+bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
+                  std::string& error) {
+  files::OutputSet out;
+  if (format == ExportFormat::kVinsFusion) {
+    std::FILE* camera = out.add(vins_camera_file(path), error);
+    if (camera == nullptr) return false;
+    write_vins_camera(camera, r);
+  }
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  switch (format) {
+    case ExportFormat::kOpenVins:
+      write_yaml_header(o, "mirrorcal calibration: OpenVINS kalibr_imucam_chain.yaml");
+      write_imucam_chain(o, r, true);
+      break;
+    case ExportFormat::kVinsFusion:
+      write_vins_config(o, r, std::filesystem::path(vins_camera_file(path)).filename().string());
+      break;
+    case ExportFormat::kRosCameraInfo:
+      write_ros_camera_info(o, r);
+      break;
+  }
+  return out.commit(error);
+}
+
+template <class Filter>
+bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+                         const RecordStore<HistoryRow<Filter>>& rows, Distortion lens,
+                         std::string& error) {
+  using State = typename Filter::State;
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  const auto params = calibration_params(State::kMarkers, State::kIntrinsics, lens);
+  std::fprintf(o, "#time [s],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z");
+  for (int i = 0; i < State::kMarkers; ++i)
+    for (const char* a : {"x", "y", "z"}) std::fprintf(o, ",f%d_%s [m]", i + 1, a);
+  std::fprintf(o, ",timeshift_cam_imu [s]");
+  const std::size_t first_intrinsic = params.size() - std::size_t(State::kIntrinsics);
+  const auto si_unit = [](const ParamInfo& p) {
+    return p.unit == "cm"     ? "m"
+           : p.unit == "deg"  ? "rad"
+           : p.unit == "ms"   ? "s"
+           : p.unit == "1e-3" ? "-"
+                              : "px";
+  };
+  for (std::size_t j = first_intrinsic; j < params.size(); ++j)
+    std::fprintf(o, ",%s [%s]", params[j].name.c_str(), si_unit(params[j]));
+  for (const auto& p : params) std::fprintf(o, ",sigma_%s [%s]", p.name.c_str(), si_unit(p));
+  std::fprintf(o, "\n");
+  for (const auto& r : rows) {
+    const State& x = r.state;
+    std::fprintf(o, "%.9f,%.9g,%.9g,%.9g,%.12g,%.12g,%.12g,%.12g", double(r.t_ns) * 1e-9,
+                 double(x.p_b_c.x()), double(x.p_b_c.y()), double(x.p_b_c.z()), double(x.q_b_c.w()),
+                 double(x.q_b_c.x()), double(x.q_b_c.y()), double(x.q_b_c.z()));
+    for (int j = 0; j < 3 * State::kMarkers; ++j) std::fprintf(o, ",%.9g", double(x.markers(j)));
+    std::fprintf(o, ",%.9g", double(x.t_d));
+    for (int j = 0; j < State::kIntrinsics; ++j) std::fprintf(o, ",%.9g", double(x.intrinsics(j)));
+    for (int j = 0; j < r.sigma.size(); ++j) std::fprintf(o, ",%.6g", r.sigma(j));
+    std::fprintf(o, "\n");
+  }
+  return true;
+}
+
+template <class Filter>
+bool write_features_csv(files::OutputSet& out, const std::string& path,
+                        const RecordStore<HistoryRow<Filter>>& rows, std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  std::fprintf(o, "%s\n", sim::kFeaturesHeader);
+  for (const auto& r : rows)
+    for (std::size_t i = 0; i < r.seen.size(); ++i) {
+      if (!r.seen[i]) continue;
+      char line[128];
+      char* p = line;
+      char* const end = line + sizeof line - 1;
+      p = std::to_chars(p, end, r.t_ns).ptr;
+      *p++ = ',';
+      p = std::to_chars(p, end, i).ptr;
+      *p++ = ',';
+      p = std::to_chars(p, end, r.measured[i].x()).ptr;
+      *p++ = ',';
+      p = std::to_chars(p, end, r.measured[i].y()).ptr;
+      *p++ = '\n';
+      std::fwrite(line, 1, std::size_t(p - line), o);
+    }
+  return true;
+}
+
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
+                                 std::string&);
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
+                                 std::string&);
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
+                                 std::string&);
+template bool write_features_csv(files::OutputSet&, const std::string&,
+                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
+                                 std::string&);
+
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
+                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
+                                  Distortion, std::string&);
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
+                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
+                                  Distortion, std::string&);
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
+                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
+                                  Distortion, std::string&);
+template bool write_estimates_csv(files::OutputSet&, const std::string&,
+                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
+                                  Distortion, std::string&);
+
+}  // namespace mirrorcal::app

@@ -1,0 +1,69 @@
+// Bright-blob detection: the marker reflections are small blurred bright spots on a darker scene.
+// Pixels above a threshold are grouped into 4-connected blobs; a blob of plausible size gets a
+// sub-pixel centroid weighted by its intensity above the local background, its flux (the summed
+// intensity above background, which tells markers of different brightness apart) and its spread
+// (a second moment that tells one spot from two merged ones). Buffers are sized at construction;
+// detect() does not allocate.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mirrorcal/hal/frames.hpp"
+
+namespace mirrorcal::detection {
+
+struct BlobConfig {
+  int threshold = 60;  // luma (0-255) above which a pixel belongs to a blob
+  int min_area = 2;    // pixels above threshold: fewer is noise or a hot pixel
+  int max_area = 400;  // more is a lamp or a window, not a marker
+  // The window for the background and the centroid extends the blob's box by this many pixels:
+  // enough to hold the spot's tails (about 3 PSF sigmas).
+  int margin = 4;
+  // Radius of the disc the centroid is refined on (px): the spot's core, about 3 PSF sigmas.
+  double centroid_radius = 3.5;
+};
+
+struct Blob {
+  double u = 0.0, v = 0.0;  // intensity-weighted centroid (px, origin at the top-left pixel centre)
+  double flux = 0.0;        // summed luma above the local background
+  double spread = 0.0;      // largest eigenvalue of the weighted second moment (px^2)
+  int area = 0;             // pixels above threshold
+  int peak = 0;             // brightest luma
+  // Another blob lies within twice the centroid radius: its tail may pull this centroid.
+  bool crowded = false;
+  // The centroid's disc reaches past the image's edge: the spot is cut, the centroid biased.
+  bool truncated = false;
+};
+
+struct BlobCounters {
+  std::uint64_t frames = 0;
+  std::uint64_t blobs = 0;
+  std::uint64_t too_small = 0;
+  std::uint64_t too_large = 0;  // includes blobs cut off by the edge of the fill
+  std::uint64_t overflow = 0;   // blobs beyond the caller's capacity
+};
+
+class BlobDetector {
+ public:
+  BlobDetector(const BlobConfig& config, int max_width, int max_height);
+
+  // Finds the blobs of a frame, in scan order (top to bottom); returns how many were written to
+  // out (at most capacity), each flagged if crowded. A frame larger than the size given at
+  // construction yields none.
+  int detect(const hal::FrameView& frame, Blob* out, int capacity);
+
+  const BlobConfig& config() const { return config_; }
+  const BlobCounters& counters() const { return counters_; }
+
+ private:
+  bool measure(const hal::FrameView& f, int x0, int y0, int x1, int y1, Blob& b) const;
+
+  BlobConfig config_;
+  int max_width_, max_height_;
+  std::vector<std::uint8_t> visited_;  // one flag per pixel
+  std::vector<std::int32_t> stack_;    // flood-fill work list (pixel indices)
+  BlobCounters counters_{};
+};
+
+}  // namespace mirrorcal::detection

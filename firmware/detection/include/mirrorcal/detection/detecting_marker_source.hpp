@@ -1,0 +1,104 @@
+// The loop's marker source on a camera: frames from a hal::FrameSource, blobs found in each and
+// labelled as markers. poll() labels by brightness alone; the loop, once it has propagated the
+// filter to the frame's time, relabels the frame with the filter's prediction (relabel(), through
+// CalibrationLoop::set_identifier). The same code runs on the board (V4L2 frames) and in the host
+// simulation (rendered frames). Nothing allocates per frame.
+#pragma once
+
+#include <array>
+#include <chrono>
+
+#include "mirrorcal/detection/blob_detector.hpp"
+#include "mirrorcal/detection/marker_identifier.hpp"
+#include "mirrorcal/hal/frames.hpp"
+#include "mirrorcal/hal/sources.hpp"
+
+namespace mirrorcal::detection {
+
+template <int M>
+struct DetectionConfig {
+  BlobConfig blobs{};
+  IdentifierConfig<M> identify{};
+};
+
+struct DetectionCounters {
+  std::uint64_t frames = 0;           // frames detected in
+  std::uint64_t corrupt_skipped = 0;  // frames the device flagged as damaged: not used
+  std::uint64_t relabelled = 0;       // frames labelled with the filter's prediction
+  double detect_seconds = 0.0;        // wall time spent in detection and identification
+};
+
+template <int M>
+class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
+ public:
+  DetectingMarkerSource(hal::FrameSource& frames, const DetectionConfig<M>& config, int max_width,
+                        int max_height)
+      : frames_(frames),
+        detector_(config.blobs, max_width, max_height),
+        identifier_(config.identify) {}
+
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override {
+    hal::FrameView view;
+    for (;;) {
+      const hal::SourceStatus st = frames_.poll(view);
+      if (st != hal::SourceStatus::kOk) return st;
+      if ((view.flags & hal::kFrameCorrupt) == 0) break;
+      ++counters_.corrupt_skipped;
+    }
+    last_view_ = view;
+    const auto t0 = std::chrono::steady_clock::now();
+    blob_count_ = detector_.detect(view, blobs_.data(), static_cast<int>(blobs_.size()));
+    committed_ += last_;  // the previous frame's labelling is final now
+    last_ = identifier_.identify(blobs_.data(), blob_count_, nullptr, frame);
+    frame.t_ns = view.t_ns;
+    const double seconds = seconds_since(t0);
+    last_detection_ns_ = static_cast<std::int64_t>(seconds * 1e9);
+    counters_.detect_seconds += seconds;
+    ++counters_.frames;
+    return hal::SourceStatus::kOk;
+  }
+
+  void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    last_ = identifier_.identify(blobs_.data(), blob_count_, &prediction, frame);
+    counters_.detect_seconds += seconds_since(t0);
+    ++counters_.relabelled;
+  }
+
+  const char* error() const override { return frames_.error(); }
+  // Detection's share of the last poll that delivered a frame, for the loop's timing budget.
+  std::int64_t detection_ns() const override { return last_detection_ns_; }
+
+  const DetectionCounters& counters() const { return counters_; }
+  const BlobCounters& blob_counters() const { return detector_.counters(); }
+  IdentifierCounters identifier_counters() const {
+    IdentifierCounters c = committed_;
+    c += last_;
+    return c;
+  }
+  hal::FrameCounters frame_counters() const { return frames_.counters(); }
+  // The image of the last frame delivered (record --images keeps it), valid until the next poll.
+  const hal::FrameView& last_frame() const { return last_view_; }
+  // The blobs of the last frame (for diagnostics and tests).
+  const Blob* last_blobs(int& n) const {
+    n = blob_count_;
+    return blobs_.data();
+  }
+
+ private:
+  static double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  hal::FrameSource& frames_;
+  BlobDetector detector_;
+  MarkerIdentifier<M> identifier_;
+  std::array<Blob, MarkerIdentifier<M>::kMaxBlobs> blobs_{};
+  int blob_count_ = 0;
+  hal::FrameView last_view_{};
+  IdentifierCounters committed_{}, last_{};
+  DetectionCounters counters_{};
+  std::int64_t last_detection_ns_ = 0;
+};
+
+}  // namespace mirrorcal::detection

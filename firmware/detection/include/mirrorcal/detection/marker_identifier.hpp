@@ -1,0 +1,263 @@
+// Which marker is which blob. Two cues: where the filter predicts each marker's reflection (a
+// Mahalanobis gate on the predicted covariance), and how bright each marker is relative to the
+// others (the rig's markers differ in brightness, 1 : 1.5 : 2.25 by default, so the ratio of two
+// blobs' fluxes names them even while the prediction is still vague). Every assignment of blobs
+// to markers within the gates is scored; the best wins, and a marker that some other assignment
+// within a margin of the best labels differently is dropped, as are markers whose predictions lie
+// on top of each other (crossing), and blobs too spread out to be one spot (two merged reflections)
+// or too close to another blob to be measured cleanly. A missing marker costs more than a poor
+// match, a wrong label is avoided at the price of a frame. Header-only; nothing allocates.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "mirrorcal/detection/blob_detector.hpp"
+#include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/hal/frames.hpp"
+
+namespace mirrorcal::detection {
+
+template <int M>
+struct IdentifierConfig {
+  // Squared Mahalanobis distance (2 dof) beyond which a blob cannot be the marker: 99.9 %.
+  double gate_chi2 = 13.8155;
+  // Added to the predicted covariance (px, 1-sigma per axis): the centroid's noise and the motion
+  // between the filter's time and the frame's (up to one IMU period).
+  double extra_sigma_px = 3.0;
+  // Relative brightness of the markers (any scale); all equal switches the cue off.
+  std::array<double, M> brightness = default_brightness();
+  double log_flux_sigma = 0.15;  // spread of log(flux) about the brightness model
+  // A runner-up assignment costing less than this much more than the best puts every label it
+  // disputes in doubt.
+  double ambiguity_margin = 6.0;
+  // Two markers predicted closer than this (px) with a confident prediction are crossing: their
+  // reflections merge or may swap, so both are dropped.
+  double min_separation_px = 6.0;
+  // A blob whose spread (px^2) exceeds this is more than one spot.
+  double max_spread_px2 = 4.0;
+
+  static constexpr std::array<double, M> default_brightness() {
+    std::array<double, M> b{};
+    double v = 1.0;
+    for (int i = 0; i < M; ++i) {
+      b[static_cast<std::size_t>(i)] = v;
+      v *= 1.5;
+    }
+    return b;
+  }
+};
+
+struct IdentifierCounters {
+  std::uint64_t frames = 0;
+  std::uint64_t identified = 0;  // markers labelled
+  std::uint64_t ambiguous = 0;   // markers dropped because the label was in doubt
+  std::uint64_t crossing = 0;    // markers dropped because their predictions met
+  std::uint64_t refused = 0;     // blobs refused: two spots in one, crowded, or cut by the edge
+  std::uint64_t unassigned = 0;  // blobs left over (spurious, or markers out of the gates)
+
+  IdentifierCounters& operator+=(const IdentifierCounters& o) {
+    frames += o.frames;
+    identified += o.identified;
+    ambiguous += o.ambiguous;
+    crossing += o.crossing;
+    refused += o.refused;
+    unassigned += o.unassigned;
+    return *this;
+  }
+};
+
+template <int M>
+class MarkerIdentifier {
+ public:
+  static constexpr int kMaxBlobs = 32;
+  // The blobs considered per marker: the nearest to its prediction, or without one the brightest.
+  static constexpr int kCandidates = 6;
+
+  explicit MarkerIdentifier(const IdentifierConfig<M>& config) : config_(config) {
+    for (int i = 0; i < M; ++i)
+      log_brightness_[i] = std::log(config.brightness[static_cast<std::size_t>(i)]);
+  }
+
+  // Labels blobs[0..n) into frame (seen/uv; t_ns is the caller's) and says what it met.
+  // prediction may be null: then brightness alone decides.
+  IdentifierCounters identify(const Blob* blobs, int n, const hal::MarkerPrediction<M>* prediction,
+                              MarkerFrame<M>& frame) {
+    IdentifierCounters counters;
+    counters.frames = 1;
+    frame.seen.fill(false);
+    if (n > kMaxBlobs) n = kMaxBlobs;
+    blobs_ = blobs;
+
+    // Candidate blobs per marker, nearest first by Mahalanobis distance.
+    std::array<bool, M> crossing{};
+    for (int i = 0; i < M; ++i) {
+      count_[i] = 0;
+      const bool predicted =
+          prediction == nullptr || prediction->valid[static_cast<std::size_t>(i)];
+      if (!predicted) continue;
+      Eigen::Matrix2d info = Eigen::Matrix2d::Identity();
+      if (prediction != nullptr) {
+        const Eigen::Matrix2d c =
+            prediction->covariance[static_cast<std::size_t>(i)] +
+            config_.extra_sigma_px * config_.extra_sigma_px * Eigen::Matrix2d::Identity();
+        info = c.inverse();
+      }
+      for (int j = 0; j < n; ++j) {
+        if (!single_spot(blobs[j])) continue;
+        if (prediction == nullptr) {
+          // Without a prediction every blob is as near as any other: the brightest are the
+          // candidates (markers are the scene's bright spots), whatever their order in the image.
+          insert_candidate(i, j, 0.0, -blobs[j].flux);
+          continue;
+        }
+        const Eigen::Vector2d r =
+            Eigen::Vector2d(blobs[j].u, blobs[j].v) - prediction->uv[static_cast<std::size_t>(i)];
+        const double d2 = r.dot(info * r);
+        if (!(d2 <= config_.gate_chi2)) continue;
+        insert_candidate(i, j, d2, d2);
+      }
+    }
+    for (int j = 0; j < n; ++j)
+      if (!single_spot(blobs[j])) ++counters.refused;
+    if (prediction != nullptr) mark_crossing(*prediction, crossing);
+
+    // The best assignment; then, per marker, the cheapest assignment that labels it otherwise.
+    best_cost_ = std::numeric_limits<double>::infinity();
+    used_.fill(false);
+    search(0, 0.0, false);
+    alt_cost_.fill(std::numeric_limits<double>::infinity());
+    search(0, 0.0, true);
+
+    int labelled = 0;
+    for (int i = 0; i < M; ++i) {
+      const int j = best_[i];
+      if (j < 0) continue;
+      if (crossing[static_cast<std::size_t>(i)]) {
+        ++counters.crossing;
+        continue;
+      }
+      if (alt_cost_[static_cast<std::size_t>(i)] < best_cost_ + config_.ambiguity_margin) {
+        ++counters.ambiguous;
+        continue;
+      }
+      frame.seen[static_cast<std::size_t>(i)] = true;
+      frame.uv[static_cast<std::size_t>(i)] = Eigen::Vector2d(blobs[j].u, blobs[j].v);
+      ++labelled;
+    }
+    counters.identified += static_cast<std::uint64_t>(labelled);
+    int assigned = 0;
+    for (int i = 0; i < M; ++i) assigned += best_[i] >= 0 ? 1 : 0;
+    counters.unassigned += static_cast<std::uint64_t>(n - assigned);
+    return counters;
+  }
+
+  const IdentifierConfig<M>& config() const { return config_; }
+
+ private:
+  // A blob that may hold two spots, whose centroid a neighbour's tail can pull, or whose spot
+  // the image's edge cuts (its centroid pulled inwards by up to a pixel) is no marker's: a frame
+  // without it costs less than a biased or swapped position.
+  bool single_spot(const Blob& b) const {
+    return !b.crowded && !b.truncated && b.spread <= config_.max_spread_px2;
+  }
+
+  // Keeps marker i's kCandidates blobs of lowest rank, each with its cost d2.
+  void insert_candidate(int i, int j, double d2, double rank) {
+    int k = count_[i] < kCandidates ? count_[i]++ : kCandidates;
+    if (k == kCandidates) {
+      if (rank >= cand_rank_[i][kCandidates - 1]) return;
+      k = kCandidates - 1;
+    }
+    while (k > 0 && cand_rank_[i][k - 1] > rank) {
+      cand_[i][k] = cand_[i][k - 1];
+      cand_d2_[i][k] = cand_d2_[i][k - 1];
+      cand_rank_[i][k] = cand_rank_[i][k - 1];
+      --k;
+    }
+    cand_[i][k] = j;
+    cand_d2_[i][k] = d2;
+    cand_rank_[i][k] = rank;
+  }
+
+  // Markers whose predictions coincide while both are confident: crossing reflections.
+  void mark_crossing(const hal::MarkerPrediction<M>& p, std::array<bool, M>& crossing) const {
+    const double sep2 = config_.min_separation_px * config_.min_separation_px;
+    for (int i = 0; i < M; ++i)
+      for (int k = i + 1; k < M; ++k) {
+        const auto a = static_cast<std::size_t>(i), b = static_cast<std::size_t>(k);
+        if (!p.valid[a] || !p.valid[b]) continue;
+        const double spread = p.covariance[a].trace() + p.covariance[b].trace();
+        if ((p.uv[a] - p.uv[b]).squaredNorm() < sep2 && spread < sep2)
+          crossing[a] = crossing[b] = true;
+      }
+  }
+
+  // Depth-first over the assignments (costs only grow, so a partial cost prunes). The first pass
+  // finds the best; the second (alternatives) records, per marker, the cheapest assignment that
+  // labels it otherwise, among those within the ambiguity margin of the best.
+  void search(int i, double cost, bool alternatives) {
+    const double bound = alternatives ? best_cost_ + config_.ambiguity_margin : best_cost_;
+    if (cost >= bound) return;
+    if (i == M) {
+      cost += brightness_cost();
+      if (cost >= bound) return;
+      if (!alternatives) {
+        best_cost_ = cost;
+        best_ = current_;
+        return;
+      }
+      for (int k = 0; k < M; ++k) {
+        auto& alt = alt_cost_[static_cast<std::size_t>(k)];
+        if (current_[k] != best_[k] && cost < alt) alt = cost;
+      }
+      return;
+    }
+    current_[i] = -1;  // not seen: costs as much as a blob at the gate's edge
+    search(i + 1, cost + config_.gate_chi2, alternatives);
+    for (int k = 0; k < count_[i]; ++k) {
+      const int j = cand_[i][k];
+      if (used_[static_cast<std::size_t>(j)]) continue;
+      used_[static_cast<std::size_t>(j)] = true;
+      current_[i] = j;
+      search(i + 1, cost + cand_d2_[i][k], alternatives);
+      used_[static_cast<std::size_t>(j)] = false;
+    }
+    current_[i] = -1;
+  }
+
+  // How badly the labelled blobs' fluxes fit the brightness ratios, with the common scale (the
+  // exposure, the distance) fitted: sum of squared log residuals about their mean over sigma^2.
+  double brightness_cost() const {
+    double r[M];
+    int n = 0;
+    double mean = 0.0;
+    for (int i = 0; i < M; ++i) {
+      const int j = current_[i];
+      if (j < 0) continue;
+      r[n] = std::log(blobs_[j].flux) - log_brightness_[i];
+      mean += r[n++];
+    }
+    if (n < 2) return 0.0;
+    mean /= n;
+    double ss = 0.0;
+    for (int k = 0; k < n; ++k) ss += (r[k] - mean) * (r[k] - mean);
+    return ss / (config_.log_flux_sigma * config_.log_flux_sigma);
+  }
+
+  IdentifierConfig<M> config_;
+  double log_brightness_[M]{};
+  const Blob* blobs_ = nullptr;
+  int count_[M]{};
+  int cand_[M][kCandidates]{};
+  double cand_d2_[M][kCandidates]{};
+  double cand_rank_[M][kCandidates]{};
+  std::array<bool, kMaxBlobs> used_{};
+  std::array<int, M> current_{}, best_{};
+  std::array<double, M> alt_cost_{};
+  double best_cost_ = 0.0;
+};
+
+}  // namespace mirrorcal::detection

@@ -1,0 +1,156 @@
+#include "mirrorcal/detection/blob_detector.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace mirrorcal::detection {
+
+BlobDetector::BlobDetector(const BlobConfig& config, int max_width, int max_height)
+    : config_(config),
+      max_width_(max_width),
+      max_height_(max_height),
+      visited_(static_cast<std::size_t>(max_width) * static_cast<std::size_t>(max_height)),
+      stack_(static_cast<std::size_t>(max_width) * static_cast<std::size_t>(max_height)) {}
+
+int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
+  ++counters_.frames;
+  if (f.width > max_width_ || f.height > max_height_ || f.data == nullptr) return 0;
+  const int w = f.width, h = f.height;
+  const int step = hal::bytes_per_pixel(f.format);
+  const int threshold = config_.threshold;
+  std::memset(visited_.data(), 0, static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+  const auto luma = [&](int x, int y) {
+    return static_cast<int>(
+        f.data[static_cast<std::size_t>(y) * static_cast<std::size_t>(f.bytes_per_line) +
+               static_cast<std::size_t>(x * step)]);
+  };
+
+  int found = 0;
+  for (int y = 0; y < h; ++y) {
+    const std::uint8_t* row =
+        f.data + static_cast<std::size_t>(y) * static_cast<std::size_t>(f.bytes_per_line);
+    for (int x = 0; x < w; ++x) {
+      if (row[x * step] <= threshold || visited_[static_cast<std::size_t>(y * w + x)] != 0)
+        continue;
+      // Flood fill (4-connected) from this seed; the stack holds at most every pixel once.
+      int top = 0, area = 0, peak = 0;
+      int x0 = x, x1 = x, y0 = y, y1 = y;
+      stack_[static_cast<std::size_t>(top++)] = y * w + x;
+      visited_[static_cast<std::size_t>(y * w + x)] = 1;
+      while (top > 0) {
+        const int p = stack_[static_cast<std::size_t>(--top)];
+        const int px = p % w, py = p / w;
+        ++area;
+        peak = std::max(peak, luma(px, py));
+        x0 = std::min(x0, px);
+        x1 = std::max(x1, px);
+        y0 = std::min(y0, py);
+        y1 = std::max(y1, py);
+        const int nx[4] = {px - 1, px + 1, px, px};
+        const int ny[4] = {py, py, py - 1, py + 1};
+        for (int k = 0; k < 4; ++k) {
+          if (nx[k] < 0 || nx[k] >= w || ny[k] < 0 || ny[k] >= h) continue;
+          const auto q = static_cast<std::size_t>(ny[k] * w + nx[k]);
+          if (visited_[q] != 0 || luma(nx[k], ny[k]) <= threshold) continue;
+          visited_[q] = 1;
+          stack_[static_cast<std::size_t>(top++)] = static_cast<std::int32_t>(q);
+        }
+      }
+      if (area < config_.min_area) {
+        ++counters_.too_small;
+        continue;
+      }
+      if (area > config_.max_area) {
+        ++counters_.too_large;
+        continue;
+      }
+      Blob b;
+      b.area = area;
+      b.peak = peak;
+      if (!measure(f, x0, y0, x1, y1, b)) {
+        ++counters_.too_small;
+        continue;
+      }
+      ++counters_.blobs;
+      if (found >= capacity) {
+        ++counters_.overflow;
+        continue;
+      }
+      out[found++] = b;
+    }
+  }
+  const double near = 2.0 * config_.centroid_radius;
+  for (int i = 0; i < found; ++i)
+    for (int j = i + 1; j < found; ++j)
+      if (std::hypot(out[i].u - out[j].u, out[i].v - out[j].v) < near)
+        out[i].crowded = out[j].crowded = true;
+  return found;
+}
+
+// Centroid, flux and spread over the blob's box grown by the margin: the background is the mean
+// of the window's outer ring, and every pixel weighs by its luma above it (clipped at zero), so
+// the spot's tails below the threshold count too and the centroid is not pulled to the pixel grid.
+bool BlobDetector::measure(const hal::FrameView& f, int x0, int y0, int x1, int y1, Blob& b) const {
+  const int m = config_.margin;
+  const int wx0 = std::max(0, x0 - m), wx1 = std::min(f.width - 1, x1 + m);
+  const int wy0 = std::max(0, y0 - m), wy1 = std::min(f.height - 1, y1 + m);
+  const int step = hal::bytes_per_pixel(f.format);
+  const auto luma = [&](int x, int y) {
+    return static_cast<double>(
+        f.data[static_cast<std::size_t>(y) * static_cast<std::size_t>(f.bytes_per_line) +
+               static_cast<std::size_t>(x * step)]);
+  };
+  double ring = 0.0;
+  int ring_n = 0;
+  for (int x = wx0; x <= wx1; ++x) {
+    ring += luma(x, wy0) + luma(x, wy1);
+    ring_n += 2;
+  }
+  for (int y = wy0 + 1; y < wy1; ++y) {
+    ring += luma(wx0, y) + luma(wx1, y);
+    ring_n += 2;
+  }
+  const double background = ring / ring_n;
+
+  // First estimate over the whole window, then re-centre a disc on it: a window symmetric about
+  // the estimate makes the clipped noise and the truncated tails pull equally both ways.
+  const double r2 = config_.centroid_radius * config_.centroid_radius;
+  double s = 0.0, cu = 0.5 * (x0 + x1), cv = 0.5 * (y0 + y1), cuu = 0.0, cvv = 0.0, cuv = 0.0;
+  for (int pass = 0; pass < 4; ++pass) {
+    const bool disc = pass > 0;
+    double ws = 0.0, su = 0.0, sv = 0.0, suu = 0.0, svv = 0.0, suv = 0.0;
+    for (int y = wy0; y <= wy1; ++y) {
+      for (int x = wx0; x <= wx1; ++x) {
+        const double du = x - cu, dv = y - cv;
+        if (disc && du * du + dv * dv > r2) continue;
+        const double wgt = luma(x, y) - background;
+        if (wgt <= 0.0) continue;
+        ws += wgt;
+        su += wgt * du;
+        sv += wgt * dv;
+        suu += wgt * du * du;
+        svv += wgt * dv * dv;
+        suv += wgt * du * dv;
+      }
+    }
+    if (!(ws > 0.0)) return false;
+    const double mu = su / ws, mv = sv / ws;
+    s = ws;
+    cuu = suu / ws - mu * mu;
+    cvv = svv / ws - mv * mv;
+    cuv = suv / ws - mu * mv;
+    cu += mu;
+    cv += mv;
+  }
+  b.u = cu;
+  b.v = cv;
+  const double r = config_.centroid_radius;
+  b.truncated = cu - r < -0.5 || cv - r < -0.5 || cu + r > f.width - 0.5 || cv + r > f.height - 0.5;
+  b.flux = s;
+  const double half_trace = 0.5 * (cuu + cvv);
+  b.spread = half_trace + std::sqrt(std::max(0.0, 0.25 * (cuu - cvv) * (cuu - cvv) + cuv * cuv));
+  return true;
+}
+
+}  // namespace mirrorcal::detection

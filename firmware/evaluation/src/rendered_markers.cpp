@@ -1,0 +1,109 @@
+#include "mirrorcal/evaluation/rendered_markers.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+namespace mirrorcal::app {
+
+DetectionReport combine(const std::vector<DetectionReport>& runs) {
+  DetectionReport all;
+  double sum_sq = 0.0, ms = 0.0;
+  for (const DetectionReport& r : runs) {
+    all.frames += r.frames;
+    all.markers_drawn += r.markers_drawn;
+    all.markers_labelled += r.markers_labelled;
+    all.wrong_labels += r.wrong_labels;
+    all.wrong_labels_before += r.wrong_labels_before;
+    all.dropped_in_doubt += r.dropped_in_doubt;
+    all.unlabelled_blobs += r.unlabelled_blobs;
+    const double good = static_cast<double>(r.markers_labelled - r.wrong_labels);
+    sum_sq += r.centroid_rms_px * r.centroid_rms_px * good;
+    for (int k = 0; k < 2; ++k) all.centroid_mean_px[k] += r.centroid_mean_px[k] * good;
+    all.centroid_max_px = std::max(all.centroid_max_px, r.centroid_max_px);
+    ms += r.ms_per_frame * static_cast<double>(r.frames);
+  }
+  const double good = static_cast<double>(all.markers_labelled - all.wrong_labels);
+  all.centroid_rms_px = good > 0 ? std::sqrt(sum_sq / good) : 0.0;
+  for (int k = 0; k < 2; ++k)
+    all.centroid_mean_px[k] = good > 0 ? all.centroid_mean_px[k] / good : 0.0;
+  all.ms_per_frame = all.frames > 0 ? ms / static_cast<double>(all.frames) : 0.0;
+  return all;
+}
+
+void print_detection(const DetectionReport& d, hal::PixelFormat format) {
+  std::printf(
+      "detection (%s frames, last pass): %llu frames, %llu of %llu reflections labelled, %llu "
+      "wrong labels (%llu in earlier passes), "
+      "%llu withheld in doubt, %llu blobs unlabelled; centroid error %.3f px RMS (max %.3f, "
+      "mean %+.4f, %+.4f) against the spots drawn; %.2f ms per frame\n",
+      hal::to_string(format), (unsigned long long)d.frames, (unsigned long long)d.markers_labelled,
+      (unsigned long long)d.markers_drawn, (unsigned long long)d.wrong_labels,
+      (unsigned long long)d.wrong_labels_before, (unsigned long long)d.dropped_in_doubt,
+      (unsigned long long)d.unlabelled_blobs, d.centroid_rms_px, d.centroid_max_px,
+      d.centroid_mean_px[0], d.centroid_mean_px[1], d.ms_per_frame);
+}
+
+detection::DetectionConfig<kMarkers> detection_config(const sim::RenderConfig& render) {
+  detection::DetectionConfig<kMarkers> c;
+  for (int i = 0; i < kMarkers; ++i)
+    c.identify.brightness[static_cast<std::size_t>(i)] =
+        render.brightness[static_cast<std::size_t>(i) % render.brightness.size()];
+  return c;
+}
+
+RenderedMarkers::RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
+                                 std::uint64_t seed)
+    : frames_(s, render, seed),
+      detect_(frames_, detection_config(render), s.truth.width, s.truth.height) {}
+
+void RenderedMarkers::relabel(const hal::MarkerPrediction<kMarkers>& prediction,
+                              MarkerFrame<kMarkers>& frame) {
+  detect_.relabel(prediction, frame);
+  // The loop holds one frame at a time, so the renderer's last frame is this one.
+  const sim::RenderedTruth& truth = frames_.truth();
+  ++report_.frames;
+  for (int i = 0; i < kMarkers; ++i) {
+    const auto ii = static_cast<std::size_t>(i);
+    if (truth.visible[ii]) ++report_.markers_drawn;
+    if (!frame.seen[ii]) continue;
+    ++report_.markers_labelled;
+    // The spot drawn nearest to the reported position says which marker it really is.
+    int nearest = -1;
+    double best = INFINITY;
+    for (int k = 0; k < kMarkers; ++k) {
+      const auto kk = static_cast<std::size_t>(k);
+      if (!truth.visible[kk]) continue;
+      const double d = (frame.uv[ii] - truth.uv[kk]).norm();
+      if (d < best) {
+        best = d;
+        nearest = k;
+      }
+    }
+    if (nearest != i) {
+      ++report_.wrong_labels;
+      continue;
+    }
+    sum_sq_ += best * best;
+    sum_u_ += frame.uv[ii].x() - truth.uv[ii].x();
+    sum_v_ += frame.uv[ii].y() - truth.uv[ii].y();
+    report_.centroid_max_px = std::max(report_.centroid_max_px, best);
+  }
+}
+
+DetectionReport RenderedMarkers::report() const {
+  DetectionReport r = report_;
+  const std::uint64_t good = r.markers_labelled - r.wrong_labels;
+  r.centroid_rms_px = good > 0 ? std::sqrt(sum_sq_ / static_cast<double>(good)) : 0.0;
+  r.centroid_mean_px[0] = good > 0 ? sum_u_ / static_cast<double>(good) : 0.0;
+  r.centroid_mean_px[1] = good > 0 ? sum_v_ / static_cast<double>(good) : 0.0;
+  r.ms_per_frame =
+      r.frames > 0 ? 1e3 * detect_.counters().detect_seconds / static_cast<double>(r.frames) : 0.0;
+  const detection::IdentifierCounters& id = detect_.identifier_counters();
+  r.dropped_in_doubt = id.ambiguous + id.crossing + id.refused;
+  r.unlabelled_blobs = id.unassigned;
+  return r;
+}
+
+}  // namespace mirrorcal::app

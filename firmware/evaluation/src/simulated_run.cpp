@@ -1,0 +1,147 @@
+#include "mirrorcal/evaluation/simulated_run.hpp"
+
+#include <optional>
+
+#include "mirrorcal/evaluation/rendered_markers.hpp"
+
+namespace mirrorcal::app {
+
+CalibrationConfig scenario_config(const sim::Scenario& s) {
+  CalibrationConfig c;
+  c.gravity_n = s.gravity_n;
+  c.imu = s.imu;
+  c.pixel_sigma = s.pixel_sigma;
+  c.intrinsics = s.truth.intrinsics;
+  if (s.told_line_delay_s) c.intrinsics.line_delay_s = *s.told_line_delay_s;
+  return c;
+}
+
+LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
+  LoopData d;
+  d.imu = data.imu;
+  d.frames = data.frames;
+  d.imu_period_ns = imu_period_ns(s.imu_rate_hz);
+  d.width = s.truth.width;
+  d.height = s.truth.height;
+  return d;
+}
+
+SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                         const std::function<void(double)>& progress, const FrameMode& frames,
+                         firmware::LoopProfiler* profiler, Passes passes) {
+  using Run = SimRun<0>;
+  const sim::SimData data = sim::simulate(s, seed);
+  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
+  Run::State x0;
+  Run::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  const Run::State truth = truth_state<Run::State>(s);
+  // With frames, every pass renders and detects them afresh (detection follows the prediction).
+  std::optional<RenderedMarkers> rendered;
+  std::uint64_t wrong_labels_before = 0;
+  const auto hooks = [&](int pass) {
+    LoopHooks h;
+    // The timing of one pass: the last of those always made.
+    if (pass == passes.min - 1) h.profiler = profiler;
+    if (frames.enabled) {
+      sim::RenderConfig render;
+      render.format = frames.format;
+      render.spot_noise_px = frames.spot_noise_px >= 0.0 ? frames.spot_noise_px : s.pixel_sigma;
+      if (rendered) wrong_labels_before += rendered->report().wrong_labels;
+      rendered.emplace(s, render, sim::derive_seed(seed, 200));
+      h.source = &*rendered;
+      h.relabeler = &*rendered;
+    }
+    return h;
+  };
+  CalibrationConfig config = scenario_config(s);
+  if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
+  Run run = run_loop<0>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
+  run.markers_out_of_image = data.markers_out_of_image;
+  if (rendered) {
+    run.detection = rendered->report();
+    run.detection.wrong_labels_before = wrong_labels_before;
+  }
+  return run;
+}
+
+std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed) {
+  using Run = SimRun<0>;
+  const sim::SimData noisy = sim::simulate(s, seed);
+  Run::State x0;
+  Run::Filter::Covariance p0;
+  initialise(sim::simulation_prior<kMarkers>(s, noisy, seed), x0, p0);
+  sim::Scenario clean = s;  // the same rig, motion and true biases; no noise, no bias walk
+  clean.pixel_sigma = 0.0;
+  clean.imu.gyro_noise_density = clean.imu.accel_noise_density = 0.0;
+  clean.imu.gyro_random_walk = clean.imu.accel_random_walk = 0.0;
+  const sim::SimData data = sim::simulate(clean, seed);
+  Run::State start = truth_state<Run::State>(s);
+  const sim::Kinematics k = sim::kinematics(s.motion, 0.0);
+  start.p = k.p;
+  start.v = k.v;
+  start.q_n_b = k.q_n_b;
+  start.b_a = data.b_a0;
+  start.b_g = data.b_g0;
+  const Run run = run_single_pass<0>(scenario_config(s), start, p0, loop_data(s, data), nullptr);
+  std::vector<double> sigma;
+  for (int i = Run::State::kPbc; i < Run::State::kDim; ++i)
+    sigma.push_back(std::sqrt(run.covariance(i, i)));
+  return sigma;
+}
+
+template <int NK>
+SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress) {
+  const auto half = [&](double offset) {
+    return [&progress, offset](double f) {
+      if (progress) progress(offset + 0.5 * f);
+    };
+  };
+  const SimRun<0> stage1 = run_simulation(s, seed, half(0.0));
+
+  using Run = SimRun<NK>;
+  using State = typename Run::State;
+  const std::uint64_t seed2 = sim::derive_seed(seed, sim::kStage2SeedStream);
+  const sim::SimData data = sim::simulate(s, seed2);
+  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed2);
+  State x0;
+  typename Run::Filter::Covariance p0;
+  initialise(prior, x0, p0);
+  // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
+  start_from(calibration_start(stage1.result), x0, p0);
+  const State truth = truth_state<State>(s);
+  Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
+  return run;
+}
+
+template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+
+template <int NK>
+SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress) {
+  using Run = SimRun<NK>;
+  const sim::SimData data = sim::simulate(s, seed);
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
+  initialise(sim::simulation_prior<kMarkers>(s, data, seed), x0, p0);
+  const typename Run::State truth = truth_state<typename Run::State>(s);
+  Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
+  run.markers_out_of_image = data.markers_out_of_image;
+  return run;
+}
+
+template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+template SimRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                               const std::function<void(double)>&);
+
+}  // namespace mirrorcal::app
