@@ -8,8 +8,8 @@
 //                       V4L2_BUF_FLAG_ERROR" as frames flagged corrupt, counted; neither fatal
 //   calibrate grey|yuyv the full loop calibrates from markers detected in frames that crossed
 //                       the kernel (a short run of the paper scenario)
-// vivid is loaded with one HDMI input (/dev/video0) and one HDMI output (/dev/video1); DESIGN.md,
-// "Real kernels for the drivers", says how it loops video on Linux 6.1.
+// vivid is loaded with one HDMI input (/dev/video0) and one HDMI output (/dev/video1);
+// docs/design.md, "Kernel-in-the-loop tests", says how it loops video on Linux 6.1.
 #include <fcntl.h>
 #include <unistd.h>
 

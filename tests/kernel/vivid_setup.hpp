@@ -1,6 +1,6 @@
 // vivid (Linux 6.1) set up as a loop-back camera for the guest programs: one HDMI input
-// (/dev/video0) shows what is written to one HDMI output (/dev/video1). DESIGN.md, "Real kernels
-// for the drivers", says how vivid loops video.
+// (/dev/video0) shows what is written to one HDMI output (/dev/video1).
+// docs/design.md, "Kernel-in-the-loop tests", says how vivid loops video.
 #pragma once
 
 #include <fcntl.h>

@@ -1,4 +1,4 @@
-// The board's time base: CLOCK_MONOTONIC in nanoseconds, as DESIGN.md fixes for the loop.
+// The board's time base: CLOCK_MONOTONIC in nanoseconds (docs/design.md, "Frames and conventions").
 #pragma once
 
 #include <cstdint>

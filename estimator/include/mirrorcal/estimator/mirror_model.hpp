@@ -1,5 +1,5 @@
 // The mirror calibration model of Panahandeh & Jansson (paper eqs. (1)-(15)) in the names and
-// conventions of DESIGN.md: the state, IMU propagation, the mirror image of a rig-fixed marker
+// conventions of docs/design.md: the state, IMU propagation, the mirror image of a rig-fixed marker
 // (eq. 11) and the pinhole projection (eqs. 12, 13).
 #pragma once
 

@@ -1,4 +1,4 @@
-// Recordings in the EuRoC/ASL layout (DESIGN.md, "Files users and other tools read"):
+// Recordings in the EuRoC/ASL layout (docs/design.md, "File formats"):
 //   DIR/mav0/imu0/data.csv       #timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]
 //   DIR/mav0/cam0/data.csv       #timestamp [ns],filename          (every frame, with or without
 //                                                                  markers)

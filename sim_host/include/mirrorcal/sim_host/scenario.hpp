@@ -24,7 +24,7 @@ struct Rig {
   // rig as it was at IMU time t_cam + t_d.
   double t_d = 0.0;
   // The image: u in [0, width), v in [0, height), origin at the top-left pixel's centre
-  // (DESIGN.md).
+  // (docs/design.md, "Frames and conventions").
   int width = 640, height = 480;
 };
 
@@ -91,7 +91,7 @@ struct Scenario {
 // (the paper's three angles, in its column order, read as rotations about x, y and z composed
 // z-y-x), markers (2,-3,-3), (5,4,-3), (-8,6,1) cm, fu = fv = 833.33, cu = 2, cv = 8, skew = 3 in
 // the paper's centred image coordinates, i.e. cu = 322, cv = 248 in a 640 x 480 image whose origin
-// is the top-left pixel (DESIGN.md's convention, which Kalibr and OpenCV use),
+// is the top-left pixel (docs/design.md's convention, which Kalibr and OpenCV use),
 // a wall mirror with y up, ADIS16448 noise (EuRoC imu0), 1 px, 200 Hz IMU, 20 Hz camera, 60 s.
 Scenario paper_scenario();
 

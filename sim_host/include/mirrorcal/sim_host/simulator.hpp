@@ -28,7 +28,7 @@ struct SimData {
   std::uint64_t markers_out_of_image = 0;  // reflections that fell outside the image or behind
 };
 
-// Synthesises the IMU stream (DESIGN.md's model: white noise and bias random walks from the
+// Synthesises the IMU stream (docs/design.md's model: white noise and bias random walks from the
 // Kalibr densities) and the marker reflections (eq. 11 through the true camera, pixel noise,
 // dropped when out of the image or not in front of the camera). Deterministic in seed.
 SimData simulate(const Scenario& s, std::uint64_t seed);

@@ -1,4 +1,4 @@
-// Files users and other tools read (DESIGN.md, "Files users and other tools read").
+// Files users and other tools read (docs/design.md, "File formats").
 #pragma once
 
 #include <array>
