@@ -508,7 +508,7 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
 
 bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::string& error) {
   std::string t =
-      "# mirrorcal priors: what is known before calibrating (README, \"mirrorcal.yaml\").\n"
+      "# mirrorcal priors: what is known before calibrating (docs/recordings.md, \"mirrorcal.yaml\").\n"
       "# SI units (m, m/s, rad, m/s^2, rad/s, px); quaternions Hamilton [w, x, y, z];\n"
       "# sigma_* are 1-sigma per axis (rotations: of the error vector, R = R_guess Exp(e)).\n";
   t += "gravity_n: " + list(r.gravity_n) + "\n";

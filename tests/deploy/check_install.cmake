@@ -1,5 +1,5 @@
 # Installs the build into a staging directory (DESTDIR, as a package build does) and checks the
-# layout the README promises: the program, the run settings and sensor descriptions, the systemd
+# layout docs/board.md ("Deploying") promises: the program, the run settings and sensor descriptions, the systemd
 # unit pointing at the installed program and settings. Run by CTest (label deploy) with
 # -DBUILD_DIR, -DSTAGE, -DPREFIX, -DSYSCONFDIR (absolute), -DUNIT_DIR (relative to the prefix).
 file(REMOVE_RECURSE ${STAGE})

@@ -1,4 +1,4 @@
-// The random scenario family: every draw is a rig the README's "The `random` family" describes,
+// The random scenario family: every draw is a rig docs/scenarios.md's "The `random` family" describes,
 // its motion's body rate is the derivative of its attitude, and the camera sees the markers. A
 // rolling shutter: the simulator's reflections and the estimator's model of them agree.
 #include <gtest/gtest.h>

@@ -8,7 +8,7 @@
 //   DIR/mav0/cam0/data/          the images, only when the recording has them (8-bit grey PNG,
 //                                <timestamp>.png as data.csv names them; PGM is read too)
 //   DIR/imu.yaml, DIR/camchain.yaml   Kalibr sensor descriptions
-//   DIR/mirrorcal.yaml                the priors (README, "mirrorcal.yaml")
+//   DIR/mirrorcal.yaml                the priors (docs/recordings.md, "mirrorcal.yaml")
 // Numbers are written as the shortest decimal that reads back as the same double, so a recording
 // written and read again replays bit-identically.
 #pragma once

@@ -96,7 +96,7 @@ struct Scenario {
 Scenario paper_scenario();
 
 // A rig a user could build, in front of a wall or floor mirror, moved by hand or at the paper's
-// pace, with the priors such a user has: every draw of the family the README's "The `random`
+// pace, with the priors such a user has: every draw of the family docs/scenarios.md's "The `random`
 // family" describes. Deterministic in seed.
 Scenario random_scenario(std::uint64_t seed);
 
