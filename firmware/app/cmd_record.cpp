@@ -10,7 +10,6 @@
 #include "cli.hpp"
 #include "devices.hpp"
 #include "mirrorcal/calibration/run.hpp"
-#include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
