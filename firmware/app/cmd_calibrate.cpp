@@ -48,26 +48,29 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
   std::printf("\n%-17s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
               "final +-1sigma", rec.has_truth ? "  error/sig (truth.yaml)" : "");
+  constexpr CalibrationLayout kLayout = SimRun<NK>::State::kCalibration;
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
+    const int i = int(j) - kLayout[p.group].begin;  // within its group
     // Rotations are shown as the final estimate's angles (Rz Ry Rx, as the scenarios state them);
     // their sigma is of the rotation error vector's components.
     double value = 0.0, value_first = 0.0;
-    if (j < 3) {
-      value = r.p_b_c(int(j)) * p.scale;
-      value_first = double(first.state.p_b_c(int(j))) * p.scale;
-    } else if (j < 6) {
-      value = angles(int(j) - 3);
-      value_first = angles_first(int(j) - 3);
-    } else if (j < 6 + 3 * std::size_t(kMarkers)) {
-      value = double(last.state.markers(int(j) - 6)) * p.scale;
-      value_first = double(first.state.markers(int(j) - 6)) * p.scale;
-    } else if (j == 6 + 3 * std::size_t(kMarkers)) {
+    if (p.group == CalibrationGroup::kCameraPosition) {
+      value = r.p_b_c(i) * p.scale;
+      value_first = double(first.state.p_b_c(i)) * p.scale;
+    } else if (p.group == CalibrationGroup::kCameraRotation) {
+      value = angles(i);
+      value_first = angles_first(i);
+    } else if (p.group == CalibrationGroup::kMarkers) {
+      value = double(last.state.markers(i)) * p.scale;
+      value_first = double(first.state.markers(i)) * p.scale;
+    } else if (p.group == CalibrationGroup::kTimeOffset) {
       value = double(last.state.t_d) * p.scale;
       value_first = double(first.state.t_d) * p.scale;
-    } else {
-      value = double(last.state.intrinsics(int(j) - 7 - 3 * kMarkers));
-      value_first = double(first.state.intrinsics(int(j) - 7 - 3 * kMarkers));
+    } else {  // the intrinsics, and the lens's coefficients after them
+      const int k = int(j) - kLayout[CalibrationGroup::kIntrinsics].begin;
+      value = double(last.state.intrinsics(k));
+      value_first = double(first.state.intrinsics(k));
     }
     std::printf("%-17s %-5s %12.4f +-%-6.3f %12.4f +-%-6.4f", p.name.c_str(), p.unit.c_str(),
                 value_first, first.sigma(int(j)) * p.scale, value, last.sigma(int(j)) * p.scale);

@@ -55,28 +55,21 @@ double worst_sigmas(const Outcome& oc) {
   return worst;
 }
 
-// Statistics of a group of a family's runs, by parameter group: p_b_c in cm, rotation in deg,
-// markers in mm, the time offset in ms (rows 0-2, 3-5, 6..6+3M-1, 6+3M), and in stage 2 the
-// camera's fu fv cu cv (skew) in px and the lens's coefficients in thousandths (from lens_row).
-constexpr std::size_t kGroups = 6;
-constexpr std::size_t kTimeRow = 6 + 3 * kMarkers;
-constexpr std::size_t kLensRow = kTimeRow + 5;  // after fu fv cu cv (NK = 8: skew held)
+// Statistics of a group of a family's runs, by parameter group (CalibrationGroup, the layout's):
+// p_b_c in cm, rotation in deg, markers in mm, the time offset in ms, and in stage 2 the camera's
+// fu fv cu cv (skew) in px and the lens's coefficients in thousandths.
+constexpr std::size_t kGroups = kCalibrationGroups;
 const char* const kGroupName[kGroups] = {"p_b_c [cm]",     "rot_b_c [deg]",   "markers [mm]",
                                          "timeshift [ms]", "intrinsics [px]", "lens [1e-3]"};
 struct GroupStats {
   using PerGroup = std::array<double, kGroups>;
-  std::size_t lens_row = SIZE_MAX;  // the first lens coefficient's row, if stage 2 has them
+  CalibrationLayout layout;  // the runs' calibration block
   std::vector<double> nees;
   int beyond = 0, flagged = 0, missed = 0;  // beyond 4 sigma; consistent: false; both but flagged
   PerGroup sq{}, var{}, lim{}, count{}, sq_ok{}, lim_ok{};  // _ok: consistent runs
 
   std::size_t group_of(std::size_t row) const {
-    return row < 3           ? 0
-           : row < 6         ? 1
-           : row < kTimeRow  ? 2
-           : row == kTimeRow ? 3
-           : row < lens_row  ? 4
-                             : 5;
+    return static_cast<std::size_t>(layout.group_of(static_cast<int>(row)));
   }
   void add(const Outcome& oc) {
     nees.push_back(oc.nees);
@@ -132,8 +125,8 @@ struct GroupStats {
 // by each axis the family draws (mirror, motion, camera rate, pixel noise, prior width), into
 // summary.csv (f) and on stdout. Stage 1's columns come first, in stage 1's order; stage 2 adds
 // the RMS error and sigma of its groups at the end of each row. Only stage 1 has the data's limit.
-void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std::size_t lens_row,
-                   double nees_lo, double nees_hi, std::FILE* f) {
+void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
+                   const CalibrationLayout& layout, double nees_lo, double nees_hi, std::FILE* f) {
   const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
   struct Group {
     std::string axis, value;
@@ -178,7 +171,7 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std
   std::printf("\n");
   for (const Group& g : groups) {
     GroupStats st;
-    st.lens_row = lens_row;
+    st.layout = layout;
     for (const Outcome& oc : out)
       if (g.has(oc.scenario)) st.add(oc);
     if (st.nees.empty()) continue;
@@ -338,13 +331,14 @@ int cmd_montecarlo(int argc, char** argv) {
   end_progress("all runs done");
 
   const std::size_t np = params.size();
-  const auto truth = truth_display(s, !intrinsics ? 0 : lens ? 8 : hold_skew ? 4 : 5);
+  const int estimated_intrinsics = !intrinsics ? 0 : lens ? 8 : hold_skew ? 4 : 5;
+  const auto truth = truth_display(s, estimated_intrinsics);
   const double n = double(runs);
   // The paper's row of parameter j: none for the lens's coefficients (estimate_distortion), which
   // follow cv where the skew's row is.
   const PaperRow kNotInPaper{NAN, NAN};
   const auto paper_row = [&](std::size_t j) -> const PaperRow& {
-    return lens && j >= 20 ? kNotInPaper : paper_tables()[j];
+    return params[j].group == CalibrationGroup::kLens ? kNotInPaper : paper_tables()[j];
   };
   std::vector<double> mean(np, 0), std_(np, 0), rms(np, 0), sig(np, 0);
   for (const auto& oc : out)
@@ -378,7 +372,8 @@ int cmd_montecarlo(int argc, char** argv) {
         np, (unsigned long long)runs, nees, lo99, hi99, median(each),
         nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
     const std::size_t groups_used = !intrinsics ? 4 : lens ? 6 : 5;
-    report_family(out, groups_used, lens ? kLensRow : SIZE_MAX, lo99, hi99, summary);
+    report_family(out, groups_used, calibration_layout(kMarkers, estimated_intrinsics), lo99, hi99,
+                  summary);
   } else {
     std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
                 !intrinsics ? " and II"

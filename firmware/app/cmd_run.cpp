@@ -231,7 +231,8 @@ int cmd_run(int argc, char** argv) {
   }
   // The camera's stamps against the IMU's clock (a V4L2 driver stamping the end of the frame, the
   // bus's latency): what the calibration found.
-  const std::size_t t_row = 6 + 3 * std::size_t(kMarkers);
+  const auto t_row =
+      std::size_t(calibration_layout(kMarkers, 0)[CalibrationGroup::kTimeOffset].begin);
   std::printf("time offset found: timeshift_cam_imu %.3f ms +- %.3f ms (t_imu = t_cam + it)\n",
               1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled

@@ -73,6 +73,9 @@ const char* motion_advice(CalibrationGroup group, const Eigen::Vector3d& directi
                  : "tilt the rig so that the markers sweep across the image";
     case CalibrationGroup::kTimeOffset:
       return "rotate the rig briskly back and forth";
+    case CalibrationGroup::kIntrinsics:
+    case CalibrationGroup::kLens:
+      break;
   }
   return "";
 }
@@ -87,6 +90,9 @@ const char* group_name(CalibrationGroup group) {
       return "markers";
     case CalibrationGroup::kTimeOffset:
       return "time offset";
+    case CalibrationGroup::kIntrinsics:
+    case CalibrationGroup::kLens:
+      break;
   }
   return "";
 }
@@ -119,13 +125,13 @@ void LiveFeedback::publish(std::int64_t t_ns, const Filter& filter) {
 void LiveFeedback::close_window(double t_s, const Filter& filter) {
   const CalibrationUncertainty u =
       calibration_uncertainty(filter.covariance(), p0_, filter.state().q_b_c);
-  std::array<bool, kCalibrationGroups> settled{};
+  std::array<bool, kFeedbackGroups> settled{};
   // Once converged, a group must fall by twice as much to unsettle it again: sigmas that fall as
   // 1/sqrt(t) cross the threshold slowly, and the verdict should not flicker as they do.
   const double fall = verdict_ == Verdict::kConverged ? 2.0 * kSettledFall : kSettledFall;
   int advised = -1;
   double worst = 0.0;
-  for (int g = 0; g < kCalibrationGroups; ++g) {
+  for (int g = 0; g < kFeedbackGroups; ++g) {
     const auto k = static_cast<std::size_t>(g);
     const double ratio = u[k].sigma / std::max(u[k].prior_sigma, 1e-300);
     // A direction the motion never excited does not fall either: settled also needs the data to
@@ -153,15 +159,15 @@ void LiveFeedback::close_window(double t_s, const Filter& filter) {
 }
 
 void LiveFeedback::print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
-                         const std::array<bool, kCalibrationGroups>& settled) {
+                         const std::array<bool, kFeedbackGroups>& settled) {
   if (out_ == nullptr) return;
   std::fprintf(out_, "live %.0f s: ", t_s);
   // Each group's sigma in the unit a user reads it in, and its share of the prior's.
   const auto figures = [&](bool only_unsettled) {
-    static constexpr double kScale[kCalibrationGroups] = {1e3, 180.0 / M_PI, 1e3, 1e3};
-    static constexpr const char* kUnit[kCalibrationGroups] = {"mm", "deg", "mm", "ms"};
+    static constexpr double kScale[kFeedbackGroups] = {1e3, 180.0 / M_PI, 1e3, 1e3};
+    static constexpr const char* kUnit[kFeedbackGroups] = {"mm", "deg", "mm", "ms"};
     const char* sep = "";
-    for (int g = 0; g < kCalibrationGroups; ++g) {
+    for (int g = 0; g < kFeedbackGroups; ++g) {
       const auto k = static_cast<std::size_t>(g);
       if (only_unsettled && settled[k]) continue;
       std::fprintf(out_, "%s%s %.3g %s (%.3g %% of prior)", sep,

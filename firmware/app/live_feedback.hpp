@@ -16,14 +16,9 @@
 
 namespace mirrorcal::app {
 
-// The parts of the calibration a user's motion informs differently.
-enum class CalibrationGroup : std::uint8_t {
-  kCameraPosition,
-  kCameraRotation,
-  kMarkers,
-  kTimeOffset
-};
-constexpr int kCalibrationGroups = 4;
+// The parts of the calibration a user's motion informs differently: the first kFeedbackGroups of
+// CalibrationGroup, those of run's filter (no intrinsics).
+constexpr int kFeedbackGroups = 4;
 
 // One group's uncertainty: the 1-sigma of its least-known direction (SI: m, rad, m, s) against the
 // prior's there, and that direction in the camera frame (unit; unused for the time offset).
@@ -33,7 +28,7 @@ struct GroupUncertainty {
   Eigen::Vector3d direction_c = Eigen::Vector3d::UnitZ();
 };
 
-using CalibrationUncertainty = std::array<GroupUncertainty, kCalibrationGroups>;
+using CalibrationUncertainty = std::array<GroupUncertainty, kFeedbackGroups>;
 
 // The uncertainty of each group from a filter's covariance P and its prior's P0 (the calibration
 // block of the live filter's state, M markers, no intrinsics: run's filter). The markers' group is
@@ -80,7 +75,7 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   enum class Verdict : std::uint8_t { kNone, kNoMarkers, kStill, kUncertain, kConverged };
   void close_window(double t_s, const Filter& filter);
   void print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
-             const std::array<bool, kCalibrationGroups>& settled);
+             const std::array<bool, kFeedbackGroups>& settled);
 
   Filter::Covariance p0_;
   std::FILE* out_;

@@ -579,7 +579,7 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
   // was estimated have none), then the intrinsics it estimated (if any).
   out.has_t_d = y.has("timeshift_cam_imu");
   if (out.has_t_d && !y.number("timeshift_cam_imu", out.t_d)) return false;
-  const std::size_t n = 6 + 3 * out.features_c.size() + (out.has_t_d ? 1 : 0);
+  const auto n = static_cast<std::size_t>(out.layout().size());
   const YAML::Node rows = y.node("covariance");
   const std::size_t dim = rows.IsSequence() ? rows.size() : 0;
   if (dim != n && dim != n + 4 && dim != n + 5 && dim != n + 8)

@@ -388,6 +388,81 @@ void check_state_round_trip(double tol) {
   }
 }
 
+// The calibration layout of MirrorState<M, NK> against the one calibration_layout gives from the
+// counts, and against the state itself: moving one group's values moves exactly that group's
+// indices of the calibration block's error vector.
+template <int M, int NK>
+void check_calibration_layout() {
+  using State = MirrorState<double, M, NK>;
+  constexpr CalibrationLayout layout = State::kCalibration;
+  const CalibrationLayout counted = calibration_layout(M, NK);
+  for (int g = 0; g < kCalibrationGroups; ++g) {
+    const auto group = static_cast<CalibrationGroup>(g);
+    EXPECT_EQ(layout[group].begin, counted[group].begin) << "M " << M << " NK " << NK << " g " << g;
+    EXPECT_EQ(layout[group].size, counted[group].size) << "M " << M << " NK " << NK << " g " << g;
+  }
+  EXPECT_EQ(layout.size(), State::kCalibrationDim);
+  EXPECT_EQ(State::kCalibrationBegin + State::kCalibrationDim, State::kDim);
+
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
+  std::mt19937_64 rng(40 + 10 * M + NK);
+  const State x = random_state<double, M, NK>(rng);
+  const auto moved_indices = [&](CalibrationGroup group, const State& y) {
+    const Eigen::Matrix<double, L, 1> d = y.template boxminus_block<B, L>(x);
+    for (int j = 0; j < L; ++j) {
+      EXPECT_EQ(d(j) != 0.0, layout[group].contains(j))
+          << "M " << M << " NK " << NK << " group " << int(group) << " index " << j;
+      if (d(j) != 0.0) {
+        EXPECT_EQ(layout.group_of(j), group);
+      }
+    }
+  };
+  State y = x;
+  y.p_b_c += Eigen::Vector3d(0.1, 0.2, 0.3);
+  moved_indices(CalibrationGroup::kCameraPosition, y);
+  y = x;
+  y.q_b_c = x.q_b_c * test::rotvec(Eigen::Vector3d(0.1, 0.2, 0.3));
+  moved_indices(CalibrationGroup::kCameraRotation, y);
+  y = x;
+  y.markers.array() += 0.1;
+  moved_indices(CalibrationGroup::kMarkers, y);
+  y = x;
+  y.t_d += 0.01;
+  moved_indices(CalibrationGroup::kTimeOffset, y);
+  y = x;
+  y.intrinsics.head(NK - State::kLensCoeffs).array() += 1.0;
+  moved_indices(CalibrationGroup::kIntrinsics, y);
+  y = x;
+  y.intrinsics.tail(State::kLensCoeffs).array() += 0.01;
+  moved_indices(CalibrationGroup::kLens, y);
+}
+
+TEST(MirrorState, CalibrationLayoutMatchesTheState) {
+  check_calibration_layout<1, 0>();
+  check_calibration_layout<1, 4>();
+  check_calibration_layout<3, 0>();
+  check_calibration_layout<3, 5>();
+  check_calibration_layout<3, 8>();
+  check_calibration_layout<5, 8>();
+}
+
+TEST(MirrorState, CalibrationLayoutWithoutTimeOffset) {
+  // Results written before the time offset was estimated: the intrinsics follow the markers.
+  for (const int markers : {1, 3, 4})
+    for (const int intrinsics : {0, 4, 5, 8}) {
+      const CalibrationLayout with = calibration_layout(markers, intrinsics);
+      const CalibrationLayout without = calibration_layout(markers, intrinsics, false);
+      EXPECT_EQ(without[CalibrationGroup::kTimeOffset].size, 0);
+      EXPECT_EQ(without[CalibrationGroup::kIntrinsics].begin,
+                without[CalibrationGroup::kMarkers].end());
+      EXPECT_EQ(without.size() + 1, with.size());
+      for (int j = 0; j < without.size(); ++j) {
+        const int same = j < with[CalibrationGroup::kTimeOffset].begin ? j : j + 1;
+        EXPECT_EQ(without.group_of(j), with.group_of(same));
+      }
+    }
+}
+
 // Stage 2 with the lens estimated (NK = 8: fu fv cu cv and the four coefficients, skew held)
 // predicts exactly what the fixed-lens model predicts when its coefficients are the configured
 // ones, and follows its own coefficients when they differ (they are not ignored).

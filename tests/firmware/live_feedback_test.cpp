@@ -16,7 +16,7 @@
 #include "mirrorcal/sim_host/simulator.hpp"
 
 namespace mc = mirrorcal;
-using mc::app::CalibrationGroup;
+using mc::CalibrationGroup;
 using mc::app::LiveFeedback;
 using Filter = LiveFeedback::Filter;
 using State = Filter::State;

@@ -135,7 +135,7 @@ TEST(Loop, LongImuGapRestartsTheMotionStatesAndSkipsItsFrames) {
   EXPECT_NEAR(std::sqrt(f.covariance()(Filter::State::kP, Filter::State::kP)), r.position, 1e-3);
   EXPECT_NEAR(std::sqrt(f.covariance()(Filter::State::kTheta, Filter::State::kTheta)), r.attitude,
               1e-3);
-  constexpr int B = Filter::State::kPbc, L = Filter::kDim - B;
+  constexpr int L = Filter::State::kCalibrationDim;  // the calibration block ends the state
   EXPECT_TRUE((f.covariance().bottomRightCorner<L, L>() == before.bottomRightCorner<L, L>()));
   EXPECT_TRUE(f.state().p.allFinite());
 }

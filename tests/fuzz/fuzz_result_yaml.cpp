@@ -24,7 +24,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   // Rows p_b_c (3), rotation (3), 3 a marker, and the time offset when the result has one.
-  const long n = 6 + 3 * static_cast<long>(start.features_c.size()) + (start.has_t_d ? 1 : 0);
+  const long n = start.layout().size();
   const Eigen::MatrixXd& c = start.covariance;
   if (c.rows() != n || c.cols() != n || !c.allFinite()) std::abort();
   if (c.llt().info() != Eigen::Success) std::abort();

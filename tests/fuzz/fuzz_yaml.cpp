@@ -44,7 +44,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   error.clear();
   ok = sim::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
   if (ok != error.empty()) std::abort();
-  const long n = 6 + 3 * static_cast<long>(start.features_c.size()) + (start.has_t_d ? 1 : 0);
+  const long n = start.layout().size();
   if (ok && (start.covariance.rows() != n || start.covariance.cols() != n)) std::abort();
   return 0;
 }

@@ -216,7 +216,8 @@ int check(const sim::Scenario& s, const std::string& dir, double k) {
   }
   // p_b_c, rotation, markers, then the time offset, which has no truth here: the live camera's
   // end-of-frame stamps and the loop-back's latency make it. It is reported, and must be learnt.
-  if (!ok || !GUEST_CHECK(sigma.size() == 7 + 3 * markers.size()) ||
+  const CalibrationLayout layout = calibration_layout(static_cast<int>(markers.size()), 0);
+  if (!ok || !GUEST_CHECK(sigma.size() == static_cast<std::size_t>(layout.size())) ||
       !GUEST_CHECK(names.back() == "timeshift_cam_imu"))
     return guest::finish("rig_feeder check");
   const double sigma_t_d = sigma.back();
@@ -242,7 +243,8 @@ int check(const sim::Scenario& s, const std::string& dir, double k) {
   }
   for (std::size_t m = 0; m < markers.size(); ++m)
     for (int i = 0; i < 3; ++i)
-      error[6 + 3 * m + static_cast<std::size_t>(i)] = markers[m][i] - s.truth.markers[m][i];
+      error[static_cast<std::size_t>(layout[CalibrationGroup::kMarkers].begin + 3 * int(m) + i)] =
+          markers[m][i] - s.truth.markers[m][i];
 
   std::printf("%-8s %12s %12s %8s   (SI: m, rad)\n", "state", "error", "1-sigma", "err/sig");
   for (std::size_t j = 0; j < sigma.size(); ++j) {

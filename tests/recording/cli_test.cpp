@@ -969,7 +969,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   ASSERT_TRUE(mc::app::calibrate_recording<0>(images, from_images, err)) << err;
   const auto& a = from_features.history.back();
   const auto& b = from_images.history.back();
-  constexpr int B = State::kPbc, L = State::kDim - State::kPbc;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const Eigen::Matrix<double, L, 1> diff = b.state.boxminus_block<B, L>(a.state);
   double worst = 0.0;
   for (int j = 0; j < L; ++j) {

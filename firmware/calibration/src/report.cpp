@@ -33,13 +33,23 @@ std::string format(const char* fmt, ...) {
 // A Euclidean calibration state's value (j in calibration_params() order; the rotation's are 0).
 template <class State>
 double euclidean_value(const State& x, int j) {
-  constexpr int B = State::kPbc;
-  const int i = B + j;
-  if (i < State::kPhi) return x.p_b_c(j);
-  if (i < State::kPi) return 0.0;
-  if (i < State::kTd) return x.markers(i - State::kPi);
-  if (i == State::kTd) return x.t_d;
-  return x.intrinsics(i - State::kK);
+  constexpr CalibrationLayout kLayout = State::kCalibration;
+  const CalibrationGroup group = kLayout.group_of(j);
+  const int i = j - kLayout[group].begin;  // within its group
+  switch (group) {
+    case CalibrationGroup::kCameraPosition:
+      return x.p_b_c(i);
+    case CalibrationGroup::kCameraRotation:
+      return 0.0;
+    case CalibrationGroup::kMarkers:
+      return x.markers(i);
+    case CalibrationGroup::kTimeOffset:
+      return x.t_d;
+    case CalibrationGroup::kIntrinsics:
+    case CalibrationGroup::kLens:  // after the intrinsics
+      break;
+  }
+  return x.intrinsics(j - kLayout[CalibrationGroup::kIntrinsics].begin);
 }
 
 }  // namespace
@@ -47,7 +57,7 @@ double euclidean_value(const State& x, int j) {
 template <int NK>
 ReportData report_data(const SimRun<NK>& run, const std::string& title) {
   using State = typename SimRun<NK>::State;
-  constexpr int B = State::kPbc, L = State::kDim - B;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   ReportData d = report_data_without_history(run.result, title);
   d.pixel_sigma = run.pixel_sigma;
   d.prior_sigma = run.prior_sigma;
@@ -73,7 +83,7 @@ ReportData report_data(const SimRun<NK>& run, const std::string& title) {
     out.t_s = double(row.t_ns) * 1e-9;
     const Eigen::Matrix<double, L, 1> from_last = row.state.template boxminus_block<B, L>(last);
     for (int j = 0; j < L && std::size_t(j) < params.size(); ++j) {
-      const bool rotation = B + j >= State::kPhi && B + j < State::kPi;
+      const bool rotation = State::kCalibration.group_of(j) == CalibrationGroup::kCameraRotation;
       const double value = rotation ? from_last(j) : euclidean_value(row.state, j);
       out.estimate[std::size_t(j)] = value * params[std::size_t(j)].scale;
       out.sigma[std::size_t(j)] = row.sigma(j) * params[std::size_t(j)].scale;
@@ -292,19 +302,22 @@ void add_calibration(std::string& t, const ReportData& d) {
               angles(2));
   t += format("\n%-17s %-5s %14s %12s %12s %12s\n", "state", "unit", "estimate", "1-sigma",
               "prior sigma", "sigma/prior");
+  const CalibrationLayout layout = r.layout();
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
+    const int i = int(j) - layout[p.group].begin;  // within its group
     double value = 0.0;
-    if (j < 3)
-      value = r.p_b_c(int(j)) * p.scale;
-    else if (j < 6)
-      value = angles(int(j) - 3);
-    else if (j < 6 + 3 * r.markers.size())
-      value = r.markers[(j - 6) / 3](int((j - 6) % 3)) * p.scale;
-    else if (j == 6 + 3 * r.markers.size())
+    if (p.group == CalibrationGroup::kCameraPosition)
+      value = r.p_b_c(i) * p.scale;
+    else if (p.group == CalibrationGroup::kCameraRotation)
+      value = angles(i);
+    else if (p.group == CalibrationGroup::kMarkers)
+      value = r.markers[std::size_t(i / 3)](i % 3) * p.scale;
+    else if (p.group == CalibrationGroup::kTimeOffset)
       value = r.t_d * p.scale;
-    else
-      value = estimated_camera_parameter(r, int(j - 7 - 3 * r.markers.size())) * p.scale;
+    else  // the intrinsics, and the lens's coefficients after them
+      value = estimated_camera_parameter(r, int(j) - layout[CalibrationGroup::kIntrinsics].begin) *
+              p.scale;
     t += format("%-17s %-5s %14.4f %12.4f", p.name.c_str(), p.unit.c_str(), value,
                 r.sigma[j] * p.scale);
     if (j < d.prior_sigma.size())
@@ -439,7 +452,9 @@ void add_excitation(std::string& t, const ReportData& d) {
       100.0 * (p_hi - p_lo), a_count == 0 ? 0.0 : std::sqrt(a_squares / double(a_count)), a_max);
   std::string weak;
   const std::vector<ParamInfo>& params = d.result.params;
-  const std::size_t from_earlier = d.from_earlier ? 7 + 3 * d.result.markers.size() : 0;
+  // The camera pose, markers and time offset: the block before the intrinsics.
+  const std::size_t from_earlier =
+      d.from_earlier ? std::size_t(d.result.layout()[CalibrationGroup::kIntrinsics].begin) : 0;
   for (std::size_t j = 0; j < params.size() && j < d.prior_sigma.size(); ++j) {
     const double ratio = d.result.sigma[j] / d.prior_sigma[j];
     if (ratio > (j < from_earlier ? kWeaklyObservedFromEarlierRatio : kWeaklyObservedRatio))

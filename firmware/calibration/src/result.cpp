@@ -16,21 +16,38 @@ std::array<const char*, 4> distortion_coeff_names(Distortion lens) {
   return {"k1", "k2", "p1", "p2"};
 }
 
-std::vector<ParamInfo> calibration_params(int markers, int intrinsics, Distortion lens) {
+namespace {
+
+// The j-th parameter of a group (j < the group's size in the layout).
+ParamInfo calibration_param(CalibrationGroup group, int j, Distortion lens) {
   constexpr double kCm = 100.0, kDeg = 180.0 / M_PI;
+  const std::string axis(1, "xyz"[j % 3]);
+  switch (group) {
+    case CalibrationGroup::kCameraPosition:
+      return {"p_" + axis, "cm", kCm, group};
+    case CalibrationGroup::kCameraRotation:
+      return {"rot_" + axis, "deg", kDeg, group};
+    case CalibrationGroup::kMarkers:
+      return {"f" + std::to_string(j / 3 + 1) + "_" + axis, "cm", kCm, group};
+    case CalibrationGroup::kTimeOffset:
+      return {"timeshift_cam_imu", "ms", 1e3, group};
+    case CalibrationGroup::kIntrinsics:
+      return {std::array<const char*, 5>{"fu", "fv", "cu", "cv", "skew"}[std::size_t(j)], "px", 1.0,
+              group};
+    case CalibrationGroup::kLens:  // in thousandths (p2 of EuRoC's lens is 1.8e-5); files in SI
+      return {distortion_coeff_names(lens)[std::size_t(j)], "1e-3", 1e3, group};
+  }
+  return {};
+}
+
+}  // namespace
+
+std::vector<ParamInfo> calibration_params(int markers, int intrinsics, Distortion lens) {
+  const CalibrationLayout layout = calibration_layout(markers, intrinsics);
   std::vector<ParamInfo> p;
-  for (const char* a : {"x", "y", "z"}) p.push_back({std::string("p_") + a, "cm", kCm});
-  for (const char* a : {"x", "y", "z"}) p.push_back({std::string("rot_") + a, "deg", kDeg});
-  for (int i = 0; i < markers; ++i)
-    for (const char* a : {"x", "y", "z"})
-      p.push_back({"f" + std::to_string(i + 1) + "_" + a, "cm", kCm});
-  p.push_back({"timeshift_cam_imu", "ms", 1e3});
-  const char* k[5] = {"fu", "fv", "cu", "cv", "skew"};
-  for (int j = 0; j < std::min(intrinsics, 5); ++j) p.push_back({k[j], "px", 1.0});
-  if (intrinsics == 8) {
-    p.pop_back();  // no skew: the lens's coefficients follow cv
-    // Shown in thousandths (p2 of EuRoC's lens is 1.8e-5); the files keep them as they are.
-    for (const char* c : distortion_coeff_names(lens)) p.push_back({c, "1e-3", 1e3});
+  for (int g = 0; g < kCalibrationGroups; ++g) {
+    const auto group = static_cast<CalibrationGroup>(g);
+    for (int j = 0; j < layout[group].size; ++j) p.push_back(calibration_param(group, j, lens));
   }
   return p;
 }
@@ -247,9 +264,9 @@ bool consistent(const CalibrationResult& r) {
 
 std::string skew_warning(const CalibrationResult& r) {
   if (r.estimated_intrinsics != 5) return {};
-  double sigma = 0.0;
-  for (std::size_t j = 0; j < r.params.size(); ++j)
-    if (r.params[j].name == "skew") sigma = r.sigma[j];
+  // fu fv cu cv skew
+  const auto j = std::size_t(r.layout()[CalibrationGroup::kIntrinsics].begin + 4);
+  const double sigma = j < r.sigma.size() ? r.sigma[j] : 0.0;
   if (!(std::abs(r.intrinsics.skew) > kSignificantSkewSigmas * sigma)) return {};
   char text[400];
   std::snprintf(text, sizeof text,
@@ -479,7 +496,8 @@ bool write_estimates_csv(files::OutputSet& out, const std::string& path,
   for (int i = 0; i < State::kMarkers; ++i)
     for (const char* a : {"x", "y", "z"}) std::fprintf(o, ",f%d_%s [m]", i + 1, a);
   std::fprintf(o, ",timeshift_cam_imu [s]");
-  const std::size_t first_intrinsic = params.size() - std::size_t(State::kIntrinsics);
+  const auto first_intrinsic =
+      std::size_t(State::kCalibration[CalibrationGroup::kIntrinsics].begin);
   const auto si_unit = [](const ParamInfo& p) {
     return p.unit == "cm"     ? "m"
            : p.unit == "deg"  ? "rad"

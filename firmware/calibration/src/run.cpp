@@ -224,7 +224,7 @@ template <int NK>
 typename SimRun<NK>::Filter::Covariance calibration_held(
     const typename SimRun<NK>::Filter::Covariance& p0, const SimRun<NK>& pass) {
   using State = typename SimRun<NK>::State;
-  constexpr int B = State::kPbc, L = State::kDim - B;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   typename SimRun<NK>::Filter::Covariance p = p0;
   p.template block<L, State::kDim>(B, 0).setZero();
   p.template block<State::kDim, L>(0, B).setZero();
@@ -275,7 +275,7 @@ template <int NK>
 void record_prior_offset(const typename SimRun<NK>::State& x0,
                          const typename SimRun<NK>::Filter::Covariance& p0, SimRun<NK>& run) {
   using State = typename SimRun<NK>::State;
-  constexpr int B = State::kPbc, L = State::kDim - B;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const auto d = run.history.back().state.template boxminus_block<B, L>(x0);
   CalibrationResult& r = run.result;
   for (int j = 0; j < L && std::size_t(j) < r.params.size(); ++j) {
@@ -292,7 +292,7 @@ void record_prior_offset(const typename SimRun<NK>::State& x0,
 template <int NK>
 double step_sigmas(const SimRun<NK>& after, const SimRun<NK>& before) {
   using State = typename SimRun<NK>::State;
-  constexpr int B = State::kPbc, L = State::kDim - B;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const Eigen::Matrix<double, L, 1> d =
       after.history.back().state.template boxminus_block<B, L>(before.history.back().state);
   const Eigen::Matrix<double, L, L> p = after.covariance.template block<L, L>(B, B);
@@ -356,7 +356,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   // linearised one's) and their estimate lies further from the truth than the data allow. How
   // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
   if (passes.refine && !run.history.empty()) {
-    constexpr int B = State::kPbc;
+    constexpr int B = State::kCalibrationBegin;
     const typename SimRun<NK>::Filter::Covariance own = run.covariance;
     const int free_passes = run.result.passes;
     // Their markers come from where the passes' did (rendered frames through detection with
@@ -411,7 +411,8 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   }
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<NK>(x0, p0, run);
-  for (int i = State::kPbc; i < State::kDim; ++i) run.prior_sigma.push_back(std::sqrt(p0(i, i)));
+  for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
+    run.prior_sigma.push_back(std::sqrt(p0(i, i)));
   run.pixel_sigma = config.pixel_sigma;
   run.gate_after_frames = config.gate_after_frames;
   return run;
@@ -439,7 +440,7 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   s.features_c = earlier.markers;
   s.has_t_d = true;
   s.t_d = earlier.t_d;
-  const long n = 7 + 3 * static_cast<long>(earlier.markers.size());
+  const int n = s.layout().size();
   s.covariance = earlier.covariance.topLeftCorner(n, n);
   return s;
 }

@@ -17,11 +17,11 @@ std::vector<double> truth_display(const sim::Scenario& s, int intrinsics) {
   t.push_back(1e3 * s.truth.t_d);
   const Pinhole<double>& k = s.truth.intrinsics;
   const double all[5] = {k.fu, k.fv, k.cu, k.cv, k.skew};
-  for (int j = 0; j < std::min(intrinsics, 5); ++j) t.push_back(all[j]);
-  if (intrinsics == 8) {  // no skew: the lens's coefficients, in thousandths (calibration_params)
-    t.pop_back();
-    for (const double c : k.coeffs) t.push_back(1e3 * c);
-  }
+  const CalibrationLayout layout = calibration_layout(int(s.truth.markers.size()), intrinsics);
+  for (int j = 0; j < layout[CalibrationGroup::kIntrinsics].size; ++j) t.push_back(all[j]);
+  // The lens's coefficients, in thousandths (calibration_params).
+  for (int j = 0; j < layout[CalibrationGroup::kLens].size; ++j)
+    t.push_back(1e3 * k.coeffs[std::size_t(j)]);
   return t;
 }
 

@@ -15,15 +15,10 @@ std::vector<PlotGroup> plot_groups(const std::vector<ParamInfo>& params) {
       {"error_markers.png", "marker positions in the camera frame", {}},
       {"error_timeshift.png", "camera-IMU time offset timeshift_cam_imu", {}},
       {"error_intrinsics.png", "camera intrinsics", {}}};
+  // In CalibrationGroup's order; the lens's coefficients with the intrinsics.
   for (std::size_t j = 0; j < params.size(); ++j) {
-    const std::string& n = params[j].name;
-    const std::size_t k =
-        n.rfind("p_", 0) == 0                                                           ? 0
-        : n.rfind("rot_", 0) == 0                                                       ? 1
-        : n[0] == 'f' && n.size() > 1 && std::isdigit(static_cast<unsigned char>(n[1])) ? 2
-        : n == "timeshift_cam_imu"                                                      ? 3
-                                                                                        : 4;
-    g[k].params.push_back(j);
+    const CalibrationGroup group = params[j].group;
+    g[group == CalibrationGroup::kLens ? 4 : static_cast<std::size_t>(group)].params.push_back(j);
   }
   std::vector<PlotGroup> used;
   for (auto& x : g)

@@ -160,7 +160,7 @@ std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
   for (const PlotGroup& grp : plot_groups(params)) {
     const std::string file = "estimate_" + grp.file.substr(grp.file.find('_') + 1);
     const std::size_t rows = (grp.params.size() + 2) / 3;
-    const bool rotation = params[grp.params[0]].name.rfind("rot_", 0) == 0;
+    const bool rotation = params[grp.params[0]].group == CalibrationGroup::kCameraRotation;
     g << "set output '" << file << "'\nset multiplot layout " << rows << ",3 title "
       << gnuplot_quoted(rotation ? "camera rotation relative to the final estimate, "
                                    "log(R_final^T R), with +-3 sigma"

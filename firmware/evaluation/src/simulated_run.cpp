@@ -85,7 +85,7 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
   start.b_g = data.b_g0;
   const Run run = run_single_pass<0>(scenario_config(s), start, p0, loop_data(s, data), nullptr);
   std::vector<double> sigma;
-  for (int i = Run::State::kPbc; i < Run::State::kDim; ++i)
+  for (int i = Run::State::kCalibrationBegin; i < Run::State::kDim; ++i)
     sigma.push_back(std::sqrt(run.covariance(i, i)));
   return sigma;
 }

@@ -158,6 +158,59 @@ Vec3<S> mirror_image(const Mat3<S>& r_n_c, const Vec3<S>& p_n_c, const Vec3<S>& 
   return pi_c - (S(2) * height) * r_n_c.row(2).transpose();
 }
 
+// A run of consecutive indices [begin, begin + size).
+struct IndexRange {
+  int begin = 0, size = 0;
+  constexpr int end() const { return begin + size; }
+  constexpr bool contains(int i) const { return i >= begin && i < end(); }
+};
+
+// The groups of the calibration parameters, in the state's order.
+enum class CalibrationGroup : std::uint8_t {
+  kCameraPosition,  // p_b_c (m)
+  kCameraRotation,  // phi, the rotation error of R_b_c (rad)
+  kMarkers,         // pi_i^c, three per marker (m)
+  kTimeOffset,      // t_d (s)
+  kIntrinsics,      // fu fv cu cv, and skew when estimated (px)
+  kLens,            // the lens's four distortion coefficients (NK = 8; unitless)
+};
+constexpr int kCalibrationGroups = 6;
+
+// Where each group lies in the calibration block [p_b_c, phi, markers, t_d, intrinsics], counted
+// from the block's start. A group not estimated is empty, at the end of the one before it.
+struct CalibrationLayout {
+  std::array<IndexRange, kCalibrationGroups> groups{};
+
+  constexpr IndexRange operator[](CalibrationGroup g) const {
+    return groups[static_cast<std::size_t>(g)];
+  }
+  constexpr int size() const { return groups.back().end(); }
+  // The group of the block's j-th parameter (0 <= j < size()).
+  constexpr CalibrationGroup group_of(int j) const {
+    int g = 0;
+    while (g + 1 < kCalibrationGroups && !groups[static_cast<std::size_t>(g)].contains(j)) ++g;
+    return static_cast<CalibrationGroup>(g);
+  }
+};
+
+// The calibration block of `markers` markers and `intrinsics` estimated camera parameters
+// (MirrorState's NK: 0, 4, 5 or 8, of which 8 are fu fv cu cv and the lens's coefficients), with
+// or without the time offset (results written before it was estimated have none). For code that
+// learns these counts at run time (a result read from a file); MirrorState<S, M, NK>::kCalibration
+// is the same layout for its M and NK.
+constexpr CalibrationLayout calibration_layout(int markers, int intrinsics, bool has_t_d = true) {
+  const int lens = intrinsics == 8 ? 4 : 0;
+  const std::array<int, kCalibrationGroups> sizes = {
+      3, 3, 3 * markers, has_t_d ? 1 : 0, intrinsics - lens, lens};
+  CalibrationLayout l;
+  int next = 0;
+  for (std::size_t g = 0; g < sizes.size(); ++g) {
+    l.groups[g] = {next, sizes[g]};
+    next += sizes[g];
+  }
+  return l;
+}
+
 // Calibration state: stage 1 has NK = 0 (22 + 3M error states); stage 2 adds the intrinsics
 // (NK = 5: fu, fv, cu, cv, skew; NK = 4 holds skew at the configured value; NK = 8: fu, fv, cu,
 // cv and the lens's four distortion coefficients, skew held, OpenVINS's eight camera parameters).
@@ -179,6 +232,18 @@ struct MirrorState {
                        kPi = 21, kTd = 21 + 3 * M, kK = 22 + 3 * M, kDim = 22 + 3 * M + NK;
   static constexpr int kDynamicBegin = 0, kDynamicDim = 15;
   static constexpr int kMeasuredBegin = kP, kMeasuredDim = kDim - kP;
+  // The calibration block [p_b_c, phi, markers, t_d, intrinsics], what a calibration reports, and
+  // its groups (counted from kCalibrationBegin).
+  static constexpr int kCalibrationBegin = kPbc, kCalibrationDim = kDim - kPbc;
+  static constexpr int kLensCoeffs = NK == 8 ? 4 : 0;  // the intrinsics' last ones
+  static constexpr CalibrationLayout kCalibration = {{{
+      {kPbc - kPbc, 3},
+      {kPhi - kPbc, 3},
+      {kPi - kPbc, 3 * M},
+      {kTd - kPbc, 1},
+      {kK - kPbc, NK - kLensCoeffs},
+      {kDim - kLensCoeffs - kPbc, kLensCoeffs},
+  }}};
 
   Vec3<S> v = Vec3<S>::Zero();    // IMU velocity in n (m/s)
   Vec3<S> b_a = Vec3<S>::Zero();  // accelerometer bias (m/s^2)

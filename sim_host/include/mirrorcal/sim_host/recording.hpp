@@ -251,11 +251,16 @@ struct CalibrationStart {
   std::vector<Eigen::Vector3d> features_c;
   bool has_t_d = false;        // results written before the time offset was estimated have none
   double t_d = 0.0;            // timeshift_cam_imu (s)
-  Eigen::MatrixXd covariance;  // (6 + 3M, + 1 with the time offset) square, positive definite
+  Eigen::MatrixXd covariance;  // layout().size() square, positive definite
   // The camera the calibration ended with (`mirrorcal export`); hand-written starts may omit it.
   bool has_camera = false;
   CameraInfo camera;
   std::string recording_fingerprint;  // Recording::fingerprint of its data; empty in older results
+
+  // The covariance's rows: the calibration block of these markers, without the intrinsics.
+  CalibrationLayout layout() const {
+    return calibration_layout(static_cast<int>(features_c.size()), 0, has_t_d);
+  }
 };
 
 // Reads a mirrorcal-result.yaml (path, or a folder holding one); on bad input false with a message

@@ -18,14 +18,16 @@ namespace mirrorcal::app {
 
 // A calibration parameter as printed and written: rows of the paper's tables.
 struct ParamInfo {
-  std::string name;  // p_x, rot_y, f2_z, fu ...
-  std::string unit;  // cm, deg, px (display units)
-  double scale;      // SI -> display
+  std::string name;        // p_x, rot_y, f2_z, fu ...
+  std::string unit;        // cm, deg, px (display units)
+  double scale;            // SI -> display
+  CalibrationGroup group;  // what it belongs to (plots draw each group together)
 };
 
-// The calibration block of the error state, [p_b_c, phi, markers, t_d, intrinsics], in order.
-// With 8 intrinsics the last four are the lens's coefficients, named after its model (k1 k2 p1
-// p2, or k1..k4), shown in thousandths (unit "1e-3"; SI: unitless).
+// The calibration block of the error state, [p_b_c, phi, markers, t_d, intrinsics], in order
+// (calibration_layout(markers, intrinsics)). With 8 intrinsics the last four are the lens's
+// coefficients, named after its model (k1 k2 p1 p2, or k1..k4), shown in thousandths (unit "1e-3";
+// SI: unitless).
 std::vector<ParamInfo> calibration_params(int markers, int intrinsics,
                                           Distortion lens = Distortion::kNone);
 // The names of a lens's four distortion coefficients (Pinhole::coeffs order).
@@ -34,7 +36,7 @@ std::array<const char*, 4> distortion_coeff_names(Distortion lens);
 template <class Filter>
 struct HistoryRow {
   using State = typename Filter::State;
-  static constexpr int kCalib = State::kDim - State::kPbc;
+  static constexpr int kCalib = State::kCalibrationDim;
   std::int64_t t_ns = 0;
   State state{};
   State predicted{};  // the estimate before this frame's update (CalibrationFilter::predicted)
@@ -63,7 +65,7 @@ template <class Filter>
 void calibration_error(const Filter& f, const typename Filter::State& truth,
                        HistoryRow<Filter>& row) {
   using State = typename Filter::State;
-  constexpr int B = State::kPbc, L = State::kDim - State::kPbc;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const auto e = f.state().template boxminus_block<B, L>(truth);
   row.error = e.template cast<double>();
   const Eigen::Matrix<double, L, L> p =
@@ -154,7 +156,7 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     r.t_ns = t_ns;
     r.state = f.state();
     r.predicted = f.predicted();
-    constexpr int B = Filter::State::kPbc, L = Filter::State::kDim - B;
+    constexpr int B = Filter::State::kCalibrationBegin, L = Filter::State::kCalibrationDim;
     r.sigma = f.covariance().diagonal().template segment<L>(B).template cast<double>().cwiseSqrt();
     if (truth_ != nullptr) calibration_error(f, *truth_, r);
     // This update's share of the filter's running counts.

@@ -41,7 +41,7 @@ struct ResidualSample {
 
 // The most calibration states a report shows: stage 2 with the lens's coefficients (p_b_c, the
 // rotation, M markers, the time offset, fu fv cu cv and four coefficients).
-constexpr int kMaxReportStates = 6 + 3 * kMarkers + 1 + 8;
+constexpr int kMaxReportStates = calibration_layout(kMarkers, 8).size();
 
 // One history row as the report plots it: the estimate after one frame (or the final estimate).
 struct ReportRow {

@@ -53,6 +53,11 @@ struct CalibrationResult {
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
+
+  // Where sigma's and covariance's groups lie.
+  CalibrationLayout layout() const {
+    return calibration_layout(static_cast<int>(markers.size()), estimated_intrinsics);
+  }
 };
 
 // The j-th camera parameter a result estimated (fu fv cu cv, then skew, or the lens's four
@@ -142,12 +147,9 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.estimated_intrinsics = State::kIntrinsics;
   r.width = width;
   r.height = height;
-  for (int j = State::kPbc; j < State::kDim; ++j)
-    r.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
-  constexpr int kCalibration = State::kDim - State::kPbc;
-  r.covariance = f.covariance()
-                     .template block<kCalibration, kCalibration>(State::kPbc, State::kPbc)
-                     .template cast<double>();
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
+  for (int j = B; j < B + L; ++j) r.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
+  r.covariance = f.covariance().template block<L, L>(B, B).template cast<double>();
   r.params = calibration_params(State::kMarkers, State::kIntrinsics, r.intrinsics.distortion);
   r.markers_used = f.counters().markers_used;
   r.nis_dof = f.counters().nis_dof;

@@ -191,9 +191,9 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier);
 // state's.
 template <class State, class Covariance>
 void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0) {
-  static_assert(State::kTd == State::kPi + 3 * State::kMarkers, "the time offset follows markers");
-  constexpr int B = State::kPbc;
-  const int l = 6 + 3 * State::kMarkers + (earlier.has_t_d ? 1 : 0);
+  // The earlier block is the state's calibration block up to the intrinsics.
+  constexpr int B = State::kCalibrationBegin;
+  const int l = calibration_layout(State::kMarkers, 0, earlier.has_t_d).size();
   x0.p_b_c = earlier.p_b_c;
   x0.q_b_c = earlier.q_b_c;
   for (int i = 0; i < State::kMarkers; ++i)

@@ -34,8 +34,9 @@ ErrorSeries error_series(const RecordStore<HistoryRow<Filter>>& rows,
   return s;
 }
 
-// The calibration parameters drawn together, one picture per group: p_b_c, the rotation, the
-// markers, the time offset, the intrinsics (file: the error plot's PNG name).
+// The calibration parameters drawn together, one picture per group (ParamInfo::group): p_b_c, the
+// rotation, the markers, the time offset, the intrinsics with the lens (file: the error plot's PNG
+// name).
 struct PlotGroup {
   std::string file, label;
   std::vector<std::size_t> params;
