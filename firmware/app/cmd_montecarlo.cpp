@@ -215,11 +215,14 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std
 }  // namespace
 
 int cmd_montecarlo(int argc, char** argv) {
-  const Options o =
-      parse(argc, argv, 2,
-            {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
-             "passes", "timeshift", "distortion", "line-delay", "filter-line-delay"},
-            {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"});
+  Options o;
+  std::string error;
+  if (!parse(argc, argv, 2,
+             {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
+              "passes", "timeshift", "distortion", "line-delay", "filter-line-delay"},
+             {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"},
+             o, error))
+    fail(error);
   const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew"),
              one_stage = o.flag("one-stage");
   // --estimate-distortion: stage 2 estimates the lens's coefficients with fu fv cu cv, skew held
@@ -229,27 +232,39 @@ int cmd_montecarlo(int argc, char** argv) {
     fail("--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
   if ((hold_skew || one_stage) && !intrinsics)
     fail("--hold-skew and --one-stage apply with --intrinsics");
-  const FrameMode frames = frame_mode_option(o);
+  FrameMode frames;
+  if (!frame_mode_option(o, frames, error)) fail(error);
   if (intrinsics && frames.enabled)
     fail("--intrinsics runs on listed markers (not yet with --frames)");
   if (!o.flag("runs")) fail(std::string("montecarlo needs --runs N\n") + usage());
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
   // draws each run's rig from the run's seed.
-  const auto scenario_for = [&](std::uint64_t run_seed) {
-    return hold_skew ? without_skew(scenario_option(o, run_seed)) : scenario_option(o, run_seed);
+  const auto scenario_for = [&](std::uint64_t run_seed, sim::Scenario& scenario) {
+    if (!scenario_option(o, run_seed, scenario, error)) return false;
+    if (hold_skew) scenario = without_skew(scenario);
+    return true;
   };
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const sim::Scenario s = scenario_for(seed);
+  std::uint64_t seed = 0;
+  sim::Scenario s;
+  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_for(seed, s)) fail(error);
   const bool family = s.name == "random";  // a rig of its own for every run
-  const std::uint64_t runs = parse_count(o, "runs", 0, 1);
+  std::uint64_t runs = 0, jobs = 0;
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
-  const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
+  if (!parse_count(o, "runs", 0, 1, runs, error) || !parse_count(o, "jobs", hw, 1, jobs, error))
+    fail(error);
+  jobs = std::min(jobs, runs);
+  // Each run's rig, drawn here: an option the scenario refuses ends the command before any run.
+  std::vector<sim::Scenario> scenarios(runs);
+  for (std::uint64_t i = 0; i < runs; ++i)
+    if (!scenario_for(sim::derive_seed(seed, 1000 + i), scenarios[i])) fail(error);
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
-  const Passes passes = passes_option(o);
+  Passes passes;
+  if (!passes_option(o, passes, error)) fail(error);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
-  const std::string dir = make_out_dir(o, "out/montecarlo");
+  std::string dir;
+  if (!make_out_dir(o, "out/montecarlo", dir, error)) fail(error, 1);
   std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
               s.name.c_str(), lens ? ", the lens's coefficients estimated in stage 2" : "",
               !intrinsics ? ""
@@ -270,7 +285,7 @@ int cmd_montecarlo(int argc, char** argv) {
   auto worker = [&] {
     for (std::uint64_t i; (i = next++) < runs;) {
       const std::uint64_t run_seed = sim::derive_seed(seed, 1000 + i);
-      const sim::Scenario rs = scenario_for(run_seed);
+      const sim::Scenario& rs = scenarios[i];
       const auto t = std::chrono::steady_clock::now();
       Outcome& oc = out[i];
       // Either stage: the same statistics of whichever run it was.

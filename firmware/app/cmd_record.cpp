@@ -49,12 +49,18 @@ class RecordingFolder {
 // camchain.yaml's), so `mirrorcal calibrate DIR` takes the recording as it is; else the camera
 // streams 640x480.
 int record_devices(const Options& o, const std::string& dir) {
-  const RunSettings s = device_settings(o, "record", false);
+  RunSettings s;
   sim::Recording sensors;
-  if (!s.sensors.empty()) read_sensors(s.sensors, sensors);
+  std::string error;
+  if (!device_settings(o, "record", false, s, error) ||
+      (!s.sensors.empty() && !read_sensors(s.sensors, sensors, error)))
+    fail(error, 2);
   const double imu_rate_hz = s.sensors.empty() ? s.rate_hz : sensors.sensors.imu_rate_hz;
-  const Devices devices =
-      open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz);
+  Devices devices;
+  int exit_code = 1;
+  if (!open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz, devices, error,
+                    exit_code))
+    fail(error, exit_code);
   RecordingFolder folder(dir, o.flag("force"));
 
   std::string err;
@@ -200,9 +206,12 @@ int cmd_record(int argc, char** argv) {
                                          "timeshift", "distortion", "line-delay"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
-  const Options o =
-      parse(argc, argv, 2, with_value,
-            {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"});
+  Options o;
+  std::string error;
+  if (!parse(argc, argv, 2, with_value,
+             {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"}, o,
+             error))
+    fail(error);
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
   const std::string dir = o.get("out", "");
   if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
@@ -219,8 +228,11 @@ int cmd_record(int argc, char** argv) {
         "--estimate-distortion applies with --intrinsics or --two-stage and --distortion "
         "radtan|equidistant");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  sim::Scenario s = hold_skew ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  std::uint64_t seed = 0;
+  sim::Scenario s;
+  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
+    fail(error);
+  if (hold_skew) s = without_skew(s);
   // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.
   if (o.flag("duration")) {
     const std::string text = o.get("duration", "");

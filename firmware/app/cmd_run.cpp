@@ -118,13 +118,14 @@ int cmd_run(int argc, char** argv) {
   std::vector<std::string> flags;
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
-  const Options o = parse(argc, argv, 2, with_value, flags);
-  const RunSettings s = device_settings(o, "run", true);
-
-  sim::Recording sensors;
-  read_sensors(s.sensors, sensors);
-  Prior<kMarkers> prior;
+  Options o;
   std::string error;
+  if (!parse(argc, argv, 2, with_value, flags, o, error)) fail(error);
+  RunSettings s;
+  sim::Recording sensors;
+  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
+    fail(error, 2);
+  Prior<kMarkers> prior;
   if (!sim::to_prior(sensors.priors, prior, error))
     fail(s.sensors + "/mirrorcal.yaml: " + error, 2);
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
@@ -137,10 +138,13 @@ int cmd_run(int argc, char** argv) {
   }
 
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
-  const Devices devices =
-      open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz);
+  Devices devices;
+  int exit_code = 1;
+  if (!open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz,
+                    devices, error, exit_code))
+    fail(error, exit_code);
   const std::unique_ptr<Camera>& camera = devices.camera;
-  create_out_dir(s.out);
+  if (!create_out_dir(s.out, error)) fail(error, 1);
 
   using Filter = CalibrationFilter<double, kMarkers, 0>;
   Filter filter(recording_config(sensors));
@@ -165,8 +169,10 @@ int cmd_run(int argc, char** argv) {
   hal::MarkerSource<kMarkers>& markers =
       camera ? static_cast<hal::MarkerSource<kMarkers>&>(*logged_markers) : no_markers;
   drivers::MonotonicClock clock;
-  const auto profiler = make_profiler(o, clock, imu_period, frame_period);
-  apply_realtime_options(o);
+  std::unique_ptr<firmware::LoopProfiler> profiler;
+  if (!make_profiler(o, clock, imu_period, frame_period, profiler, error) ||
+      !apply_realtime_options(o, error))
+    fail(error);
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
@@ -200,7 +206,7 @@ int cmd_run(int argc, char** argv) {
       static_cast<unsigned long long>(lcount.imu_out_of_order),
       static_cast<unsigned long long>(lcount.frames));
   print_device_counters(devices);
-  if (profiler) report_profile(*profiler, "timing", s.out);
+  if (profiler && !report_profile(*profiler, "timing", s.out, error)) fail(error, 1);
   CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
   const std::string title = "mirrorcal run, IMU " + s.imu;
   ReportData report = report_data_without_history(result, title);

@@ -29,8 +29,11 @@ int cmd_sim(int argc, char** argv) {
       flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
-  const Options o = parse(argc, argv, 2, with_value, flags);
-  const FrameMode frames = frame_mode_option(o);
+  Options o;
+  FrameMode frames;
+  std::string error;
+  if (!parse(argc, argv, 2, with_value, flags, o, error) || !frame_mode_option(o, frames, error))
+    fail(error);
   const bool intrinsics = o.flag("intrinsics");
   if (intrinsics && (frames.enabled || o.flag("profile")))
     fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
@@ -43,19 +46,25 @@ int cmd_sim(int argc, char** argv) {
   if (lens && (!intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
     fail("--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const sim::Scenario s =
-      o.flag("hold-skew") ? without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  std::uint64_t seed = 0;
+  sim::Scenario s;
+  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
+    fail(error);
+  if (o.flag("hold-skew")) s = without_skew(s);
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
-  const Passes passes = passes_option(o);
+  Passes passes;
+  if (!passes_option(o, passes, error)) fail(error);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
-  const std::string dir = make_out_dir(o, "out/sim");
+  std::string dir;
+  if (!make_out_dir(o, "out/sim", dir, error)) fail(error, 1);
   firmware::MonotonicClock clock;  // the simulation's own clock is simulated time
-  const auto profiler = make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
-                                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz));
-  apply_realtime_options(o);
+  std::unique_ptr<firmware::LoopProfiler> profiler;
+  if (!make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
+                     static_cast<std::int64_t>(1e9 / s.camera_rate_hz), profiler, error) ||
+      !apply_realtime_options(o, error))
+    fail(error);
   std::printf(
       "mirrorcal sim: scenario '%s', seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), s.duration_s, s.imu_rate_hz,
@@ -124,9 +133,11 @@ int cmd_sim(int argc, char** argv) {
         "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
         "report.html, residuals.csv\n",
         dir.c_str());
-    if (profiler)
-      report_profile(*profiler,
-                     "this host's monotonic clock, simulated data fed as fast as it is taken", dir);
+    if (profiler &&
+        !report_profile(*profiler,
+                        "this host's monotonic clock, simulated data fed as fast as it is taken",
+                        dir, err))
+      fail(err, 1);
   };
   if (lens)
     report(one_stage ? run_one_stage_simulation<8>(s, seed, progress)
