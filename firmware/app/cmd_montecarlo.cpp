@@ -124,19 +124,16 @@ struct GroupStats {
   }
 };
 
-// A random family's campaign: no common truth, so statistics of the errors by parameter group
-// (groups of them: stage 1's four, and the camera's and the lens's in stage 2), over all runs and
-// by each axis the family draws (mirror, motion, camera rate, pixel noise, prior width), into
-// summary.csv (f) and on stdout. Stage 1's columns come first, in stage 1's order; stage 2 adds
-// the RMS error and sigma of its groups at the end of each row. Only stage 1 has the data's limit.
-void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std::size_t lens_row,
-                   double nees_lo, double nees_hi, std::FILE* f) {
-  const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
-  struct Group {
-    std::string axis, value;
-    std::function<bool(const sim::Scenario&)> has;
-  };
-  std::vector<Group> groups = {
+// A slice of a family's runs by one axis the family draws: runs whose rig has() it.
+struct FamilyGroup {
+  std::string axis, value;
+  std::function<bool(const sim::Scenario&)> has;
+};
+
+// The slices report_family gives statistics for: all runs, then by mirror, motion, camera rate,
+// pixel noise, IMU noise and marker prior, and in stage 2 (groups_used > 4) by the camera's prior.
+std::vector<FamilyGroup> family_groups(std::size_t groups_used) {
+  std::vector<FamilyGroup> groups = {
       {"all", "all", [](const sim::Scenario&) { return true; }},
       {"mirror", "wall", [](const sim::Scenario& s) { return s.mirror == "wall"; }},
       {"mirror", "floor", [](const sim::Scenario& s) { return s.mirror == "floor"; }},
@@ -158,6 +155,11 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std
     groups.push_back({"camera prior", "60-100 px",
                       [](const sim::Scenario& s) { return s.priors.intrinsics[0] >= 60.0; }});
   }
+  return groups;
+}
+
+// summary.csv's header and the table's on stdout, for groups_used parameter groups.
+void family_headers(std::size_t groups_used, bool has_limit, std::FILE* f) {
   std::fprintf(f,
                "axis,value,runs,nees_mean,nees_median,runs_beyond_4_sigma,flagged,"
                "unflagged_beyond_4_sigma,rms_p_b_c [cm],rms_rot_b_c [deg],rms_markers [mm],"
@@ -173,7 +175,18 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std
   for (std::size_t k = 0; k < groups_used; ++k) std::printf(" %15s", kGroupName[k]);
   if (has_limit) std::printf(" | %23s | %23s", "RMS / limit", "consistent / lim");
   std::printf("\n");
-  for (const Group& g : groups) {
+}
+
+// A random family's campaign: no common truth, so statistics of the errors by parameter group
+// (groups of them: stage 1's four, and the camera's and the lens's in stage 2), over all runs and
+// by each axis the family draws (mirror, motion, camera rate, pixel noise, prior width), into
+// summary.csv (f) and on stdout. Stage 1's columns come first, in stage 1's order; stage 2 adds
+// the RMS error and sigma of its groups at the end of each row. Only stage 1 has the data's limit.
+void report_family(const std::vector<Outcome>& out, std::size_t groups_used, std::size_t lens_row,
+                   double nees_lo, double nees_hi, std::FILE* f) {
+  const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
+  family_headers(groups_used, has_limit, f);
+  for (const FamilyGroup& g : family_groups(groups_used)) {
     GroupStats st;
     st.lens_row = lens_row;
     for (const Outcome& oc : out)
