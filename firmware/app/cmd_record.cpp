@@ -44,6 +44,61 @@ class RecordingFolder {
   files::StagedFolder staged_;
 };
 
+// The camera's last frame as the image beside its markers: its luma copied into luma (sized for
+// the camera's frames) and grey pointing at it; nullptr for a frame larger than that.
+const sim::GrayImage* frame_image(const hal::FrameView& view, std::vector<std::uint8_t>& luma,
+                                  sim::GrayImage& grey) {
+  grey = {view.width, view.height, luma.data()};
+  if (std::size_t(view.width) * std::size_t(view.height) > luma.size()) return nullptr;
+  for (int y = 0; y < view.height; ++y)
+    for (int x = 0; x < view.width; ++x)
+      luma[std::size_t(y) * std::size_t(view.width) + std::size_t(x)] = view.luma(x, y);
+  return &grey;
+}
+
+// How recording the devices' streams ended, and the frames written.
+struct RecordEnd {
+  hal::SourceStatus imu_status = hal::SourceStatus::kOk;
+  hal::SourceStatus frame_status = hal::SourceStatus::kNotReady;
+  std::uint64_t frames = 0;
+};
+
+// The IMU's samples into writer, each followed by the camera's frames that came meanwhile (with
+// their images when asked: luma is their buffer), until the IMU stream ends (its duration, a
+// signal) or fails, the writer refuses, or the camera fails.
+RecordEnd record_streams(const Devices& devices, hal::ImuSource& imu, sim::RecordingWriter& writer,
+                         bool images, std::vector<std::uint8_t>& luma) {
+  RecordEnd end;
+  StopOnSignal stop_on_signal;
+  ImuSample sample;
+  MarkerFrame<kMarkers> frame;
+  while ((end.imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
+    if (!writer.add_imu(sample)) break;
+    // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
+    while (devices.camera &&
+           (end.frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
+      const sim::GrayImage* image = nullptr;
+      sim::GrayImage grey;
+      if (images) image = frame_image(devices.camera->markers->last_frame(), luma, grey);
+      if (!writer.add_frame(frame, image)) break;
+      ++end.frames;
+    }
+    if (end.frame_status == hal::SourceStatus::kError) break;
+  }
+  return end;
+}
+
+void print_record_start(const RunSettings& s, const Devices& devices, double imu_rate_hz,
+                        const std::string& dir) {
+  std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
+              describe_camera(s, devices).c_str(),
+              describe_trigger(s, devices, imu_rate_hz).c_str(),
+              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
+                               : "until Ctrl-C or the IMU stops",
+              dir.c_str());
+  std::fflush(stdout);
+}
+
 // The board's devices into dir until --duration or Ctrl-C. With --sensors, its imu.yaml,
 // camchain.yaml and mirrorcal.yaml are copied beside the streams (the camera's size is
 // camchain.yaml's), so `mirrorcal calibrate DIR` takes the recording as it is; else the camera
@@ -72,52 +127,19 @@ int record_devices(const Options& o, const std::string& dir) {
   if (images && !devices.camera) fail("--images needs a camera (--camera DEV)");
   std::vector<std::uint8_t> luma(
       images ? std::size_t(sensors.sensors.width) * std::size_t(sensors.sensors.height) : 0);
-  std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
-              describe_camera(s, devices).c_str(),
-              describe_trigger(s, devices, imu_rate_hz).c_str(),
-              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
-                               : "until Ctrl-C or the IMU stops",
-              dir.c_str());
-  std::fflush(stdout);
+  print_record_start(s, devices, imu_rate_hz, dir);
   StoppingImu imu(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
-  hal::SourceStatus imu_status, frame_status = hal::SourceStatus::kNotReady;
-  std::uint64_t frames = 0;
-  {
-    StopOnSignal stop_on_signal;
-    ImuSample sample;
-    MarkerFrame<kMarkers> frame;
-    while ((imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
-      if (!writer.add_imu(sample)) break;
-      // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
-      while (devices.camera &&
-             (frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
-        const sim::GrayImage* image = nullptr;
-        sim::GrayImage grey;
-        if (images) {
-          const hal::FrameView& view = devices.camera->markers->last_frame();
-          grey = {view.width, view.height, luma.data()};
-          if (std::size_t(view.width) * std::size_t(view.height) <= luma.size()) {
-            for (int y = 0; y < view.height; ++y)
-              for (int x = 0; x < view.width; ++x)
-                luma[std::size_t(y) * std::size_t(view.width) + std::size_t(x)] = view.luma(x, y);
-            image = &grey;
-          }
-        }
-        if (!writer.add_frame(frame, image)) break;
-        ++frames;
-      }
-      if (frame_status == hal::SourceStatus::kError) break;
-    }
-  }
+  const RecordEnd end = record_streams(devices, imu, writer, images, luma);
   StopOnSignal::report("closing the recording");
   const bool written = writer.close(err);
   std::printf("record: %llu IMU samples over %.3f s, %llu frames\n",
               static_cast<unsigned long long>(imu.samples()), imu.seconds(),
-              static_cast<unsigned long long>(frames));
+              static_cast<unsigned long long>(end.frames));
   print_device_counters(devices);
   if (!written) folder.fail_with(err);
-  if (imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
-  if (frame_status == hal::SourceStatus::kError) folder.fail_with(devices.camera->markers->error());
+  if (end.imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
+  if (end.frame_status == hal::SourceStatus::kError)
+    folder.fail_with(devices.camera->markers->error());
   if (!s.sensors.empty()) {
     std::string text;
     for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
