@@ -147,6 +147,33 @@ class LiveStreams {
   std::unique_ptr<LoggedMarkers> logged_markers_;
 };
 
+bool parse_run_options(int argc, char** argv, Options& o, std::string& error) {
+  std::vector<std::string> with_value = {"config", "from"};
+  for (const char* key : kRunKeys) with_value.emplace_back(key);
+  std::vector<std::string> flags;
+  with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
+  flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
+  return parse(argc, argv, 2, with_value, flags, o, error);
+}
+
+// What a run starts from: its settings (--config, then the command line), the sensor description
+// (--sensors) and the priors of its mirrorcal.yaml; an error names what is missing or wrong.
+bool run_inputs(const Options& o, RunSettings& s, sim::Recording& sensors, Prior<kMarkers>& prior,
+                std::string& error) {
+  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
+    return false;
+  if (sim::to_prior(sensors.priors, prior, error)) return true;
+  error = s.sensors + "/mirrorcal.yaml: " + error;
+  return false;
+}
+
+// Runs the loop while SIGINT and SIGTERM ask it to stop (at the next IMU sample).
+template <class Loop>
+firmware::LoopEnd run_until_signal(Loop& loop) {
+  StopOnSignal stop_on_signal;
+  return loop.run();
+}
+
 // The frame path's budget: the camera's frame interval where the driver reports one, else 20 Hz.
 std::int64_t frame_period_ns(const Devices& devices) {
   const std::unique_ptr<Camera>& camera = devices.camera;
@@ -223,21 +250,13 @@ bool write_run_result(const std::string& dir, const CalibrationResult& result,
 }  // namespace
 
 int cmd_run(int argc, char** argv) {
-  std::vector<std::string> with_value = {"config", "from"};
-  for (const char* key : kRunKeys) with_value.emplace_back(key);
-  std::vector<std::string> flags;
-  with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
-  flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   Options o;
   std::string error;
-  if (!parse(argc, argv, 2, with_value, flags, o, error)) fail(error);
+  if (!parse_run_options(argc, argv, o, error)) fail(error);
   RunSettings s;
   sim::Recording sensors;
-  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
-    fail(error, 2);
   Prior<kMarkers> prior;
-  if (!sim::to_prior(sensors.priors, prior, error))
-    fail(s.sensors + "/mirrorcal.yaml: " + error, 2);
+  if (!run_inputs(o, s, sensors, prior, error)) fail(error, 2);
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
   // one (stage 2 after stage 1, as calibrate --from).
   sim::CalibrationStart start;
@@ -279,11 +298,7 @@ int cmd_run(int argc, char** argv) {
                                                       devices.camera ? &feedback : nullptr);
   if (devices.camera) loop.set_identifier(streams.identifier());
   print_run_start(s, devices, sensors.sensors.imu_rate_hz);
-  firmware::LoopEnd end;
-  {
-    StopOnSignal stop_on_signal;
-    end = loop.run();
-  }
+  const firmware::LoopEnd end = run_until_signal(loop);
   StopOnSignal::report("writing the calibration so far");
 
   print_loop_counters(loop.counters(), streams.seconds());
