@@ -161,17 +161,16 @@ int record_devices(const Options& o, const std::string& dir) {
 // images hold the same data as features.csv and a calibration from either sees the same.
 // With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
 // guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
-// true ones.
-void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
+// true ones. False, with the error, when a file cannot be written.
+bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
                                bool hold_skew, bool lens, RecordingFolder& folder,
-                               const std::string& sub, bool images = false) {
+                               const std::string& sub, std::string& err, bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = simulation_prior(s, data, seed);
 
-  std::string err;
   sim::RecordingWriter writer;
-  if (!writer.open(dir, err)) folder.fail_with(err);
+  if (!writer.open(dir, err)) return false;
   for (const ImuSample& smp : data.imu)
     if (!writer.add_imu(smp)) break;
   const sim::RenderConfig render;
@@ -189,7 +188,7 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
     }
     if (!writer.add_frame(f, images ? &image : nullptr)) break;
   }
-  if (!writer.close(err)) folder.fail_with(err);
+  if (!writer.close(err)) return false;
 
   sim::SensorInfo sensors;
   sensors.imu = s.imu;
@@ -212,13 +211,14 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   truth.has_distortion = lens;
   if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
-    folder.fail_with(err);
+    return false;
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
       "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv,%s imu.yaml, "
       "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
       s.duration_s, folder.as_target(dir).c_str(), images ? " mav0/cam0/data/*.png," : "");
+  return true;
 }
 
 }  // namespace
@@ -267,16 +267,19 @@ int cmd_record(int argc, char** argv) {
   RecordingFolder folder(dir, o.flag("force"));
   const bool images = o.flag("images");
   if (!two_stage) {
-    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "", images);
+    if (!write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
+                                   error, images))
+      folder.fail_with(error);
     folder.commit();
     return 0;
   }
   // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
   // together.
   const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  write_simulated_recording(s, seed, false, false, false, folder, "/stage1", images);
-  write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew, lens,
-                            folder, "/stage2", images);
+  if (!write_simulated_recording(s, seed, false, false, false, folder, "/stage1", error, images) ||
+      !write_simulated_recording(s, sim::derive_seed(seed, kStage2SeedStream), true, hold_skew,
+                                 lens, folder, "/stage2", error, images))
+    folder.fail_with(error);
   folder.commit();
   std::printf(
       "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
