@@ -158,6 +158,22 @@ std::int64_t monotonic_minus_realtime_ns() {
   return best_offset;
 }
 
+// The time a frame was received: the kernel's receive time (SO_TIMESTAMPNS, CLOCK_REALTIME) moved
+// onto CLOCK_MONOTONIC, or now_ns where the message carries none.
+std::int64_t receive_time_ns(msghdr& msg, std::int64_t now_ns) {
+  std::int64_t t_ns = now_ns;
+  for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
+    if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+      timespec ts{};
+      std::memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+      const std::int64_t rx_real =
+          static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+      t_ns = rx_real + monotonic_minus_realtime_ns();
+    }
+  }
+  return t_ns;
+}
+
 }  // namespace
 
 int open_mm710_socket(const std::string& ifname) {
@@ -264,20 +280,7 @@ hal::SourceStatus CanImu::next(ImuSample& sample) {
     const std::int64_t poll_start = time_.now_ns();
     const std::int64_t left = deadline - poll_start;
     if (left <= 0) {
-      if (frames_meanwhile > 0 && !bus_off_)
-        error_.set(
-            "%s: stops answering: %llu frames in %lld ms but no complete MM7.10 sample (wrong "
-            "length, out of order or missing messages)",
-            device_.c_str(), static_cast<unsigned long long>(frames_meanwhile),
-            static_cast<long long>(timeout_ns_ / 1'000'000));
-      else if (bus_off_)
-        error_.set(
-            "%s: stops answering: bus-off and no frame since for %lld ms (automatic "
-            "recovery: ip link set %s type can restart-ms 100)",
-            device_.c_str(), static_cast<long long>(timeout_ns_ / 1'000'000), device_.c_str());
-      else
-        error_.set("%s: stops answering: no frame of the MM7.10 for %lld ms", device_.c_str(),
-                   static_cast<long long>(timeout_ns_ / 1'000'000));
+      set_silence_error(frames_meanwhile);
       return hal::SourceStatus::kError;
     }
     const int ready = time_.wait_readable(fd_, left);
@@ -311,40 +314,57 @@ hal::SourceStatus CanImu::next(ImuSample& sample) {
       continue;
     }
     // The kernel's receive time is CLOCK_REALTIME; move it onto CLOCK_MONOTONIC.
-    std::int64_t t_ns = time_.now_ns();
-    for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
-      if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
-        timespec ts{};
-        std::memcpy(&ts, CMSG_DATA(c), sizeof(ts));
-        const std::int64_t rx_real =
-            static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-        t_ns = rx_real + monotonic_minus_realtime_ns();
-      }
-    }
+    const std::int64_t t_ns = receive_time_ns(msg, time_.now_ns());
     if ((frame.can_id & CAN_ERR_FLAG) != 0) {
       on_error_frame(frame.can_id, frame.data);
       continue;
     }
     ++frames_meanwhile;
-    mm710::Frame f;
-    f.id = frame.can_id & CAN_SFF_MASK;
-    f.len = frame.len;
-    std::memcpy(f.data, frame.data, 8);
     mm710::Part part;
-    if ((frame.can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG)) != 0 || !mm710::decode(f, part)) {
-      ++counters_.rejected_frames;
-      continue;
-    }
-    ++counters_.frames;
-    if (bus_off_) {  // frames flow again: the controller recovered without telling us
-      bus_off_ = false;
-      ++counters_.recoveries;
-    }
+    if (!take_data_frame(frame.can_id, frame.len, frame.data, part)) continue;
     if (assembler_.add(part, t_ns, sample)) {
       ++counters_.samples;
       return hal::SourceStatus::kOk;
     }
   }
+}
+
+// Why no sample came within the timeout: frames that never completed one, a bus-off, or silence.
+void CanImu::set_silence_error(std::uint64_t frames_meanwhile) {
+  if (frames_meanwhile > 0 && !bus_off_)
+    error_.set(
+        "%s: stops answering: %llu frames in %lld ms but no complete MM7.10 sample (wrong "
+        "length, out of order or missing messages)",
+        device_.c_str(), static_cast<unsigned long long>(frames_meanwhile),
+        static_cast<long long>(timeout_ns_ / 1'000'000));
+  else if (bus_off_)
+    error_.set(
+        "%s: stops answering: bus-off and no frame since for %lld ms (automatic "
+        "recovery: ip link set %s type can restart-ms 100)",
+        device_.c_str(), static_cast<long long>(timeout_ns_ / 1'000'000), device_.c_str());
+  else
+    error_.set("%s: stops answering: no frame of the MM7.10 for %lld ms", device_.c_str(),
+               static_cast<long long>(timeout_ns_ / 1'000'000));
+}
+
+// A data frame decoded into part and counted; one that is not a standard data frame of the
+// MM7.10's messages is counted as rejected (false). Frames that flow again end a bus-off.
+bool CanImu::take_data_frame(std::uint32_t can_id, std::uint8_t len, const std::uint8_t* data,
+                             mm710::Part& part) {
+  mm710::Frame f;
+  f.id = can_id & CAN_SFF_MASK;
+  f.len = len;
+  std::memcpy(f.data, data, 8);
+  if ((can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG)) != 0 || !mm710::decode(f, part)) {
+    ++counters_.rejected_frames;
+    return false;
+  }
+  ++counters_.frames;
+  if (bus_off_) {  // frames flow again: the controller recovered without telling us
+    bus_off_ = false;
+    ++counters_.recoveries;
+  }
+  return true;
 }
 
 bool CanImuSender::send_frame(const mm710::Frame& f) {

@@ -114,87 +114,16 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
   std::int64_t t_ns = 0;
   wait_ns_ = 0;
   if (drdy_ != nullptr) {
-    const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
-    const std::int64_t wait_start = time_.now_ns();
-    const hal::SourceStatus s = drdy_->wait_rising(timeout_ns, t_ns);
-    wait_ns_ = time_.now_ns() - wait_start;
-    if (s == hal::SourceStatus::kNotReady) {
-      error_.set("%s: stops answering: no data-ready edge for %lld ms", bus_->device().c_str(),
-                 static_cast<long long>(timeout_ns / 1'000'000));
-      return hal::SourceStatus::kError;
-    }
-    if (s != hal::SourceStatus::kOk) {
-      error_.set("%s: data-ready line failed: %s", bus_->device().c_str(), drdy_->error());
-      return hal::SourceStatus::kError;
-    }
+    if (!wait_data_ready_line(t_ns)) return hal::SourceStatus::kError;
   } else if (pace_) {
-    // Without a data-ready line the part's own data-ready status tells when a new sample is in
-    // its registers: polled every eighth of a period from shortly before the next one is due.
-    // No sample is read twice (a part whose clock runs slower than the host's), and each is timed
-    // within an eighth of a period of its arrival.
-    const std::int64_t poll_ns = std::max<std::int64_t>(period_ns_ / 8, 50'000);
-    const std::int64_t start = time_.now_ns();
-    if (next_due_ns_ < start - period_ns_) next_due_ns_ = start;  // the first, or fell behind
-    time_.sleep_until_ns(next_due_ns_);
-    const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
-    for (;;) {
-      std::uint8_t status = 0;
-      if (!read_with_retry(status_register_, &status, 1)) {
-        error_.set("%s: stops answering: reading the status at 0x%02x failed: %s",
-                   bus_->device().c_str(), status_register_, std::strerror(errno));
-        return hal::SourceStatus::kError;
-      }
-      t_ns = time_.now_ns();
-      if ((status & status_ready_mask_) != 0) break;
-      if (t_ns - start > timeout_ns) {
-        error_.set("%s: stops answering: no new sample for %lld ms (status 0x%02x at 0x%02x)",
-                   bus_->device().c_str(), static_cast<long long>(timeout_ns / 1'000'000), status,
-                   status_register_);
-        return hal::SourceStatus::kError;
-      }
-      time_.sleep_until_ns(t_ns + poll_ns);
-    }
-    wait_ns_ = t_ns - start;
-    next_due_ns_ = t_ns + period_ns_ - 2 * poll_ns;
+    if (!poll_data_ready_status(t_ns)) return hal::SourceStatus::kError;
   } else {
     t_ns = time_.now_ns();
   }
-  // The part counts on: samples further apart than a period are samples nobody read.
-  if (drdy_ != nullptr || pace_) {
-    if (last_sample_ns_ >= 0) {
-      const long long periods = std::llround(static_cast<double>(t_ns - last_sample_ns_) /
-                                             static_cast<double>(period_ns_));
-      if (periods > 1) counters_.missed_samples += static_cast<std::uint64_t>(periods - 1);
-    }
-    last_sample_ns_ = t_ns;
-  }
+  count_missed_samples(t_ns);
 
   std::uint8_t raw[32];
-  if (!read_with_retry(data_register_, raw, data_length_)) {
-    error_.set("%s: stops answering: reading %zu bytes at 0x%02x failed: %s",
-               bus_->device().c_str(), data_length_, data_register_, std::strerror(errno));
-    return hal::SourceStatus::kError;
-  }
-  // A bus with nobody answering reads one byte value throughout (0xff where the data line floats
-  // high or is pulled up, 0x00 where it is held low), and a part that reset itself reads its
-  // no-data value: neither may reach the filter as a sample. A working part never reads all six
-  // axes exactly zero (gravity and noise see to that).
-  if (const char* why = no_data(raw)) {
-    error_.set("%s: stops answering: the data registers read %s", bus_->device().c_str(), why);
-    return hal::SourceStatus::kError;
-  }
-  // Once a second, make sure the part is still the one we configured (a part replaced or reset
-  // to another configuration would otherwise pass unnoticed).
-  const std::uint64_t per_second =
-      static_cast<std::uint64_t>(1'000'000'000 / (period_ns_ > 0 ? period_ns_ : 1));
-  if (per_second > 0 && counters_.samples % per_second == per_second - 1) {
-    std::uint8_t id = 0;
-    if (!read_with_retry(who_am_i_register_, &id, 1) || id != who_am_i_) {
-      error_.set("%s: stops answering: WHO_AM_I reads 0x%02x instead of 0x%02x",
-                 bus_->device().c_str(), id, who_am_i_);
-      return hal::SourceStatus::kError;
-    }
-  }
+  if (!read_data(raw)) return hal::SourceStatus::kError;
 
   const double rad_per_lsb = kPi / 180.0 / gyro_lsb_per_dps_;
   const double ms2_per_lsb = kStandardGravity / accel_lsb_per_g_;
@@ -206,6 +135,100 @@ hal::SourceStatus RegisterImu::next(ImuSample& sample) {
   }
   ++counters_.samples;
   return hal::SourceStatus::kOk;
+}
+
+// The data-ready line's next rising edge, timed by the line (t_ns); false after 20 periods (at
+// least 200 ms) without one, or when the line fails.
+bool RegisterImu::wait_data_ready_line(std::int64_t& t_ns) {
+  const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
+  const std::int64_t wait_start = time_.now_ns();
+  const hal::SourceStatus s = drdy_->wait_rising(timeout_ns, t_ns);
+  wait_ns_ = time_.now_ns() - wait_start;
+  if (s == hal::SourceStatus::kNotReady) {
+    error_.set("%s: stops answering: no data-ready edge for %lld ms", bus_->device().c_str(),
+               static_cast<long long>(timeout_ns / 1'000'000));
+    return false;
+  }
+  if (s != hal::SourceStatus::kOk) {
+    error_.set("%s: data-ready line failed: %s", bus_->device().c_str(), drdy_->error());
+    return false;
+  }
+  return true;
+}
+
+bool RegisterImu::poll_data_ready_status(std::int64_t& t_ns) {
+  // Without a data-ready line the part's own data-ready status tells when a new sample is in
+  // its registers: polled every eighth of a period from shortly before the next one is due.
+  // No sample is read twice (a part whose clock runs slower than the host's), and each is timed
+  // within an eighth of a period of its arrival.
+  const std::int64_t poll_ns = std::max<std::int64_t>(period_ns_ / 8, 50'000);
+  const std::int64_t start = time_.now_ns();
+  if (next_due_ns_ < start - period_ns_) next_due_ns_ = start;  // the first, or fell behind
+  time_.sleep_until_ns(next_due_ns_);
+  const std::int64_t timeout_ns = std::max<std::int64_t>(20 * period_ns_, 200'000'000);
+  for (;;) {
+    std::uint8_t status = 0;
+    if (!read_with_retry(status_register_, &status, 1)) {
+      error_.set("%s: stops answering: reading the status at 0x%02x failed: %s",
+                 bus_->device().c_str(), status_register_, std::strerror(errno));
+      return false;
+    }
+    t_ns = time_.now_ns();
+    if ((status & status_ready_mask_) != 0) break;
+    if (t_ns - start > timeout_ns) {
+      error_.set("%s: stops answering: no new sample for %lld ms (status 0x%02x at 0x%02x)",
+                 bus_->device().c_str(), static_cast<long long>(timeout_ns / 1'000'000), status,
+                 status_register_);
+      return false;
+    }
+    time_.sleep_until_ns(t_ns + poll_ns);
+  }
+  wait_ns_ = t_ns - start;
+  next_due_ns_ = t_ns + period_ns_ - 2 * poll_ns;
+  return true;
+}
+
+void RegisterImu::count_missed_samples(std::int64_t t_ns) {
+  // The part counts on: samples further apart than a period are samples nobody read.
+  if (drdy_ != nullptr || pace_) {
+    if (last_sample_ns_ >= 0) {
+      const long long periods = std::llround(static_cast<double>(t_ns - last_sample_ns_) /
+                                             static_cast<double>(period_ns_));
+      if (periods > 1) counters_.missed_samples += static_cast<std::uint64_t>(periods - 1);
+    }
+    last_sample_ns_ = t_ns;
+  }
+}
+
+// The sample's bytes into raw; false when the bus fails, the registers hold no data, or (once a
+// second) the part no longer answers as the one configured.
+bool RegisterImu::read_data(std::uint8_t* raw) {
+  if (!read_with_retry(data_register_, raw, data_length_)) {
+    error_.set("%s: stops answering: reading %zu bytes at 0x%02x failed: %s",
+               bus_->device().c_str(), data_length_, data_register_, std::strerror(errno));
+    return false;
+  }
+  // A bus with nobody answering reads one byte value throughout (0xff where the data line floats
+  // high or is pulled up, 0x00 where it is held low), and a part that reset itself reads its
+  // no-data value: neither may reach the filter as a sample. A working part never reads all six
+  // axes exactly zero (gravity and noise see to that).
+  if (const char* why = no_data(raw)) {
+    error_.set("%s: stops answering: the data registers read %s", bus_->device().c_str(), why);
+    return false;
+  }
+  // Once a second, make sure the part is still the one we configured (a part replaced or reset
+  // to another configuration would otherwise pass unnoticed).
+  const std::uint64_t per_second =
+      static_cast<std::uint64_t>(1'000'000'000 / (period_ns_ > 0 ? period_ns_ : 1));
+  if (per_second > 0 && counters_.samples % per_second == per_second - 1) {
+    std::uint8_t id = 0;
+    if (!read_with_retry(who_am_i_register_, &id, 1) || id != who_am_i_) {
+      error_.set("%s: stops answering: WHO_AM_I reads 0x%02x instead of 0x%02x",
+                 bus_->device().c_str(), id, who_am_i_);
+      return false;
+    }
+  }
+  return true;
 }
 
 Mpu6050::Mpu6050(std::unique_ptr<RegisterBus> bus, const RegisterImuConfig& config,

@@ -84,9 +84,16 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
   close();
   path_ = path;
   error_[0] = '\0';
+  if (!open_device() || !set_format(config)) return false;
+  read_frame_period();
+  return map_buffers(config);
+}
+
+// Opens path_ and checks that it is a single-planar video device of the stream's direction that
+// streams.
+bool V4l2Stream::open_device() {
   const char* p = path_.c_str();
   const char* what = output_ ? "output" : "capture";
-  const auto buf_type = output_ ? V4L2_BUF_TYPE_VIDEO_OUTPUT : V4L2_BUF_TYPE_VIDEO_CAPTURE;
 
   fd_ = ::open(p, O_RDWR | O_NONBLOCK | O_CLOEXEC);
   if (fd_ < 0) {
@@ -124,7 +131,14 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     return fail(Fault::kWrongKind, "%s (%s) does not support streaming I/O", p,
                 reinterpret_cast<const char*>(cap.card));
   }
+  return true;
+}
 
+// Sets the format config asks for (or the device's own, format_from_device) and keeps what the
+// driver granted: the size, stride and image size.
+bool V4l2Stream::set_format(const V4l2Config& config) {
+  const char* p = path_.c_str();
+  const auto buf_type = output_ ? V4L2_BUF_TYPE_VIDEO_OUTPUT : V4L2_BUF_TYPE_VIDEO_CAPTURE;
   hal::PixelFormat format = config.format;
   v4l2_format fmt{};
   fmt.type = buf_type;
@@ -174,7 +188,11 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
     return fail(Fault::kWrongKind, "%s reports an image size of %u bytes, less than %zu for %dx%d",
                 p, got.sizeimage, need, width_, height_);
   }
+  return true;
+}
 
+void V4l2Stream::read_frame_period() {
+  const auto buf_type = output_ ? V4L2_BUF_TYPE_VIDEO_OUTPUT : V4L2_BUF_TYPE_VIDEO_CAPTURE;
   // The frame interval, where the driver tells it (capture: timeperframe; output: timeperframe).
   frame_period_ns_ = 0;
   v4l2_streamparm parm{};
@@ -186,7 +204,12 @@ bool V4l2Stream::open_stream(const std::string& path, const V4l2Config& config) 
       frame_period_ns_ =
           static_cast<std::int64_t>(1'000'000'000LL * tpf.numerator / tpf.denominator);
   }
+}
 
+// Requests config.buffers memory-mapped buffers (2..kMaxBuffers) and maps those granted.
+bool V4l2Stream::map_buffers(const V4l2Config& config) {
+  const char* p = path_.c_str();
+  const auto buf_type = output_ ? V4L2_BUF_TYPE_VIDEO_OUTPUT : V4L2_BUF_TYPE_VIDEO_CAPTURE;
   v4l2_requestbuffers req{};
   req.count = static_cast<std::uint32_t>(config.buffers < 2 ? 2 : config.buffers);
   if (req.count > kMaxBuffers) req.count = kMaxBuffers;

@@ -32,14 +32,15 @@ void fail(const std::string& msg, int code) {
   std::exit(code);
 }
 
-Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
-              const std::vector<std::string>& flags, std::size_t max_positional) {
+bool asks_for_help(int argc, char** argv, int first) {
   for (int i = first; i < argc; ++i)
-    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
-      std::fputs(usage(argv[1]).c_str(), stdout);
-      std::exit(0);
-    }
-  Options o;
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") return true;
+  return false;
+}
+
+bool parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
+           const std::vector<std::string>& flags, Options& o, std::string& error,
+           std::size_t max_positional) {
   for (int i = first; i < argc; ++i) {
     const std::string a = argv[i];
     auto in = [&](const std::vector<std::string>& v) {
@@ -48,94 +49,119 @@ Options parse(int argc, char** argv, int first, const std::vector<std::string>& 
       return false;
     };
     if (in(with_value)) {
-      if (i + 1 >= argc) fail("option " + a + " needs a value\n" + usage());
+      if (i + 1 >= argc) {
+        error = "option " + a + " needs a value\n" + usage();
+        return false;
+      }
       o.values[a.substr(2)] = argv[++i];
     } else if (in(flags)) {
       o.values[a.substr(2)] = "1";
     } else if (a.rfind("-", 0) != 0 && o.positional.size() < max_positional) {
       o.positional.push_back(a);
     } else {
-      fail("unknown argument '" + a + "'\n" + usage());
+      error = "unknown argument '" + a + "'\n" + usage();
+      return false;
     }
   }
-  return o;
+  return true;
 }
 
-std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
-                          std::uint64_t min, std::uint64_t max) {
+bool parse_count(const Options& o, const std::string& key, std::uint64_t def, std::uint64_t min,
+                 std::uint64_t& value, std::string& error, std::uint64_t max) {
   const std::string s = o.get(key, "");
-  if (s.empty()) return def;
+  if (s.empty()) {
+    value = def;
+    return true;
+  }
   char* end = nullptr;
   errno = 0;
   const unsigned long long v = std::strtoull(s.c_str(), &end, 10);
-  if (errno != 0 || end == s.c_str() || *end != '\0' || s[0] == '-' || v < min || v > max)
-    fail("--" + key + " must be an integer " +
-         (max == UINT64_MAX ? ">= " + std::to_string(min)
-                            : "within " + std::to_string(min) + ".." + std::to_string(max)) +
-         ", not '" + s + "'");
-  return v;
+  if (errno != 0 || end == s.c_str() || *end != '\0' || s[0] == '-' || v < min || v > max) {
+    error = "--" + key + " must be an integer " +
+            (max == UINT64_MAX ? ">= " + std::to_string(min)
+                               : "within " + std::to_string(min) + ".." + std::to_string(max)) +
+            ", not '" + s + "'";
+    return false;
+  }
+  value = v;
+  return true;
 }
 
 namespace {
 
 // A rolling shutter's line delay: seconds per row, the whole frame read within
 // kMaxSimulatedReadoutS.
-double line_delay_option(const Options& o, const std::string& key, const sim::Scenario& s) {
+bool line_delay_option(const Options& o, const std::string& key, const sim::Scenario& s,
+                       double& line_delay, std::string& error) {
   const std::string text = o.get(key, "");
   char* end = nullptr;
-  const double line_delay = std::strtod(text.c_str(), &end);
+  line_delay = std::strtod(text.c_str(), &end);
   if (end == text.c_str() || *end != '\0' || !(line_delay >= 0.0) ||
-      !(line_delay * s.truth.height <= kMaxSimulatedReadoutS))
-    fail("--" + key + ": '" + text + "' is not seconds per row (a " +
-         std::to_string(s.truth.height) + "-row readout within 0.1 s; 30 us is 3e-5)");
-  return line_delay;
+      !(line_delay * s.truth.height <= kMaxSimulatedReadoutS)) {
+    error = "--" + key + ": '" + text + "' is not seconds per row (a " +
+            std::to_string(s.truth.height) + "-row readout within 0.1 s; 30 us is 3e-5)";
+    return false;
+  }
+  return true;
 }
 
 }  // namespace
 
-sim::Scenario scenario_option(const Options& o, std::uint64_t seed) {
-  sim::Scenario s;
+bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error) {
+  s = sim::Scenario{};
   const std::string name = o.get("scenario", "paper");
-  if (!sim::scenario_by_name(name, seed, s))
-    fail("unknown scenario '" + name + "' (known: paper, random)");
+  if (!sim::scenario_by_name(name, seed, s)) {
+    error = "unknown scenario '" + name + "' (known: paper, random)";
+    return false;
+  }
   // --timeshift S: the camera stamps its frames S seconds before the IMU's clock shows them.
   if (o.flag("timeshift")) {
     const std::string text = o.get("timeshift", "");
     char* end = nullptr;
     const double t_d = std::strtod(text.c_str(), &end);
-    if (end == text.c_str() || *end != '\0' || !(std::abs(t_d) <= kMaxSimulatedTimeshiftS))
-      fail("--timeshift: '" + text + "' is not a time offset in seconds within +-" +
-           std::to_string(kMaxSimulatedTimeshiftS).substr(0, 3) + " s");
+    if (end == text.c_str() || *end != '\0' || !(std::abs(t_d) <= kMaxSimulatedTimeshiftS)) {
+      error = "--timeshift: '" + text + "' is not a time offset in seconds within +-" +
+              std::to_string(kMaxSimulatedTimeshiftS).substr(0, 3) + " s";
+      return false;
+    }
     s.truth.t_d = t_d;
   }
   // --line-delay S: a rolling shutter that reads each row S seconds after the one above;
   // --filter-line-delay S: the line delay the filter is told, if not the true one.
-  if (o.flag("line-delay")) s.truth.intrinsics.line_delay_s = line_delay_option(o, "line-delay", s);
-  if (o.flag("filter-line-delay"))
-    s.told_line_delay_s = line_delay_option(o, "filter-line-delay", s);
+  if (o.flag("line-delay") &&
+      !line_delay_option(o, "line-delay", s, s.truth.intrinsics.line_delay_s, error))
+    return false;
+  if (o.flag("filter-line-delay")) {
+    double told = 0.0;
+    if (!line_delay_option(o, "filter-line-delay", s, told, error)) return false;
+    s.told_line_delay_s = told;
+  }
   // --distortion MODEL: the camera's lens (sim::lens_of: EuRoC cam0's radtan, or a fisheye).
   if (o.flag("distortion")) {
     const std::string name = o.get("distortion", "");
     Distortion d = Distortion::kNone;
-    if (!distortion_from_string(name, d))
-      fail("--distortion: '" + name + "' is not a lens model (radtan, equidistant or none)");
+    if (!distortion_from_string(name, d)) {
+      error = "--distortion: '" + name + "' is not a lens model (radtan, equidistant or none)";
+      return false;
+    }
     sim::set_lens(s, d);
   }
-  return s;
+  return true;
 }
 
-void create_out_dir(const std::string& dir) {
+bool create_out_dir(const std::string& dir, std::string& error) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  if (ec) fail("cannot create output directory " + dir + ": " + ec.message(), 1);
-  std::string error;
-  if (!files::lock_folder(dir, error)) fail(error, 1);
+  if (ec) {
+    error = "cannot create output directory " + dir + ": " + ec.message();
+    return false;
+  }
+  return files::lock_folder(dir, error);
 }
 
-std::string make_out_dir(const Options& o, const std::string& def) {
-  const std::string dir = o.get("out", def);
-  create_out_dir(dir);
-  return dir;
+bool make_out_dir(const Options& o, const std::string& def, std::string& dir, std::string& error) {
+  dir = o.get("out", def);
+  return create_out_dir(dir, error);
 }
 
 namespace {

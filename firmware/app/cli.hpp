@@ -32,19 +32,24 @@ struct Options {
   }
 };
 
-// Prints "mirrorcal: msg" to stderr and exits with code.
+// Prints "mirrorcal: msg" to stderr and exits with code. Only the commands (cmd_*.cpp) and main
+// call it: the helpers return false with the message, and the command chooses the exit code (2: the
+// command line or the files it names are wrong; 1: a file, a device or an output failed).
 [[noreturn]] void fail(const std::string& msg, int code = 2);
 
-// Parses argv[first..) as --key value (keys in with_value) and --flag (flags); anything else is an
-// error naming the argument, unless max_positional allows that many plain arguments. --help (or -h)
-// anywhere prints the usage of the command argv[1] and exits 0.
-Options parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
-              const std::vector<std::string>& flags, std::size_t max_positional = 0);
+// Whether --help (or -h) is anywhere in argv[first..): main then prints the command's usage.
+bool asks_for_help(int argc, char** argv, int first);
 
-// An unsigned integer option within min..max, or def when absent; anything else fails with a
-// message.
-std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_t def,
-                          std::uint64_t min, std::uint64_t max = UINT64_MAX);
+// Parses argv[first..) as --key value (keys in with_value) and --flag (flags) into o; anything
+// else is an error naming the argument, unless max_positional allows that many plain arguments.
+bool parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
+           const std::vector<std::string>& flags, Options& o, std::string& error,
+           std::size_t max_positional = 0);
+
+// An unsigned integer option within min..max into value, or def when absent; anything else is an
+// error.
+bool parse_count(const Options& o, const std::string& key, std::uint64_t def, std::uint64_t min,
+                 std::uint64_t& value, std::string& error, std::uint64_t max = UINT64_MAX);
 
 // The scenario named by --scenario (default "paper"); the random family's draw for seed. With
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
@@ -53,13 +58,13 @@ std::uint64_t parse_count(const Options& o, const std::string& key, std::uint64_
 // kMaxSimulatedReadoutS).
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
 constexpr double kMaxSimulatedReadoutS = 0.1;
-sim::Scenario scenario_option(const Options& o, std::uint64_t seed);
+bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error);
 
 // Creates dir and locks it against a second mirrorcal writing into it (files::lock_folder) for as
-// long as this one runs; fails with a message if it cannot.
-void create_out_dir(const std::string& dir);
-// The same for --out (or def), which it returns.
-std::string make_out_dir(const Options& o, const std::string& def);
+// long as this one runs; an error if it cannot.
+bool create_out_dir(const std::string& dir, std::string& error);
+// The same for --out (or def), which goes into dir.
+bool make_out_dir(const Options& o, const std::string& def, std::string& dir, std::string& error);
 
 // "\r<what> NN %" on stderr when it is a terminal; otherwise (a log, a CI capture) a line
 // "<what> NN %" at every tenth, so that the log gets a few lines rather than one of thousands of

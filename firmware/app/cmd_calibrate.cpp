@@ -127,12 +127,14 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
 }  // namespace
 
 int cmd_calibrate(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"out", "from"},
-                          {"intrinsics", "hold-skew", "from-same-data", "from-images"}, 1);
+  Options o;
+  std::string err;
+  if (!parse(argc, argv, 2, {"out", "from"},
+             {"intrinsics", "hold-skew", "from-same-data", "from-images"}, o, err, 1))
+    fail(err);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
   sim::Recording rec;
-  std::string err;
   // The markers: features.csv, or found in the images where there is none (or when asked).
   const bool from_images =
       o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
@@ -164,7 +166,8 @@ int cmd_calibrate(int argc, char** argv) {
         "covariance), not from mirrorcal.yaml's guesses\n",
         o.get("from", "").c_str());
   }
-  const std::string out = make_out_dir(o, "out/calibrate");
+  std::string out;
+  if (!make_out_dir(o, "out/calibrate", out, err)) fail(err, 1);
   const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
   const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
   if (o.flag("hold-skew") && !intrinsics)

@@ -26,7 +26,9 @@ CalibrationResult result_of(const sim::CalibrationStart& file) {
 }  // namespace
 
 int cmd_export(int argc, char** argv) {
-  const Options o = parse(argc, argv, 2, {"format"}, {}, 2);
+  Options o;
+  std::string err;
+  if (!parse(argc, argv, 2, {"format"}, {}, o, err, 2)) fail(err);
   if (o.positional.size() != 2 || !o.flag("format"))
     fail("export needs --format FORMAT, a RESULT and an OUT file\n" + usage("export"));
   ExportFormat format{};
@@ -36,7 +38,6 @@ int cmd_export(int argc, char** argv) {
   const std::string& in = o.positional[0];
   const std::string& out = o.positional[1];
   sim::CalibrationStart file;
-  std::string err;
   if (!sim::read_calibration_result(in, file, err)) fail(err, 1);
   if (!file.has_camera) fail(in + ": holds no camera (intrinsics, resolution) to export", 1);
   if (!write_export(format, out, result_of(file), err)) fail(err, 1);

@@ -120,19 +120,16 @@ struct GroupStats {
   }
 };
 
-// A random family's campaign: no common truth, so statistics of the errors by parameter group
-// (groups of them: stage 1's four, and the camera's and the lens's in stage 2), over all runs and
-// by each axis the family draws (mirror, motion, camera rate, pixel noise, prior width), into
-// summary.csv (f) and on stdout. Stage 1's columns come first, in stage 1's order; stage 2 adds
-// the RMS error and sigma of its groups at the end of each row. Only stage 1 has the data's limit.
-void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
-                   const CalibrationLayout& layout, double nees_lo, double nees_hi, std::FILE* f) {
-  const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
-  struct Group {
-    std::string axis, value;
-    std::function<bool(const sim::Scenario&)> has;
-  };
-  std::vector<Group> groups = {
+// A slice of a family's runs by one axis the family draws: runs whose rig has() it.
+struct FamilyGroup {
+  std::string axis, value;
+  std::function<bool(const sim::Scenario&)> has;
+};
+
+// The slices report_family gives statistics for: all runs, then by mirror, motion, camera rate,
+// pixel noise, IMU noise and marker prior, and in stage 2 (groups_used > 4) by the camera's prior.
+std::vector<FamilyGroup> family_groups(std::size_t groups_used) {
+  std::vector<FamilyGroup> groups = {
       {"all", "all", [](const sim::Scenario&) { return true; }},
       {"mirror", "wall", [](const sim::Scenario& s) { return s.mirror == "wall"; }},
       {"mirror", "floor", [](const sim::Scenario& s) { return s.mirror == "floor"; }},
@@ -154,6 +151,11 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
     groups.push_back({"camera prior", "60-100 px",
                       [](const sim::Scenario& s) { return s.priors.intrinsics[0] >= 60.0; }});
   }
+  return groups;
+}
+
+// summary.csv's header and the table's on stdout, for groups_used parameter groups.
+void family_headers(std::size_t groups_used, bool has_limit, std::FILE* f) {
   std::fprintf(f,
                "axis,value,runs,nees_mean,nees_median,runs_beyond_4_sigma,flagged,"
                "unflagged_beyond_4_sigma,rms_p_b_c [cm],rms_rot_b_c [deg],rms_markers [mm],"
@@ -169,7 +171,18 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
   for (std::size_t k = 0; k < groups_used; ++k) std::printf(" %15s", kGroupName[k]);
   if (has_limit) std::printf(" | %23s | %23s", "RMS / limit", "consistent / lim");
   std::printf("\n");
-  for (const Group& g : groups) {
+}
+
+// A random family's campaign: no common truth, so statistics of the errors by parameter group
+// (groups of them: stage 1's four, and the camera's and the lens's in stage 2), over all runs and
+// by each axis the family draws (mirror, motion, camera rate, pixel noise, prior width), into
+// summary.csv (f) and on stdout. Stage 1's columns come first, in stage 1's order; stage 2 adds
+// the RMS error and sigma of its groups at the end of each row. Only stage 1 has the data's limit.
+void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
+                   const CalibrationLayout& layout, double nees_lo, double nees_hi, std::FILE* f) {
+  const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
+  family_headers(groups_used, has_limit, f);
+  for (const FamilyGroup& g : family_groups(groups_used)) {
     GroupStats st;
     st.layout = layout;
     for (const Outcome& oc : out)
@@ -208,138 +221,166 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
       nees_lo, nees_hi);
 }
 
-}  // namespace
+// What a campaign runs, from the command line: the rigs, the seeds and how each run calibrates.
+struct Campaign {
+  bool intrinsics = false, hold_skew = false, one_stage = false;
+  bool lens = false;    // --estimate-distortion: the lens's coefficients in stage 2
+  bool family = false;  // a rig of its own for every run (the random family)
+  FrameMode frames;
+  Passes passes;
+  std::uint64_t seed = 0, runs = 0, jobs = 0;
+  sim::Scenario scenario;                // the campaign's (the seed's draw, for a family)
+  std::vector<sim::Scenario> scenarios;  // each run's rig
+  bool plots = true;
+};
 
-int cmd_montecarlo(int argc, char** argv) {
-  const Options o =
-      parse(argc, argv, 2,
-            {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
-             "passes", "timeshift", "distortion", "line-delay", "filter-line-delay"},
-            {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"});
-  const bool intrinsics = o.flag("intrinsics"), hold_skew = o.flag("hold-skew"),
-             one_stage = o.flag("one-stage");
+// The campaign the options ask for; an error (exit code 2) for options that are wrong or do not
+// go together.
+bool campaign_options(const Options& o, Campaign& c, std::string& error) {
+  c.intrinsics = o.flag("intrinsics");
+  c.hold_skew = o.flag("hold-skew");
+  c.one_stage = o.flag("one-stage");
+  c.plots = !o.flag("no-plots");
   // --estimate-distortion: stage 2 estimates the lens's coefficients with fu fv cu cv, skew held
   // (at the scenario camera's; --hold-skew: a camera without skew).
-  const bool lens = o.flag("estimate-distortion");
-  if (lens && (!intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
-    fail("--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
-  if ((hold_skew || one_stage) && !intrinsics)
-    fail("--hold-skew and --one-stage apply with --intrinsics");
-  const FrameMode frames = frame_mode_option(o);
-  if (intrinsics && frames.enabled)
-    fail("--intrinsics runs on listed markers (not yet with --frames)");
-  if (!o.flag("runs")) fail(std::string("montecarlo needs --runs N\n") + usage());
+  c.lens = o.flag("estimate-distortion");
+  const auto refuse = [&](const std::string& why) {
+    error = why;
+    return false;
+  };
+  if (c.lens && (!c.intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
+    return refuse(
+        "--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
+  if ((c.hold_skew || c.one_stage) && !c.intrinsics)
+    return refuse("--hold-skew and --one-stage apply with --intrinsics");
+  if (!frame_mode_option(o, c.frames, error)) return false;
+  if (c.intrinsics && c.frames.enabled)
+    return refuse("--intrinsics runs on listed markers (not yet with --frames)");
+  if (!o.flag("runs")) return refuse(std::string("montecarlo needs --runs N\n") + usage());
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
   // draws each run's rig from the run's seed.
-  const auto scenario_for = [&](std::uint64_t run_seed) {
-    return hold_skew ? sim::without_skew(scenario_option(o, run_seed))
-                     : scenario_option(o, run_seed);
+  const auto scenario_for = [&](std::uint64_t run_seed, sim::Scenario& scenario) {
+    if (!scenario_option(o, run_seed, scenario, error)) return false;
+    if (c.hold_skew) scenario = sim::without_skew(scenario);
+    return true;
   };
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const sim::Scenario s = scenario_for(seed);
-  const bool family = s.name == "random";  // a rig of its own for every run
-  const std::uint64_t runs = parse_count(o, "runs", 0, 1);
+  if (!parse_count(o, "seed", 1, 0, c.seed, error) || !scenario_for(c.seed, c.scenario))
+    return false;
+  c.family = c.scenario.name == "random";
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
-  const std::uint64_t jobs = std::min<std::uint64_t>(parse_count(o, "jobs", hw, 1), runs);
+  if (!parse_count(o, "runs", 0, 1, c.runs, error) || !parse_count(o, "jobs", hw, 1, c.jobs, error))
+    return false;
+  c.jobs = std::min(c.jobs, c.runs);
+  // Each run's rig, drawn here: an option the scenario refuses ends the command before any run.
+  c.scenarios.resize(c.runs);
+  for (std::uint64_t i = 0; i < c.runs; ++i)
+    if (!scenario_for(sim::derive_seed(c.seed, 1000 + i), c.scenarios[i])) return false;
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
-  const Passes passes = passes_option(o);
-  if (intrinsics && o.flag("passes"))
-    fail("--passes applies to stage 1 only (without --intrinsics)");
-  const std::string dir = make_out_dir(o, "out/montecarlo");
-  std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
-              s.name.c_str(), lens ? ", the lens's coefficients estimated in stage 2" : "",
-              !intrinsics ? ""
-              : one_stage ? (hold_skew ? " in one stage with the intrinsics (skew held at 0)"
-                                       : " in one stage with the intrinsics")
-              : hold_skew ? " with stage 2 (intrinsics, skew held at 0)"
-                          : " with stage 2 (intrinsics)",
-              frames.enabled ? ", markers detected in rendered frames, " : "",
-              frames.enabled ? hal::to_string(frames.format) : "", (unsigned long long)runs,
-              (unsigned long long)jobs, (unsigned long long)seed);
+  if (!passes_option(o, c.passes, error)) return false;
+  if (c.intrinsics && o.flag("passes"))
+    return refuse("--passes applies to stage 1 only (without --intrinsics)");
+  return true;
+}
 
-  std::vector<Outcome> out(runs);
-  std::vector<ParamInfo> params;
+void print_campaign_title(const Campaign& c) {
+  std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
+              c.scenario.name.c_str(),
+              c.lens ? ", the lens's coefficients estimated in stage 2" : "",
+              !c.intrinsics ? ""
+              : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"
+                                           : " in one stage with the intrinsics")
+              : c.hold_skew ? " with stage 2 (intrinsics, skew held at 0)"
+                            : " with stage 2 (intrinsics)",
+              c.frames.enabled ? ", markers detected in rendered frames, " : "",
+              c.frames.enabled ? hal::to_string(c.frames.format) : "", (unsigned long long)c.runs,
+              (unsigned long long)c.jobs, (unsigned long long)c.seed);
+}
+
+// Run i of the campaign into oc; the parameters' names and units into params (from the first run
+// to finish, under mu).
+void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamInfo>& params,
+             std::mutex& mu) {
+  const std::uint64_t run_seed = sim::derive_seed(c.seed, 1000 + i);
+  const sim::Scenario& rs = c.scenarios[i];
+  const auto t = std::chrono::steady_clock::now();
+  // Either stage: the same statistics of whichever run it was.
+  const auto record = [&](const auto& r) {
+    oc.seed = run_seed;
+    oc.scenario = rs;
+    oc.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    const auto& last = r.history.back();
+    for (std::size_t j = 0; j < r.result.params.size(); ++j) {
+      oc.error.push_back(last.error(int(j)) * r.result.params[j].scale);
+      oc.sigma.push_back(last.sigma(int(j)) * r.result.params[j].scale);
+    }
+    oc.nees = last.nees;
+    oc.gated = r.filter_counters.markers_gated;
+    oc.suspect = !convergence_warning(r.result).empty();
+    oc.passes = r.result.passes;
+    oc.nis_per_dof = r.result.nis_per_dof;
+    oc.sigma_ratio = r.result.sigma_ratio;
+    oc.refinement_step = r.result.refinement_step_sigmas;
+    oc.failures = r.filter_counters.failures;
+    oc.series = error_series(r.history, r.result.params);
+    if (c.family && !c.intrinsics) {  // stage 1's limit (stage 2's is not computed yet)
+      const std::vector<double> limit = data_limit_sigmas(rs, run_seed);
+      for (std::size_t j = 0; j < limit.size(); ++j)
+        oc.limit.push_back(limit[j] * r.result.params[j].scale);
+    }
+    oc.detection = r.detection;
+    std::lock_guard<std::mutex> lock(mu);
+    if (params.empty()) params = r.result.params;
+  };
+  if (c.lens)
+    record(c.one_stage ? run_one_stage_simulation<8>(rs, run_seed)
+                       : run_two_stage_simulation<8>(rs, run_seed));
+  else if (c.intrinsics && c.hold_skew)
+    record(c.one_stage ? run_one_stage_simulation<4>(rs, run_seed)
+                       : run_two_stage_simulation<4>(rs, run_seed));
+  else if (c.intrinsics)
+    record(c.one_stage ? run_one_stage_simulation<5>(rs, run_seed)
+                       : run_two_stage_simulation<5>(rs, run_seed));
+  else
+    record(run_simulation(rs, run_seed, {}, c.frames, nullptr, c.passes));
+}
+
+// The campaign's runs on c.jobs threads, into out (one per run) and params. False, with the
+// message, when a run's temporary store could not be written (a full $TMPDIR): no more runs start.
+bool run_campaign(const Campaign& c, std::vector<Outcome>& out, std::vector<ParamInfo>& params,
+                  std::string& store_error) {
   std::atomic<std::uint64_t> next{0}, done{0};
   std::mutex mu;
-  std::string store_error;
-  const auto t0 = std::chrono::steady_clock::now();
   auto worker = [&] {
-    for (std::uint64_t i; (i = next++) < runs;) {
-      const std::uint64_t run_seed = sim::derive_seed(seed, 1000 + i);
-      const sim::Scenario rs = scenario_for(run_seed);
-      const auto t = std::chrono::steady_clock::now();
-      Outcome& oc = out[i];
-      // Either stage: the same statistics of whichever run it was.
-      const auto record = [&](const auto& r) {
-        oc.seed = run_seed;
-        oc.scenario = rs;
-        oc.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-        const auto& last = r.history.back();
-        for (std::size_t j = 0; j < r.result.params.size(); ++j) {
-          oc.error.push_back(last.error(int(j)) * r.result.params[j].scale);
-          oc.sigma.push_back(last.sigma(int(j)) * r.result.params[j].scale);
-        }
-        oc.nees = last.nees;
-        oc.gated = r.filter_counters.markers_gated;
-        oc.suspect = !convergence_warning(r.result).empty();
-        oc.passes = r.result.passes;
-        oc.nis_per_dof = r.result.nis_per_dof;
-        oc.sigma_ratio = r.result.sigma_ratio;
-        oc.refinement_step = r.result.refinement_step_sigmas;
-        oc.failures = r.filter_counters.failures;
-        oc.series = error_series(r.history, r.result.params);
-        if (family && !intrinsics) {  // stage 1's limit (stage 2's is not computed yet)
-          const std::vector<double> limit = data_limit_sigmas(rs, run_seed);
-          for (std::size_t j = 0; j < limit.size(); ++j)
-            oc.limit.push_back(limit[j] * r.result.params[j].scale);
-        }
-        oc.detection = r.detection;
-        std::lock_guard<std::mutex> lock(mu);
-        if (params.empty()) params = r.result.params;
-      };
+    for (std::uint64_t i; (i = next++) < c.runs;) {
       try {
-        if (lens)
-          record(one_stage ? run_one_stage_simulation<8>(rs, run_seed)
-                           : run_two_stage_simulation<8>(rs, run_seed));
-        else if (intrinsics && hold_skew)
-          record(one_stage ? run_one_stage_simulation<4>(rs, run_seed)
-                           : run_two_stage_simulation<4>(rs, run_seed));
-        else if (intrinsics)
-          record(one_stage ? run_one_stage_simulation<5>(rs, run_seed)
-                           : run_two_stage_simulation<5>(rs, run_seed));
-        else
-          record(run_simulation(rs, run_seed, {}, frames, nullptr, passes));
+        run_one(c, i, out[i], params, mu);
       } catch (const files::StoreError& e) {  // a full $TMPDIR: no more runs, main says why
         std::lock_guard<std::mutex> lock(mu);
         if (store_error.empty()) store_error = e.what();
-        next = runs;
+        next = c.runs;
         return;
       }
       std::lock_guard<std::mutex> lock(mu);
-      print_progress("runs done:", double(++done) / double(runs));
+      print_progress("runs done:", double(++done) / double(c.runs));
     }
   };
   std::vector<std::thread> pool;
-  for (std::uint64_t j = 0; j < jobs; ++j) pool.emplace_back(worker);
+  for (std::uint64_t j = 0; j < c.jobs; ++j) pool.emplace_back(worker);
   for (auto& t : pool) t.join();
-  if (!store_error.empty()) {
-    end_progress("stopped");
-    fail(store_error, 1);
-  }
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  end_progress("all runs done");
+  return store_error.empty();
+}
 
-  const std::size_t np = params.size();
-  const int estimated_intrinsics = !intrinsics ? 0 : lens ? 8 : hold_skew ? 4 : 5;
-  const auto truth = truth_display(s, estimated_intrinsics);
-  const double n = double(runs);
-  // The paper's row of parameter j: none for the lens's coefficients (estimate_distortion), which
-  // follow cv where the skew's row is.
-  const PaperRow kNotInPaper{NAN, NAN};
-  const auto paper_row = [&](std::size_t j) -> const PaperRow& {
-    return params[j].group == CalibrationGroup::kLens ? kNotInPaper : paper_tables()[j];
-  };
+// Each parameter's error over the runs (mean, variance, mean square) and reported variance, and
+// the average NEES of the calibration states with its 95 % interval.
+struct ErrorStatistics {
+  std::vector<double> mean, var, mean_square, sigma_square;
+  double nees = 0, nees_lo = 0, nees_hi = 0;
+};
+
+ErrorStatistics error_statistics(const std::vector<Outcome>& out, std::size_t np) {
+  const double n = double(out.size());
+  ErrorStatistics st;
   std::vector<double> mean(np, 0), std_(np, 0), rms(np, 0), sig(np, 0);
   for (const auto& oc : out)
     for (std::size_t j = 0; j < np; ++j) {
@@ -352,58 +393,85 @@ int cmd_montecarlo(int argc, char** argv) {
       std_[j] += (oc.error[j] - mean[j]) * (oc.error[j] - mean[j]) / std::max(1.0, n - 1.0);
   double nees = 0;
   for (const auto& oc : out) nees += oc.nees / n;
-  const double nees_lo = chi2_quantile(0.025, n * double(np)) / n;
-  const double nees_hi = chi2_quantile(0.975, n * double(np)) / n;
+  st.mean = mean;
+  st.var = std_;
+  st.mean_square = rms;
+  st.sigma_square = sig;
+  st.nees = nees;
+  st.nees_lo = chi2_quantile(0.025, n * double(np)) / n;
+  st.nees_hi = chi2_quantile(0.975, n * double(np)) / n;
+  return st;
+}
 
-  // summary.csv and runs.csv, written together when both are complete.
-  files::OutputSet results;
-  std::string err;
-  std::FILE* const summary = results.add(dir + "/summary.csv", err);
-  std::FILE* const runs_csv = summary != nullptr ? results.add(dir + "/runs.csv", err) : nullptr;
-  if (runs_csv == nullptr) fail(err, 1);
-  if (family) {
-    std::vector<double> each;
-    for (const auto& oc : out) each.push_back(oc.nees);
-    const double lo99 = chi2_quantile(0.005, n * double(np)) / n,
-                 hi99 = chi2_quantile(0.995, n * double(np)) / n;
-    std::printf(
-        "\naverage NEES of the %zu calibration states over %llu rigs: %.2f (99 %% interval "
-        "%.2f..%.2f), median of the runs %.2f: %s\n",
-        np, (unsigned long long)runs, nees, lo99, hi99, median(each),
-        nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
-    const std::size_t groups_used = !intrinsics ? 4 : lens ? 6 : 5;
-    report_family(out, groups_used, calibration_layout(kMarkers, estimated_intrinsics), lo99, hi99,
-                  summary);
-  } else {
-    std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
-                !intrinsics ? " and II"
-                : one_stage ? ", II and III (one stage)"
+// The camera parameters the campaign's filter estimates: none in stage 1, fu fv cu cv (skew) in
+// stage 2, and the lens's four coefficients in place of the skew with estimate_distortion.
+int estimated_intrinsics(const Campaign& c) {
+  return !c.intrinsics ? 0 : c.lens ? 8 : c.hold_skew ? 4 : 5;
+}
+
+// The paper's row of parameter j: none for the lens's coefficients (estimate_distortion), which
+// follow cv where the skew's row is.
+const PaperRow& paper_row(const std::vector<ParamInfo>& params, std::size_t j) {
+  static const PaperRow kNotInPaper{NAN, NAN};
+  return params[j].group == CalibrationGroup::kLens ? kNotInPaper : paper_tables()[j];
+}
+
+// A family's verdict: the average NEES over the rigs against its 99 % interval, then
+// report_family's tables (also into summary).
+void report_family_campaign(const Campaign& c, const std::vector<Outcome>& out, std::size_t np,
+                            double nees, std::FILE* summary) {
+  const double n = double(c.runs);
+  std::vector<double> each;
+  for (const auto& oc : out) each.push_back(oc.nees);
+  const double lo99 = chi2_quantile(0.005, n * double(np)) / n,
+               hi99 = chi2_quantile(0.995, n * double(np)) / n;
+  std::printf(
+      "\naverage NEES of the %zu calibration states over %llu rigs: %.2f (99 %% interval "
+      "%.2f..%.2f), median of the runs %.2f: %s\n",
+      np, (unsigned long long)c.runs, nees, lo99, hi99, median(each),
+      nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
+  const std::size_t groups_used = !c.intrinsics ? 4 : c.lens ? 6 : 5;
+  report_family(out, groups_used, calibration_layout(kMarkers, estimated_intrinsics(c)), lo99, hi99,
+                summary);
+}
+
+// Tables I-III: each parameter's truth, the paper's final value and sigma, and ours over the runs.
+void print_paper_tables(const Campaign& c, const std::vector<ParamInfo>& params,
+                        const std::vector<double>& truth, const ErrorStatistics& st) {
+  const std::size_t np = params.size();
+  const double n = double(c.runs);
+  std::printf("\nTables I%s: final estimates over %llu runs (ours) beside the paper's\n",
+              !c.intrinsics ? " and II"
+              : c.one_stage ? ", II and III (one stage)"
                             : ", II and III (after stage 2)",
-                (unsigned long long)runs);
-    std::printf("%-17s %-4s %9s | %9s %7s | %9s %8s %8s %8s | %s\n", "param", "unit", "truth",
-                "paper", "sigma", "mean", "std", "rms err", "filter s", "rms < paper sigma");
-    int beaten = 0, in_paper = 0;
-    for (std::size_t j = 0; j < np; ++j) {
-      const double r = std::sqrt(rms[j]);
-      const PaperRow& p = paper_row(j);
-      const bool compared = !std::isnan(p.sigma), ok = r < p.sigma;
-      in_paper += compared ? 1 : 0;
-      beaten += ok ? 1 : 0;
-      std::printf("%-17s %-4s %9.3f | %9.2f %7.2f | %9.4f %8.4f %8.4f %8.4f | %s\n",
-                  params[j].name.c_str(), params[j].unit.c_str(), truth[j], p.final_value, p.sigma,
-                  truth[j] + mean[j], std::sqrt(std_[j]), r, std::sqrt(sig[j]),
-                  !compared ? "(not in the paper)"
-                  : ok      ? "yes"
-                            : "NO");
-    }
-    std::printf("\n%d of the paper's %d parameters below its sigma\n", beaten, in_paper);
-    std::printf(
-        "average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f, 99 %% "
-        "%.2f..%.2f): %s\n",
-        np, nees, nees_lo, nees_hi, chi2_quantile(0.005, n * double(np)) / n,
-        chi2_quantile(0.995, n * double(np)) / n,
-        nees >= nees_lo && nees <= nees_hi ? "consistent" : "NOT consistent");
+              (unsigned long long)c.runs);
+  std::printf("%-17s %-4s %9s | %9s %7s | %9s %8s %8s %8s | %s\n", "param", "unit", "truth",
+              "paper", "sigma", "mean", "std", "rms err", "filter s", "rms < paper sigma");
+  int beaten = 0, in_paper = 0;
+  for (std::size_t j = 0; j < np; ++j) {
+    const double r = std::sqrt(st.mean_square[j]);
+    const PaperRow& p = paper_row(params, j);
+    const bool compared = !std::isnan(p.sigma), ok = r < p.sigma;
+    in_paper += compared ? 1 : 0;
+    beaten += ok ? 1 : 0;
+    std::printf("%-17s %-4s %9.3f | %9.2f %7.2f | %9.4f %8.4f %8.4f %8.4f | %s\n",
+                params[j].name.c_str(), params[j].unit.c_str(), truth[j], p.final_value, p.sigma,
+                truth[j] + st.mean[j], std::sqrt(st.var[j]), r, std::sqrt(st.sigma_square[j]),
+                !compared ? "(not in the paper)"
+                : ok      ? "yes"
+                          : "NO");
   }
+  std::printf("\n%d of the paper's %d parameters below its sigma\n", beaten, in_paper);
+  std::printf(
+      "average NEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f, 99 %% "
+      "%.2f..%.2f): %s\n",
+      np, st.nees, st.nees_lo, st.nees_hi, chi2_quantile(0.005, n * double(np)) / n,
+      chi2_quantile(0.995, n * double(np)) / n,
+      st.nees >= st.nees_lo && st.nees <= st.nees_hi ? "consistent" : "NOT consistent");
+}
+
+// The runs that took more passes than the default, and those a user would have been warned of.
+void print_notable_runs(const std::vector<Outcome>& out) {
   std::string suspects;
   for (std::size_t i = 0; i < out.size(); ++i)
     if (out[i].suspect) suspects += (suspects.empty() ? "" : ", ") + std::to_string(i);
@@ -420,36 +488,34 @@ int cmd_montecarlo(int argc, char** argv) {
   if (!suspects.empty())
     std::printf("runs a user would have been warned of (consistent: false; included above): %s\n",
                 suspects.c_str());
-  DetectionReport detection;
-  if (frames.enabled) {
-    std::vector<DetectionReport> each;
-    for (const auto& oc : out) each.push_back(oc.detection);
-    detection = combine(each);
-    print_detection(detection, frames.format);
-  }
-  std::printf("wall time %.1f s (%.2f s per run on %llu jobs)\n", wall, wall / n * double(jobs),
-              (unsigned long long)jobs);
+}
 
-  std::FILE* f = summary;
-  if (!family) {
-    std::fprintf(f, "parameter,unit,truth,mean_estimate,std,rms_error,paper_std\n");
-    for (std::size_t j = 0; j < np; ++j)
-      std::fprintf(f, "%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f\n", params[j].name.c_str(),
-                   params[j].unit.c_str(), truth[j], truth[j] + mean[j], std::sqrt(std_[j]),
-                   std::sqrt(rms[j]), paper_row(j).sigma);
-    std::fprintf(
-        f, "# nees_mean=%.4f nees_95_lo=%.4f nees_95_hi=%.4f runs=%llu wall_s=%.2f jobs=%llu\n",
-        nees, nees_lo, nees_hi, (unsigned long long)runs, wall, (unsigned long long)jobs);
-    if (frames.enabled)
-      std::fprintf(f,
-                   "# frames=%s markers_drawn=%llu markers_labelled=%llu wrong_labels=%llu "
-                   "centroid_rms_px=%.4f centroid_max_px=%.4f ms_per_frame=%.3f\n",
-                   hal::to_string(frames.format), (unsigned long long)detection.markers_drawn,
-                   (unsigned long long)detection.markers_labelled,
-                   (unsigned long long)detection.wrong_labels, detection.centroid_rms_px,
-                   detection.centroid_max_px, detection.ms_per_frame);
-  }
-  f = runs_csv;
+// summary.csv of a campaign on one rig: Tables I-III's columns, then the NEES and the detection.
+void write_paper_summary(std::FILE* f, const Campaign& c, const std::vector<ParamInfo>& params,
+                         const std::vector<double>& truth, const ErrorStatistics& st, double wall,
+                         const DetectionReport& detection) {
+  std::fprintf(f, "parameter,unit,truth,mean_estimate,std,rms_error,paper_std\n");
+  for (std::size_t j = 0; j < params.size(); ++j)
+    std::fprintf(f, "%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f\n", params[j].name.c_str(),
+                 params[j].unit.c_str(), truth[j], truth[j] + st.mean[j], std::sqrt(st.var[j]),
+                 std::sqrt(st.mean_square[j]), paper_row(params, j).sigma);
+  std::fprintf(f,
+               "# nees_mean=%.4f nees_95_lo=%.4f nees_95_hi=%.4f runs=%llu wall_s=%.2f jobs=%llu\n",
+               st.nees, st.nees_lo, st.nees_hi, (unsigned long long)c.runs, wall,
+               (unsigned long long)c.jobs);
+  if (c.frames.enabled)
+    std::fprintf(f,
+                 "# frames=%s markers_drawn=%llu markers_labelled=%llu wrong_labels=%llu "
+                 "centroid_rms_px=%.4f centroid_max_px=%.4f ms_per_frame=%.3f\n",
+                 hal::to_string(c.frames.format), (unsigned long long)detection.markers_drawn,
+                 (unsigned long long)detection.markers_labelled,
+                 (unsigned long long)detection.wrong_labels, detection.centroid_rms_px,
+                 detection.centroid_max_px, detection.ms_per_frame);
+}
+
+// runs.csv: a row per run, its errors, sigmas, counters, rig and (--frames) detection.
+void write_runs_csv(std::FILE* f, const std::vector<Outcome>& out,
+                    const std::vector<ParamInfo>& params, bool frames) {
   std::fprintf(f, "run,seed");
   for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
@@ -459,7 +525,7 @@ int cmd_montecarlo(int argc, char** argv) {
   std::fprintf(f,
                ",mirror,motion,camera_hz,pixel_sigma,imu_noise_scale,prior_marker [cm],"
                "prior_p_b_c [cm],prior_rot_b_c [deg]");
-  if (frames.enabled)
+  if (frames)
     std::fprintf(f, ",markers_drawn,markers_labelled,wrong_labels,centroid_rms_px,centroid_max_px");
   std::fprintf(f, "\n");
   for (std::size_t i = 0; i < out.size(); ++i) {
@@ -475,7 +541,7 @@ int cmd_montecarlo(int argc, char** argv) {
                  rs.motion_kind.c_str(), rs.camera_rate_hz, rs.pixel_sigma, rs.imu_noise_scale,
                  100.0 * rs.priors.marker, 100.0 * rs.priors.p_b_c,
                  rs.priors.rot_b_c * 180.0 / M_PI);
-    if (frames.enabled) {
+    if (frames) {
       const DetectionReport& d = out[i].detection;
       std::fprintf(f, ",%llu,%llu,%llu,%.4f,%.4f", (unsigned long long)d.markers_drawn,
                    (unsigned long long)d.markers_labelled, (unsigned long long)d.wrong_labels,
@@ -483,13 +549,67 @@ int cmd_montecarlo(int argc, char** argv) {
     }
     std::fprintf(f, "\n");
   }
+}
+
+}  // namespace
+
+int cmd_montecarlo(int argc, char** argv) {
+  Options o;
+  Campaign c;
+  std::string error;
+  if (!parse(argc, argv, 2,
+             {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
+              "passes", "timeshift", "distortion", "line-delay", "filter-line-delay"},
+             {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"},
+             o, error) ||
+      !campaign_options(o, c, error))
+    fail(error);
+  std::string dir;
+  if (!make_out_dir(o, "out/montecarlo", dir, error)) fail(error, 1);
+  print_campaign_title(c);
+
+  std::vector<Outcome> out(c.runs);
+  std::vector<ParamInfo> params;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!run_campaign(c, out, params, error)) {
+    end_progress("stopped");
+    fail(error, 1);
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  end_progress("all runs done");
+
+  const std::size_t np = params.size();
+  const auto truth = truth_display(c.scenario, estimated_intrinsics(c));
+  const ErrorStatistics st = error_statistics(out, np);
+  // summary.csv and runs.csv, written together when both are complete.
+  files::OutputSet results;
+  std::string err;
+  std::FILE* const summary = results.add(dir + "/summary.csv", err);
+  std::FILE* const runs_csv = summary != nullptr ? results.add(dir + "/runs.csv", err) : nullptr;
+  if (runs_csv == nullptr) fail(err, 1);
+  if (c.family)
+    report_family_campaign(c, out, np, st.nees, summary);
+  else
+    print_paper_tables(c, params, truth, st);
+  print_notable_runs(out);
+  DetectionReport detection;
+  if (c.frames.enabled) {
+    std::vector<DetectionReport> each;
+    for (const auto& oc : out) each.push_back(oc.detection);
+    detection = combine(each);
+    print_detection(detection, c.frames.format);
+  }
+  std::printf("wall time %.1f s (%.2f s per run on %llu jobs)\n", wall,
+              wall / double(c.runs) * double(c.jobs), (unsigned long long)c.jobs);
+  if (!c.family) write_paper_summary(summary, c, params, truth, st, wall, detection);
+  write_runs_csv(runs_csv, out, params, c.frames.enabled);
   if (!results.commit(err)) fail(err, 1);
   std::printf("wrote %s/summary.csv, %s/runs.csv\n", dir.c_str(), dir.c_str());
-  if (!o.flag("no-plots")) {
+  if (c.plots) {
     std::vector<ErrorSeries> series;
     for (auto& oc : out) series.push_back(std::move(oc.series));
-    const auto pngs = plot_errors(dir, "mirrorcal Monte Carlo, " + std::to_string(runs) + " runs",
-                                  params, series, nees_lo, nees_hi, err);
+    const auto pngs = plot_errors(dir, "mirrorcal Monte Carlo, " + std::to_string(c.runs) + " runs",
+                                  params, series, st.nees_lo, st.nees_hi, err);
     if (pngs.empty()) std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
     for (const auto& p : pngs) std::printf("plot: %s\n", p.c_str());
   }

@@ -44,17 +44,78 @@ class RecordingFolder {
   files::StagedFolder staged_;
 };
 
+// The camera's last frame as the image beside its markers: its luma copied into luma (sized for
+// the camera's frames) and grey pointing at it; nullptr for a frame larger than that.
+const sim::GrayImage* frame_image(const hal::FrameView& view, std::vector<std::uint8_t>& luma,
+                                  sim::GrayImage& grey) {
+  grey = {view.width, view.height, luma.data()};
+  if (std::size_t(view.width) * std::size_t(view.height) > luma.size()) return nullptr;
+  for (int y = 0; y < view.height; ++y)
+    for (int x = 0; x < view.width; ++x)
+      luma[std::size_t(y) * std::size_t(view.width) + std::size_t(x)] = view.luma(x, y);
+  return &grey;
+}
+
+// How recording the devices' streams ended, and the frames written.
+struct RecordEnd {
+  hal::SourceStatus imu_status = hal::SourceStatus::kOk;
+  hal::SourceStatus frame_status = hal::SourceStatus::kNotReady;
+  std::uint64_t frames = 0;
+};
+
+// The IMU's samples into writer, each followed by the camera's frames that came meanwhile (with
+// their images when asked: luma is their buffer), until the IMU stream ends (its duration, a
+// signal) or fails, the writer refuses, or the camera fails.
+RecordEnd record_streams(const Devices& devices, hal::ImuSource& imu, sim::RecordingWriter& writer,
+                         bool images, std::vector<std::uint8_t>& luma) {
+  RecordEnd end;
+  StopOnSignal stop_on_signal;
+  ImuSample sample;
+  MarkerFrame<kMarkers> frame;
+  while ((end.imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
+    if (!writer.add_imu(sample)) break;
+    // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
+    while (devices.camera &&
+           (end.frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
+      const sim::GrayImage* image = nullptr;
+      sim::GrayImage grey;
+      if (images) image = frame_image(devices.camera->markers->last_frame(), luma, grey);
+      if (!writer.add_frame(frame, image)) break;
+      ++end.frames;
+    }
+    if (end.frame_status == hal::SourceStatus::kError) break;
+  }
+  return end;
+}
+
+void print_record_start(const RunSettings& s, const Devices& devices, double imu_rate_hz,
+                        const std::string& dir) {
+  std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
+              describe_camera(s, devices).c_str(),
+              describe_trigger(s, devices, imu_rate_hz).c_str(),
+              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
+                               : "until Ctrl-C or the IMU stops",
+              dir.c_str());
+  std::fflush(stdout);
+}
+
 // The board's devices into dir until --duration or Ctrl-C. With --sensors, its imu.yaml,
 // camchain.yaml and mirrorcal.yaml are copied beside the streams (the camera's size is
 // camchain.yaml's), so `mirrorcal calibrate DIR` takes the recording as it is; else the camera
 // streams 640x480.
 int record_devices(const Options& o, const std::string& dir) {
-  const RunSettings s = device_settings(o, "record", false);
+  RunSettings s;
   sim::Recording sensors;
-  if (!s.sensors.empty()) read_sensors(s.sensors, sensors);
+  std::string error;
+  if (!device_settings(o, "record", false, s, error) ||
+      (!s.sensors.empty() && !read_sensors(s.sensors, sensors, error)))
+    fail(error, 2);
   const double imu_rate_hz = s.sensors.empty() ? s.rate_hz : sensors.sensors.imu_rate_hz;
-  const Devices devices =
-      open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz);
+  Devices devices;
+  int exit_code = 1;
+  if (!open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz, devices, error,
+                    exit_code))
+    fail(error, exit_code);
   RecordingFolder folder(dir, o.flag("force"));
 
   std::string err;
@@ -66,52 +127,19 @@ int record_devices(const Options& o, const std::string& dir) {
   if (images && !devices.camera) fail("--images needs a camera (--camera DEV)");
   std::vector<std::uint8_t> luma(
       images ? std::size_t(sensors.sensors.width) * std::size_t(sensors.sensors.height) : 0);
-  std::printf("mirrorcal record: IMU %s, %s%s; %s into %s\n", s.imu.c_str(),
-              describe_camera(s, devices).c_str(),
-              describe_trigger(s, devices, imu_rate_hz).c_str(),
-              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
-                               : "until Ctrl-C or the IMU stops",
-              dir.c_str());
-  std::fflush(stdout);
+  print_record_start(s, devices, imu_rate_hz, dir);
   StoppingImu imu(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
-  hal::SourceStatus imu_status, frame_status = hal::SourceStatus::kNotReady;
-  std::uint64_t frames = 0;
-  {
-    StopOnSignal stop_on_signal;
-    ImuSample sample;
-    MarkerFrame<kMarkers> frame;
-    while ((imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
-      if (!writer.add_imu(sample)) break;
-      // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
-      while (devices.camera &&
-             (frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
-        const sim::GrayImage* image = nullptr;
-        sim::GrayImage grey;
-        if (images) {
-          const hal::FrameView& view = devices.camera->markers->last_frame();
-          grey = {view.width, view.height, luma.data()};
-          if (std::size_t(view.width) * std::size_t(view.height) <= luma.size()) {
-            for (int y = 0; y < view.height; ++y)
-              for (int x = 0; x < view.width; ++x)
-                luma[std::size_t(y) * std::size_t(view.width) + std::size_t(x)] = view.luma(x, y);
-            image = &grey;
-          }
-        }
-        if (!writer.add_frame(frame, image)) break;
-        ++frames;
-      }
-      if (frame_status == hal::SourceStatus::kError) break;
-    }
-  }
+  const RecordEnd end = record_streams(devices, imu, writer, images, luma);
   StopOnSignal::report("closing the recording");
   const bool written = writer.close(err);
   std::printf("record: %llu IMU samples over %.3f s, %llu frames\n",
               static_cast<unsigned long long>(imu.samples()), imu.seconds(),
-              static_cast<unsigned long long>(frames));
+              static_cast<unsigned long long>(end.frames));
   print_device_counters(devices);
   if (!written) folder.fail_with(err);
-  if (imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
-  if (frame_status == hal::SourceStatus::kError) folder.fail_with(devices.camera->markers->error());
+  if (end.imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
+  if (end.frame_status == hal::SourceStatus::kError)
+    folder.fail_with(devices.camera->markers->error());
   if (!s.sensors.empty()) {
     std::string text;
     for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
@@ -133,17 +161,16 @@ int record_devices(const Options& o, const std::string& dir) {
 // images hold the same data as features.csv and a calibration from either sees the same.
 // With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
 // guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
-// true ones.
-void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
+// true ones. False, with the error, when a file cannot be written.
+bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
                                bool hold_skew, bool lens, RecordingFolder& folder,
-                               const std::string& sub, bool images = false) {
+                               const std::string& sub, std::string& err, bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
 
-  std::string err;
   sim::RecordingWriter writer;
-  if (!writer.open(dir, err)) folder.fail_with(err);
+  if (!writer.open(dir, err)) return false;
   for (const ImuSample& smp : data.imu)
     if (!writer.add_imu(smp)) break;
   const sim::RenderConfig render;
@@ -161,7 +188,7 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
     }
     if (!writer.add_frame(f, images ? &image : nullptr)) break;
   }
-  if (!writer.close(err)) folder.fail_with(err);
+  if (!writer.close(err)) return false;
 
   sim::SensorInfo sensors;
   sensors.imu = s.imu;
@@ -184,13 +211,14 @@ void write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   truth.has_distortion = lens;
   if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
-    folder.fail_with(err);
+    return false;
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
       "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv,%s imu.yaml, "
       "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
       s.duration_s, folder.as_target(dir).c_str(), images ? " mav0/cam0/data/*.png," : "");
+  return true;
 }
 
 }  // namespace
@@ -200,9 +228,12 @@ int cmd_record(int argc, char** argv) {
                                          "timeshift", "distortion", "line-delay"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
-  const Options o =
-      parse(argc, argv, 2, with_value,
-            {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"});
+  Options o;
+  std::string error;
+  if (!parse(argc, argv, 2, with_value,
+             {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"}, o,
+             error))
+    fail(error);
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
   const std::string dir = o.get("out", "");
   if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
@@ -219,9 +250,11 @@ int cmd_record(int argc, char** argv) {
         "--estimate-distortion applies with --intrinsics or --two-stage and --distortion "
         "radtan|equidistant");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  sim::Scenario s =
-      hold_skew ? sim::without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  std::uint64_t seed = 0;
+  sim::Scenario s;
+  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
+    fail(error);
+  if (hold_skew) s = sim::without_skew(s);
   // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.
   if (o.flag("duration")) {
     const std::string text = o.get("duration", "");
@@ -234,16 +267,19 @@ int cmd_record(int argc, char** argv) {
   RecordingFolder folder(dir, o.flag("force"));
   const bool images = o.flag("images");
   if (!two_stage) {
-    write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "", images);
+    if (!write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
+                                   error, images))
+      folder.fail_with(error);
     folder.commit();
     return 0;
   }
   // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
   // together.
   const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  write_simulated_recording(s, seed, false, false, false, folder, "/stage1", images);
-  write_simulated_recording(s, sim::derive_seed(seed, sim::kStage2SeedStream), true, hold_skew,
-                            lens, folder, "/stage2", images);
+  if (!write_simulated_recording(s, seed, false, false, false, folder, "/stage1", error, images) ||
+      !write_simulated_recording(s, sim::derive_seed(seed, sim::kStage2SeedStream), true, hold_skew,
+                                 lens, folder, "/stage2", error, images))
+    folder.fail_with(error);
   folder.commit();
   std::printf(
       "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"

@@ -111,23 +111,153 @@ class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
 // at 200 Hz and 2 MB of frames at 60 Hz, reserved at the start.
 constexpr double kLoggedSecondsWithoutDuration = 600.0;
 
-}  // namespace
+// The devices' streams as the live loop reads them: the IMU ended by --duration or a signal, and
+// both streams kept in a SessionLog sized for the run (markers only with a camera).
+class LiveStreams {
+ public:
+  LiveStreams(const Devices& devices, double duration_s, std::int64_t imu_period,
+              std::int64_t frame_period)
+      : stopping_(devices.imu_stream(), static_cast<std::int64_t>(duration_s * 1e9)),
+        log_(capacity(duration_s, imu_period),
+             devices.camera ? capacity(duration_s, frame_period) : 0),
+        imu_(stopping_, log_) {
+    if (devices.camera)
+      logged_markers_ = std::make_unique<LoggedMarkers>(*devices.camera->markers, log_);
+  }
+  hal::ImuSource& imu() { return imu_; }
+  hal::MarkerSource<kMarkers>& markers() {
+    return logged_markers_ ? static_cast<hal::MarkerSource<kMarkers>&>(*logged_markers_)
+                           : no_markers_;
+  }
+  // What labels the camera's markers with the filter's prediction (null without a camera).
+  hal::MarkerRelabeler<kMarkers>* identifier() { return logged_markers_.get(); }
+  double seconds() const { return stopping_.seconds(); }
+  SessionLog& log() { return log_; }
 
-int cmd_run(int argc, char** argv) {
+ private:
+  // Items of one period kept over the run (--duration, else kLoggedSecondsWithoutDuration).
+  static std::size_t capacity(double duration_s, std::int64_t period_ns) {
+    const double kept_s = (duration_s > 0 ? duration_s : kLoggedSecondsWithoutDuration) + 1.0;
+    return static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(period_ns));
+  }
+
+  StoppingImu stopping_;
+  SessionLog log_;
+  LoggedImu imu_;
+  NoMarkers no_markers_;
+  std::unique_ptr<LoggedMarkers> logged_markers_;
+};
+
+bool parse_run_options(int argc, char** argv, Options& o, std::string& error) {
   std::vector<std::string> with_value = {"config", "from"};
   for (const char* key : kRunKeys) with_value.emplace_back(key);
   std::vector<std::string> flags;
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
-  const Options o = parse(argc, argv, 2, with_value, flags);
-  const RunSettings s = device_settings(o, "run", true);
+  return parse(argc, argv, 2, with_value, flags, o, error);
+}
 
-  sim::Recording sensors;
-  read_sensors(s.sensors, sensors);
-  Prior<kMarkers> prior;
+// What a run starts from: its settings (--config, then the command line), the sensor description
+// (--sensors) and the priors of its mirrorcal.yaml; an error names what is missing or wrong.
+bool run_inputs(const Options& o, RunSettings& s, sim::Recording& sensors, Prior<kMarkers>& prior,
+                std::string& error) {
+  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
+    return false;
+  if (sim::to_prior(sensors.priors, prior, error)) return true;
+  error = s.sensors + "/mirrorcal.yaml: " + error;
+  return false;
+}
+
+// Runs the loop while SIGINT and SIGTERM ask it to stop (at the next IMU sample).
+template <class Loop>
+firmware::LoopEnd run_until_signal(Loop& loop) {
+  StopOnSignal stop_on_signal;
+  return loop.run();
+}
+
+// The frame path's budget: the camera's frame interval where the driver reports one, else 20 Hz.
+std::int64_t frame_period_ns(const Devices& devices) {
+  const std::unique_ptr<Camera>& camera = devices.camera;
+  return camera && camera->capture.frame_period_ns() > 0 ? camera->capture.frame_period_ns()
+                                                         : 50'000'000;
+}
+
+void print_run_start(const RunSettings& s, const Devices& devices, double imu_rate_hz) {
+  std::printf("mirrorcal run: IMU %s%s%s, %s%s; %s\n", s.imu.c_str(),
+              s.drdy.empty() ? "" : ", data-ready ", s.drdy.c_str(),
+              describe_camera(s, devices).c_str(),
+              describe_trigger(s, devices, imu_rate_hz).c_str(),
+              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
+                               : "until the IMU stops");
+  std::fflush(stdout);
+}
+
+void print_loop_counters(const firmware::LoopCounters& lcount, double seconds) {
+  std::printf(
+      "loop: %llu IMU samples over %.3f s, %llu gaps (%llu too long to cross: motion restarted), "
+      "%llu out of order, %llu frames\n",
+      static_cast<unsigned long long>(lcount.imu_samples), seconds,
+      static_cast<unsigned long long>(lcount.imu_gaps),
+      static_cast<unsigned long long>(lcount.imu_restarts),
+      static_cast<unsigned long long>(lcount.imu_out_of_order),
+      static_cast<unsigned long long>(lcount.frames));
+}
+
+// The calibration after the live pass: what it kept, as a recording with the sensor description
+// and priors, calibrated as `mirrorcal calibrate` calibrates one (from an earlier calibration with
+// from). The result and its report replace the live pass's; false with the error when it fails.
+bool calibrate_log(const SessionLog& log, sim::Recording& sensors,
+                   const sim::CalibrationStart* from, const std::string& title,
+                   CalibrationResult& result, ReportData& report, std::string& error) {
+  std::printf(
+      "calibrating from the run's %zu IMU samples and %zu labelled frames%s, in %d passes "
+      "(more if one gates too many) as `mirrorcal calibrate` does\n",
+      log.imu.size(), log.frames.size(),
+      log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
+  log.to_recording(sensors);
+  // The live pass predicted with camchain.yaml's intrinsics; the calibration estimates them too
+  // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew).
+  const auto refine = [&](auto run) {
+    if (!calibrate_recording(sensors, run, error, {}, from)) return false;
+    result = run.result;
+    report = report_data(run, title);
+    report.from_earlier = from != nullptr;
+    return true;
+  };
+  if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
+    return refine(SimRun<8>{});
+  if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew) return refine(SimRun<4>{});
+  if (sensors.priors.estimate_intrinsics) return refine(SimRun<5>{});
+  return refine(SimRun<0>{});
+}
+
+// The result's warnings on stderr, and its files in dir.
+bool write_run_result(const std::string& dir, const CalibrationResult& result,
+                      const ReportData& report, std::string& error) {
+  for (const std::string& w : result_warnings(result))
+    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+  files::OutputSet out;
+  if (!write_camchain_imucam(out, dir + "/camchain-imucam.yaml", result, error) ||
+      !write_result_yaml(out, dir + "/mirrorcal-result.yaml", result, error) ||
+      !write_report(out, dir, report, report_plots(), error) || !out.commit(error))
+    return false;
+  std::printf(
+      "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, report.txt, report.html, "
+      "residuals.csv\n",
+      dir.c_str());
+  return true;
+}
+
+}  // namespace
+
+int cmd_run(int argc, char** argv) {
+  Options o;
   std::string error;
-  if (!sim::to_prior(sensors.priors, prior, error))
-    fail(s.sensors + "/mirrorcal.yaml: " + error, 2);
+  if (!parse_run_options(argc, argv, o, error)) fail(error);
+  RunSettings s;
+  sim::Recording sensors;
+  Prior<kMarkers> prior;
+  if (!run_inputs(o, s, sensors, prior, error)) fail(error, 2);
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
   // one (stage 2 after stage 1, as calibrate --from).
   sim::CalibrationStart start;
@@ -138,10 +268,12 @@ int cmd_run(int argc, char** argv) {
   }
 
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
-  const Devices devices =
-      open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz);
-  const std::unique_ptr<Camera>& camera = devices.camera;
-  create_out_dir(s.out);
+  Devices devices;
+  int exit_code = 1;
+  if (!open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz,
+                    devices, error, exit_code))
+    fail(error, exit_code);
+  if (!create_out_dir(s.out, error)) fail(error, 1);
 
   using Filter = CalibrationFilter<double, kMarkers, 0>;
   Filter filter(recording_config(sensors));
@@ -149,86 +281,36 @@ int cmd_run(int argc, char** argv) {
   Filter::Covariance p0;
   initialise(prior, x0, p0);
   filter.reset(x0, p0);
-  StoppingImu stopping(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
   const std::int64_t imu_period = imu_period_ns(sensors.sensors.imu_rate_hz);
-  // The frame path's budget: the camera's frame interval where the driver reports one, else 20 Hz.
-  const std::int64_t frame_period = camera && camera->capture.frame_period_ns() > 0
-                                        ? camera->capture.frame_period_ns()
-                                        : 50'000'000;
-  const double kept_s = (s.duration_s > 0 ? s.duration_s : kLoggedSecondsWithoutDuration) + 1.0;
-  SessionLog log(
-      static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(imu_period)),
-      camera ? static_cast<std::size_t>(kept_s * 1e9 / static_cast<double>(frame_period)) : 0);
-  LoggedImu imu(stopping, log);
-  NoMarkers no_markers;
-  std::unique_ptr<LoggedMarkers> logged_markers;
-  if (camera) logged_markers = std::make_unique<LoggedMarkers>(*camera->markers, log);
-  hal::MarkerSource<kMarkers>& markers =
-      camera ? static_cast<hal::MarkerSource<kMarkers>&>(*logged_markers) : no_markers;
+  const std::int64_t frame_period = frame_period_ns(devices);
+  LiveStreams streams(devices, s.duration_s, imu_period, frame_period);
   drivers::MonotonicClock clock;
-  const auto profiler = make_profiler(o, clock, imu_period, frame_period);
-  apply_realtime_options(o);
+  std::unique_ptr<firmware::LoopProfiler> profiler;
+  if (!make_profiler(o, clock, imu_period, frame_period, profiler, error) ||
+      !apply_realtime_options(o, error))
+    fail(error);
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
   // While the user moves the rig: what is still uncertain, what motion helps, when it converged.
   // On a terminal a line every window; in a log only when the verdict changes.
   LiveFeedback feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
-  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, imu, markers, lc,
-                                                      camera ? &feedback : nullptr);
-  if (camera) loop.set_identifier(logged_markers.get());
-  std::printf("mirrorcal run: IMU %s%s%s, %s%s; %s\n", s.imu.c_str(),
-              s.drdy.empty() ? "" : ", data-ready ", s.drdy.c_str(),
-              describe_camera(s, devices).c_str(),
-              describe_trigger(s, devices, sensors.sensors.imu_rate_hz).c_str(),
-              s.duration_s > 0 ? ("for " + std::to_string(s.duration_s) + " s").c_str()
-                               : "until the IMU stops");
-  std::fflush(stdout);
-  firmware::LoopEnd end;
-  {
-    StopOnSignal stop_on_signal;
-    end = loop.run();
-  }
+  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, streams.imu(), streams.markers(), lc,
+                                                      devices.camera ? &feedback : nullptr);
+  if (devices.camera) loop.set_identifier(streams.identifier());
+  print_run_start(s, devices, sensors.sensors.imu_rate_hz);
+  const firmware::LoopEnd end = run_until_signal(loop);
   StopOnSignal::report("writing the calibration so far");
 
-  const firmware::LoopCounters& lcount = loop.counters();
-  std::printf(
-      "loop: %llu IMU samples over %.3f s, %llu gaps (%llu too long to cross: motion restarted), "
-      "%llu out of order, %llu frames\n",
-      static_cast<unsigned long long>(lcount.imu_samples), stopping.seconds(),
-      static_cast<unsigned long long>(lcount.imu_gaps),
-      static_cast<unsigned long long>(lcount.imu_restarts),
-      static_cast<unsigned long long>(lcount.imu_out_of_order),
-      static_cast<unsigned long long>(lcount.frames));
+  print_loop_counters(loop.counters(), streams.seconds());
   print_device_counters(devices);
-  if (profiler) report_profile(*profiler, "timing", s.out);
+  if (profiler && !report_profile(*profiler, "timing", s.out, error)) fail(error, 1);
   CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
   const std::string title = "mirrorcal run, IMU " + s.imu;
   ReportData report = report_data_without_history(result, title);
-  if (!log.frames.empty()) {
-    std::printf(
-        "calibrating from the run's %zu IMU samples and %zu labelled frames%s, in %d passes "
-        "(more if one gates too many) as `mirrorcal calibrate` does\n",
-        log.imu.size(), log.frames.size(),
-        log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
-    log.to_recording(sensors);
-    // The live pass predicted with camchain.yaml's intrinsics; the calibration estimates them too
-    // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew).
-    const auto refine = [&](auto run) {
-      if (!calibrate_recording(sensors, run, error, {}, from)) fail(error, 1);
-      result = run.result;
-      report = report_data(run, title);
-      report.from_earlier = from != nullptr;
-    };
-    if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
-      refine(SimRun<8>{});
-    else if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
-      refine(SimRun<4>{});
-    else if (sensors.priors.estimate_intrinsics)
-      refine(SimRun<5>{});
-    else
-      refine(SimRun<0>{});
-  }
+  if (!streams.log().frames.empty() &&
+      !calibrate_log(streams.log(), sensors, from, title, result, report, error))
+    fail(error, 1);
   // The camera's stamps against the IMU's clock (a V4L2 driver stamping the end of the frame, the
   // bus's latency): what the calibration found.
   const auto t_row =
@@ -237,19 +319,9 @@ int cmd_run(int argc, char** argv) {
               1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
   report.result = result;
-  for (const std::string& w : result_warnings(result))
-    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
-  files::OutputSet out;
-  if (!write_camchain_imucam(out, s.out + "/camchain-imucam.yaml", result, error) ||
-      !write_result_yaml(out, s.out + "/mirrorcal-result.yaml", result, error) ||
-      !write_report(out, s.out, report, report_plots(), error) || !out.commit(error))
-    fail(error, 1);
-  std::printf(
-      "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, report.txt, report.html, "
-      "residuals.csv\n",
-      s.out.c_str());
-  if (end == firmware::LoopEnd::kImuError) fail(imu.error(), 1);
-  if (end == firmware::LoopEnd::kMarkerError) fail(markers.error(), 1);
+  if (!write_run_result(s.out, result, report, error)) fail(error, 1);
+  if (end == firmware::LoopEnd::kImuError) fail(streams.imu().error(), 1);
+  if (end == firmware::LoopEnd::kMarkerError) fail(streams.markers().error(), 1);
   return 0;
 }
 

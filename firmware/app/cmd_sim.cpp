@@ -25,6 +25,111 @@
 
 namespace mirrorcal::app {
 
+namespace {
+
+// Each calibration state's truth, its estimate after the first frame and at the end with their
+// sigmas, and the NEES of the end.
+template <class Run>
+void print_estimates(const Run& run, const sim::Scenario& s) {
+  const auto& params = run.result.params;
+  const auto truth = truth_display(s, Run::State::kIntrinsics);
+  const auto& first = run.first_frame;
+  const auto& last = run.history.back();
+  std::printf("\n%-17s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth",
+              "after 1st frame +-1s", "final +-1sigma", "error/sig");
+  for (std::size_t j = 0; j < params.size(); ++j) {
+    const double sc = params[j].scale;
+    std::printf("%-17s %-5s %12.4f %12.4f +-%-6.3f %12.4f +-%-6.4f %+10.2f\n",
+                params[j].name.c_str(), params[j].unit.c_str(), truth[j],
+                truth[j] + first.error(int(j)) * sc, first.sigma(int(j)) * sc,
+                truth[j] + last.error(int(j)) * sc, last.sigma(int(j)) * sc,
+                last.error(int(j)) / last.sigma(int(j)));
+  }
+  std::printf("\nNEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f)\n",
+              params.size(), last.nees, chi2_quantile(0.025, double(params.size())),
+              chi2_quantile(0.975, double(params.size())));
+}
+
+template <class Run>
+void print_loop_summary(const Run& run, double wall) {
+  const auto& lc = run.loop_counters;
+  const auto& fc = run.filter_counters;
+  std::printf(
+      "loop, last of %d passes: %llu IMU samples, %llu frames (%llu without markers), %llu "
+      "IMU gaps, "
+      "%llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
+      run.result.passes, (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
+      (unsigned long long)lc.frames_without_markers, (unsigned long long)lc.imu_gaps,
+      (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
+      (unsigned long long)fc.failures, wall);
+}
+
+// What a sim run shows and writes beside its calibration.
+struct SimReport {
+  const sim::Scenario& scenario;
+  std::uint64_t seed;
+  FrameMode frames;
+  bool plots;
+  std::string dir, title;
+  bool two_stage;  // stage 2 reported, after stage 1
+  const firmware::LoopProfiler* profiler;
+  std::chrono::steady_clock::time_point t0;
+};
+
+// What a run shows and writes, whichever stage it ended in; false with the error when a file
+// cannot be written.
+template <class Run>
+bool report_run(const Run& run, const SimReport& r, std::string& err) {
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - r.t0).count();
+  end_progress("calibrating done");
+  print_estimates(run, r.scenario);
+  print_loop_summary(run, wall);
+  if (r.frames.enabled) print_detection(run.detection, r.frames.format);
+
+  const auto& params = run.result.params;
+  for (const std::string& w : result_warnings(run.result))
+    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+  // The error plots first: the report embeds them.
+  ReportPlots figures = report_plots(r.plots);
+  if (figures.draw) {
+    const std::vector<ErrorSeries> series = {error_series(run.history, params)};
+    figures.extra_pngs = plot_errors(r.dir, "mirrorcal sim, seed " + std::to_string(r.seed), params,
+                                     series, chi2_quantile(0.025, double(params.size())),
+                                     chi2_quantile(0.975, double(params.size())), err);
+    if (figures.extra_pngs.empty()) std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
+    for (const auto& p : figures.extra_pngs) std::printf("plot: %s\n", p.c_str());
+  }
+  if (!write_run_outputs_and_report(r.dir, run, r.title, r.two_stage, figures, err)) return false;
+  std::printf(
+      "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
+      "report.html, residuals.csv\n",
+      r.dir.c_str());
+  return !r.profiler ||
+         report_profile(*r.profiler,
+                        "this host's monotonic clock, simulated data fed as fast as it is taken",
+                        r.dir, err);
+}
+
+// --intrinsics and what goes with it: --hold-skew and --one-stage only with it, and
+// --estimate-distortion with it and a lens; not with --frames or --profile. An error names the
+// first that does not go.
+bool check_stage_options(const Options& o, const FrameMode& frames, std::string& error) {
+  const bool intrinsics = o.flag("intrinsics");
+  if (intrinsics && (frames.enabled || o.flag("profile")))
+    error = "--intrinsics runs on listed markers, without --profile (not yet with --frames)";
+  else if ((o.flag("hold-skew") || o.flag("one-stage")) && !intrinsics)
+    error = "--hold-skew and --one-stage apply with --intrinsics";
+  else if (o.flag("estimate-distortion") &&
+           (!intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
+    error = "--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant";
+  else
+    return true;
+  return false;
+}
+
+}  // namespace
+
 int cmd_sim(int argc, char** argv) {
   std::vector<std::string>
       with_value = {"scenario",         "seed",   "out",       "format",     "pixel-sigma",
@@ -33,114 +138,71 @@ int cmd_sim(int argc, char** argv) {
       flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
-  const Options o = parse(argc, argv, 2, with_value, flags);
-  const FrameMode frames = frame_mode_option(o);
-  const bool intrinsics = o.flag("intrinsics");
-  if (intrinsics && (frames.enabled || o.flag("profile")))
-    fail("--intrinsics runs on listed markers, without --profile (not yet with --frames)");
-  if ((o.flag("hold-skew") || o.flag("one-stage")) && !intrinsics)
-    fail("--hold-skew and --one-stage apply with --intrinsics");
-  const bool one_stage = o.flag("one-stage");
+  Options o;
+  FrameMode frames;
+  std::string error;
+  if (!parse(argc, argv, 2, with_value, flags, o, error) || !frame_mode_option(o, frames, error))
+    fail(error);
+  if (!check_stage_options(o, frames, error)) fail(error);
+  const bool intrinsics = o.flag("intrinsics"), one_stage = o.flag("one-stage");
   // --estimate-distortion: stage 2 estimates the lens's coefficients with fu fv cu cv, skew held
   // (at the scenario camera's; --hold-skew: a camera without skew).
   const bool lens = o.flag("estimate-distortion");
-  if (lens && (!intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
-    fail("--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
-  const std::uint64_t seed = parse_count(o, "seed", 1, 0);
-  const sim::Scenario s =
-      o.flag("hold-skew") ? sim::without_skew(scenario_option(o, seed)) : scenario_option(o, seed);
+  std::uint64_t seed = 0;
+  sim::Scenario s;
+  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
+    fail(error);
+  if (o.flag("hold-skew")) s = sim::without_skew(s);
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
-  const Passes passes = passes_option(o);
+  Passes passes;
+  if (!passes_option(o, passes, error)) fail(error);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
-  const std::string dir = make_out_dir(o, "out/sim");
-  firmware::MonotonicClock clock;  // the simulation's own clock is simulated time
-  const auto profiler = make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
-                                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz));
-  apply_realtime_options(o);
+  std::string dir;
+  if (!make_out_dir(o, "out/sim", dir, error)) fail(error, 1);
+  firmware::SteadyClock clock;  // the simulation's own clock is simulated time
+  std::unique_ptr<firmware::LoopProfiler> profiler;
+  if (!make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
+                     static_cast<std::int64_t>(1e9 / s.camera_rate_hz), profiler, error) ||
+      !apply_realtime_options(o, error))
+    fail(error);
   std::printf(
       "mirrorcal sim: scenario '%s', seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), s.duration_s, s.imu_rate_hz,
       s.camera_rate_hz);
-  const auto t0 = std::chrono::steady_clock::now();
+  const SimReport report{s,
+                         seed,
+                         frames,
+                         !o.flag("no-plots"),
+                         dir,
+                         "mirrorcal sim, scenario " + s.name + ", seed " + std::to_string(seed) +
+                             (intrinsics ? one_stage ? ", intrinsics in one stage"
+                                                     : ", intrinsics in stage 2 (reported)"
+                                         : ""),
+                         intrinsics && !one_stage,
+                         profiler.get(),
+                         std::chrono::steady_clock::now()};
   const auto progress = [](double f) { print_progress("calibrating", f); };
-  // What a run shows and writes, whichever stage it ended in.
-  const auto report = [&](const auto& run) {
-    const double wall =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    end_progress("calibrating done");
-
-    const auto& params = run.result.params;
-    const auto truth = truth_display(s, std::decay_t<decltype(run)>::State::kIntrinsics);
-    const auto& first = run.first_frame;
-    const auto& last = run.history.back();
-    std::printf("\n%-17s %-5s %12s %20s %20s %10s\n", "param", "unit", "truth",
-                "after 1st frame +-1s", "final +-1sigma", "error/sig");
-    for (std::size_t j = 0; j < params.size(); ++j) {
-      const double sc = params[j].scale;
-      std::printf("%-17s %-5s %12.4f %12.4f +-%-6.3f %12.4f +-%-6.4f %+10.2f\n",
-                  params[j].name.c_str(), params[j].unit.c_str(), truth[j],
-                  truth[j] + first.error(int(j)) * sc, first.sigma(int(j)) * sc,
-                  truth[j] + last.error(int(j)) * sc, last.sigma(int(j)) * sc,
-                  last.error(int(j)) / last.sigma(int(j)));
-    }
-    const auto& lc = run.loop_counters;
-    const auto& fc = run.filter_counters;
-    std::printf("\nNEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f)\n",
-                params.size(), last.nees, chi2_quantile(0.025, double(params.size())),
-                chi2_quantile(0.975, double(params.size())));
-    std::printf(
-        "loop, last of %d passes: %llu IMU samples, %llu frames (%llu without markers), %llu "
-        "IMU gaps, "
-        "%llu markers used, %llu gated, %llu filter failures; %.2f s wall\n",
-        run.result.passes, (unsigned long long)lc.imu_samples, (unsigned long long)lc.frames,
-        (unsigned long long)lc.frames_without_markers, (unsigned long long)lc.imu_gaps,
-        (unsigned long long)fc.markers_used, (unsigned long long)fc.markers_gated,
-        (unsigned long long)fc.failures, wall);
-
-    if (frames.enabled) print_detection(run.detection, frames.format);
-
-    std::string err;
-    for (const std::string& w : result_warnings(run.result))
-      std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
-    // The error plots first: the report embeds them.
-    ReportPlots figures = report_plots(!o.flag("no-plots"));
-    if (figures.draw) {
-      const std::vector<ErrorSeries> series = {error_series(run.history, params)};
-      figures.extra_pngs = plot_errors(dir, "mirrorcal sim, seed " + std::to_string(seed), params,
-                                       series, chi2_quantile(0.025, double(params.size())),
-                                       chi2_quantile(0.975, double(params.size())), err);
-      if (figures.extra_pngs.empty())
-        std::fprintf(stderr, "mirrorcal: no plots: %s\n", err.c_str());
-      for (const auto& p : figures.extra_pngs) std::printf("plot: %s\n", p.c_str());
-    }
-    const std::string title =
-        "mirrorcal sim, scenario " + s.name + ", seed " + std::to_string(seed) +
-        (intrinsics ? one_stage ? ", intrinsics in one stage" : ", intrinsics in stage 2 (reported)"
-                    : "");
-    if (!write_run_outputs_and_report(dir, run, title, intrinsics && !one_stage, figures, err))
-      fail(err, 1);
-    std::printf(
-        "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-        "report.html, residuals.csv\n",
-        dir.c_str());
-    if (profiler)
-      report_profile(*profiler,
-                     "this host's monotonic clock, simulated data fed as fast as it is taken", dir);
-  };
+  std::string err;
+  bool written = false;
   if (lens)
-    report(one_stage ? run_one_stage_simulation<8>(s, seed, progress)
-                     : run_two_stage_simulation<8>(s, seed, progress));
+    written = report_run(one_stage ? run_one_stage_simulation<8>(s, seed, progress)
+                                   : run_two_stage_simulation<8>(s, seed, progress),
+                         report, err);
   else if (intrinsics && o.flag("hold-skew"))
-    report(one_stage ? run_one_stage_simulation<4>(s, seed, progress)
-                     : run_two_stage_simulation<4>(s, seed, progress));
+    written = report_run(one_stage ? run_one_stage_simulation<4>(s, seed, progress)
+                                   : run_two_stage_simulation<4>(s, seed, progress),
+                         report, err);
   else if (intrinsics)
-    report(one_stage ? run_one_stage_simulation<5>(s, seed, progress)
-                     : run_two_stage_simulation<5>(s, seed, progress));
+    written = report_run(one_stage ? run_one_stage_simulation<5>(s, seed, progress)
+                                   : run_two_stage_simulation<5>(s, seed, progress),
+                         report, err);
   else
-    report(run_simulation(s, seed, progress, frames, profiler.get(), passes));
+    written =
+        report_run(run_simulation(s, seed, progress, frames, profiler.get(), passes), report, err);
+  if (!written) fail(err, 1);
   return 0;
 }
 

@@ -97,43 +97,50 @@ extern "C" void request_stop(int signal) {
 
 }  // namespace
 
-RunSettings device_settings(const Options& o, const char* command, bool sensors_required) {
-  RunSettings s;
-  std::string error;
+bool device_settings(const Options& o, const char* command, bool sensors_required, RunSettings& s,
+                     std::string& error) {
   if (o.flag("config")) {
     const std::string file = o.get("config", "");
     std::string text;
     if (!files::read_file(file, text, error) || !parse_run_config(text, file, s, error))
-      fail(error, 2);
+      return false;
   }
   for (const char* key : kRunKeys)
-    if (o.flag(key) && !set_run_setting(s, key, o.get(key, ""), error)) fail("--" + error, 2);
-  if (s.imu.empty())
-    fail(std::string(command) + ": no IMU given (--imu SPEC, or `imu:` in the --config file)", 2);
-  if (sensors_required && s.sensors.empty())
-    fail(std::string(command) +
-             ": no sensor description given (--sensors DIR with imu.yaml, camchain.yaml and "
-             "mirrorcal.yaml, as `mirrorcal record` writes them)",
-         2);
-  return s;
+    if (o.flag(key) && !set_run_setting(s, key, o.get(key, ""), error)) {
+      error = "--" + error;
+      return false;
+    }
+  if (s.imu.empty()) {
+    error = std::string(command) + ": no IMU given (--imu SPEC, or `imu:` in the --config file)";
+    return false;
+  }
+  if (sensors_required && s.sensors.empty()) {
+    error = std::string(command) +
+            ": no sensor description given (--sensors DIR with imu.yaml, camchain.yaml and "
+            "mirrorcal.yaml, as `mirrorcal record` writes them)";
+    return false;
+  }
+  return true;
 }
 
-void read_sensors(const std::string& dir, sim::Recording& r) {
-  std::string text, error;
+bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error) {
+  std::string text;
   const std::string imu = dir + "/imu.yaml", cam = dir + "/camchain.yaml",
                     priors = dir + "/mirrorcal.yaml";
-  if (!files::read_file(imu, text, error) || !sim::parse_imu_yaml(text, imu, r.sensors, error) ||
-      !files::read_file(cam, text, error) ||
-      !sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) ||
-      !files::read_file(priors, text, error) ||
-      !sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error))
-    fail(error, 2);
+  return files::read_file(imu, text, error) && sim::parse_imu_yaml(text, imu, r.sensors, error) &&
+         files::read_file(cam, text, error) &&
+         sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) &&
+         files::read_file(priors, text, error) &&
+         sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error);
 }
 
-Devices open_devices(const RunSettings& s, int width, int height, double imu_rate_hz) {
-  Devices d;
-  if (!s.trigger.empty() && s.camera.empty())
-    fail("--trigger " + s.trigger + ": a camera trigger needs a camera (--camera DEV)", 2);
+bool open_devices(const RunSettings& s, int width, int height, double imu_rate_hz, Devices& d,
+                  std::string& error, int& exit_code) {
+  if (!s.trigger.empty() && s.camera.empty()) {
+    error = "--trigger " + s.trigger + ": a camera trigger needs a camera (--camera DEV)";
+    exit_code = 2;
+    return false;
+  }
   try {
     if (!s.trigger.empty())
       d.trigger = std::make_unique<drivers::GpioTrigger>(drivers::parse_line_spec(s.trigger));
@@ -147,7 +154,9 @@ Devices open_devices(const RunSettings& s, int width, int height, double imu_rat
     imu_config.accel_range_g = s.accel_range_g;
     d.imu = drivers::open_imu(spec, imu_config, d.drdy.get());
   } catch (const drivers::DriverError& e) {
-    fail(e.what(), 1);
+    error = e.what();
+    exit_code = 1;
+    return false;
   }
   if (d.trigger) {
     int every = s.trigger_every;
@@ -162,7 +171,7 @@ Devices open_devices(const RunSettings& s, int width, int height, double imu_rat
     }
     d.triggering = std::make_unique<firmware::TriggeringImu>(*d.imu, *d.trigger, every);
   }
-  return d;
+  return true;
 }
 
 std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz) {

@@ -34,14 +34,15 @@ struct Camera {
   std::unique_ptr<detection::DetectingMarkerSource<kMarkers>> markers;
 };
 
-// The settings of a command on the devices: --config FILE, then the command line (kRunKeys). An
-// IMU is required, and the sensor description (--sensors) when sensors_required; else the
-// command fails naming what is missing.
-RunSettings device_settings(const Options& o, const char* command, bool sensors_required);
+// The settings of a command on the devices into s: --config FILE, then the command line
+// (kRunKeys). An IMU is required, and the sensor description (--sensors) when sensors_required;
+// else an error naming what is missing.
+bool device_settings(const Options& o, const char* command, bool sensors_required, RunSettings& s,
+                     std::string& error);
 
-// imu.yaml, camchain.yaml and mirrorcal.yaml of dir, as beside a recording; fails the command
-// with the file, line and what is wrong.
-void read_sensors(const std::string& dir, sim::Recording& r);
+// imu.yaml, camchain.yaml and mirrorcal.yaml of dir into r, as beside a recording; an error names
+// the file, line and what is wrong.
+bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error);
 
 struct Devices {
   std::unique_ptr<drivers::GpioDataReady> drdy;
@@ -56,11 +57,13 @@ struct Devices {
   }
 };
 
-// Opens the devices s names, the camera (streaming, width x height) first. A device that is
-// missing, busy or of the wrong kind, or a malformed specification, fails the command (exit 1)
-// with a message naming it. imu_rate_hz sets how many IMU samples a camera trigger pulse takes
-// when --trigger-every does not (one frame interval's worth, 20 Hz where none is reported).
-Devices open_devices(const RunSettings& s, int width, int height, double imu_rate_hz);
+// Opens the devices s names into d, the camera (streaming, width x height) first. A device that is
+// missing, busy or of the wrong kind, or a malformed specification, is an error naming it with
+// exit_code 1; a trigger without a camera one with exit_code 2. imu_rate_hz sets how many IMU
+// samples a camera trigger pulse takes when --trigger-every does not (one frame interval's worth,
+// 20 Hz where none is reported).
+bool open_devices(const RunSettings& s, int width, int height, double imu_rate_hz, Devices& d,
+                  std::string& error, int& exit_code);
 
 // ", camera trigger gpiochip0:18 every 4 IMU samples (50 Hz)", or "" without a trigger.
 std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz);

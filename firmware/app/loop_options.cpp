@@ -12,42 +12,62 @@ const std::vector<std::string> kLoopValueOptions = {"budget-imu-us", "budget-fra
                                                     "rt-priority", "cpu"};
 const std::vector<std::string> kLoopFlagOptions = {"profile", "mlock"};
 
-void apply_realtime_options(const Options& o) {
+bool apply_realtime_options(const Options& o, std::string& error) {
   firmware::RealtimeOptions rt;
-  rt.fifo_priority = static_cast<int>(parse_count(o, "rt-priority", 0, 1));
+  std::uint64_t priority = 0, cpu = 0;
+  if (!parse_count(o, "rt-priority", 0, 1, priority, error)) return false;
+  rt.fifo_priority = static_cast<int>(priority);
   rt.lock_memory = o.flag("mlock");
-  rt.cpu = o.flag("cpu") ? static_cast<int>(parse_count(o, "cpu", 0, 0)) : -1;
+  if (o.flag("cpu") && !parse_count(o, "cpu", 0, 0, cpu, error)) return false;
+  rt.cpu = o.flag("cpu") ? static_cast<int>(cpu) : -1;
   const firmware::RealtimeOutcome r = firmware::apply_realtime(rt);
-  if (!r.error.empty()) fail(r.error);
+  if (!r.error.empty()) {
+    error = r.error;
+    return false;
+  }
   for (const auto& note : r.notes) std::printf("real-time: %s\n", note.c_str());
+  return true;
 }
 
-std::unique_ptr<firmware::LoopProfiler> make_profiler(const Options& o, hal::Clock& clock,
-                                                      std::int64_t imu_period_ns,
-                                                      std::int64_t frame_period_ns) {
-  const auto imu_us = parse_count(o, "budget-imu-us", 0, 1);
-  const auto frame_us = parse_count(o, "budget-frame-us", 0, 1);
+bool make_profiler(const Options& o, hal::Clock& clock, std::int64_t imu_period_ns,
+                   std::int64_t frame_period_ns, std::unique_ptr<firmware::LoopProfiler>& profiler,
+                   std::string& error) {
+  std::uint64_t imu_us = 0, frame_us = 0;
+  if (!parse_count(o, "budget-imu-us", 0, 1, imu_us, error) ||
+      !parse_count(o, "budget-frame-us", 0, 1, frame_us, error))
+    return false;
   if (!o.flag("profile")) {
-    if (imu_us != 0 || frame_us != 0) fail("--budget-imu-us and --budget-frame-us need --profile");
-    return nullptr;
+    if (imu_us != 0 || frame_us != 0) {
+      error = "--budget-imu-us and --budget-frame-us need --profile";
+      return false;
+    }
+    profiler = nullptr;
+    return true;
   }
-  return std::make_unique<firmware::LoopProfiler>(
+  profiler = std::make_unique<firmware::LoopProfiler>(
       clock, imu_us != 0 ? static_cast<std::int64_t>(imu_us) * 1000 : imu_period_ns,
       frame_us != 0 ? static_cast<std::int64_t>(frame_us) * 1000 : frame_period_ns);
+  return true;
 }
 
-void report_profile(const firmware::LoopProfiler& p, const std::string& title,
-                    const std::string& dir) {
+bool report_profile(const firmware::LoopProfiler& p, const std::string& title,
+                    const std::string& dir, std::string& error) {
   std::printf("\ntiming budget (%s):\n%s", title.c_str(), p.table().c_str());
-  std::string err;
   const std::string path = dir + "/timing-histogram.txt";
-  if (!p.write_histogram(path, err)) fail(err, 1);
+  if (!p.write_histogram(path, error)) return false;
   std::printf("wrote %s (cyclictest histogram format)\n", path.c_str());
+  return true;
 }
 
-Passes passes_option(const Options& o) {
-  if (!o.flag("passes")) return Passes{};
-  return Passes::exactly(static_cast<int>(parse_count(o, "passes", 0, 1, kMaxRequestedPasses)));
+bool passes_option(const Options& o, Passes& passes, std::string& error) {
+  if (!o.flag("passes")) {
+    passes = Passes{};
+    return true;
+  }
+  std::uint64_t n = 0;
+  if (!parse_count(o, "passes", 0, 1, n, error, kMaxRequestedPasses)) return false;
+  passes = Passes::exactly(static_cast<int>(n));
+  return true;
 }
 
 }  // namespace mirrorcal::app

@@ -115,13 +115,20 @@ int main(int argc, char** argv) {
     std::fputs(app::usage().c_str(), argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;
   }
-  for (const auto& c : app::commands())
-    if (first == c.name) try {
-        return c.run(argc, argv);
-      } catch (const mirrorcal::files::StoreError& e) {
-        // A calibration's temporary store that could not be written (a full $TMPDIR): as a
-        // result file that could not be written, code 1 and the file named.
-        app::fail(e.what(), 1);
-      }
+  for (const auto& c : app::commands()) {
+    if (first != c.name) continue;
+    // --help (or -h) anywhere among a command's arguments: its usage, and nothing else.
+    if (app::asks_for_help(argc, argv, 2)) {
+      std::fputs(app::usage(first).c_str(), stdout);
+      return 0;
+    }
+    try {
+      return c.run(argc, argv);
+    } catch (const mirrorcal::files::StoreError& e) {
+      // A calibration's temporary store that could not be written (a full $TMPDIR): as a
+      // result file that could not be written, code 1 and the file named.
+      app::fail(e.what(), 1);
+    }
+  }
   app::fail("unknown command '" + first + "'\n" + app::usage());
 }

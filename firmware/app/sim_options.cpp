@@ -5,28 +5,38 @@
 
 namespace mirrorcal::app {
 
-FrameMode frame_mode_option(const Options& o) {
-  FrameMode frames;
+bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) {
+  frames = FrameMode{};
   frames.enabled = o.flag("frames");
   const std::string format = o.get("format", "grey");
-  if (format == "yuyv")
+  if (format == "yuyv") {
     frames.format = hal::PixelFormat::kYuyv;
-  else if (format != "grey")
-    fail("--format: '" + format + "' is not a pixel format (grey or yuyv)");
-  if (o.flag("format") && !frames.enabled) fail("--format applies to --frames only");
+  } else if (format != "grey") {
+    error = "--format: '" + format + "' is not a pixel format (grey or yuyv)";
+    return false;
+  }
+  if (o.flag("format") && !frames.enabled) {
+    error = "--format applies to --frames only";
+    return false;
+  }
   const auto pixels = [&](const char* key, double& value, bool zero_allowed) {
-    if (!o.flag(key)) return;
-    if (!frames.enabled) fail(std::string("--") + key + " applies to --frames only");
+    if (!o.flag(key)) return true;
+    if (!frames.enabled) {
+      error = std::string("--") + key + " applies to --frames only";
+      return false;
+    }
     const std::string text = o.get(key, "");
     char* end = nullptr;
     value = std::strtod(text.c_str(), &end);
-    if (end == text.c_str() || *end != '\0' || !(value > 0.0 || (zero_allowed && value == 0.0)))
-      fail(std::string("--") + key + ": '" + text + "' is not a " +
-           (zero_allowed ? "non-negative" : "positive") + " number of pixels");
+    if (end == text.c_str() || *end != '\0' || !(value > 0.0 || (zero_allowed && value == 0.0))) {
+      error = std::string("--") + key + ": '" + text + "' is not a " +
+              (zero_allowed ? "non-negative" : "positive") + " number of pixels";
+      return false;
+    }
+    return true;
   };
-  pixels("spot-noise", frames.spot_noise_px, true);
-  pixels("pixel-sigma", frames.pixel_sigma, false);
-  return frames;
+  return pixels("spot-noise", frames.spot_noise_px, true) &&
+         pixels("pixel-sigma", frames.pixel_sigma, false);
 }
 
 }  // namespace mirrorcal::app

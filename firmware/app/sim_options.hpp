@@ -7,9 +7,9 @@
 
 namespace mirrorcal::app {
 
-// --frames, --format grey|yuyv, --spot-noise PX and --pixel-sigma PX of sim and montecarlo; fails
-// on a format that is not one, a noise that is negative or a sigma that is not positive, or any of
-// them without --frames.
-FrameMode frame_mode_option(const Options& o);
+// --frames, --format grey|yuyv, --spot-noise PX and --pixel-sigma PX of sim and montecarlo; an
+// error for a format that is not one, a noise that is negative or a sigma that is not positive, or
+// any of them without --frames.
+bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error);
 
 }  // namespace mirrorcal::app

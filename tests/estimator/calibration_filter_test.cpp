@@ -131,6 +131,7 @@ CalibrationConfig wall_config() {
   CalibrationConfig cfg;
   cfg.gravity_n = Eigen::Vector3d(0.0, -9.81, 0.0);
   cfg.pixel_sigma = 1.0;
+  cfg.intrinsics = test::Rig{}.pinhole();  // the camera the scenarios' markers are rendered with
   return cfg;
 }
 

@@ -57,6 +57,7 @@ AllocCounts exercise() {
 
   CalibrationConfig cfg;
   cfg.gravity_n = traj.gravity_n;
+  cfg.intrinsics = rig.pinhole();
   cfg.gate_after_frames = 0;  // gate from the first frame, so the outliers take that path too
   Filter warm(cfg);
   warm.reset(x0, p0);

@@ -51,7 +51,13 @@ struct Rig {
   std::array<Eigen::Vector3d, 3> markers{Eigen::Vector3d(0.02, -0.03, -0.03),
                                          Eigen::Vector3d(0.05, 0.04, -0.03),
                                          Eigen::Vector3d(-0.08, 0.06, 0.01)};
+  // The paper's camera in its centred coordinates (cu, cv from the image centre): these tests
+  // render their markers with it and give the filter the same camera (pinhole()), so the
+  // convention does not matter here.
   double fu = 833.33, fv = 833.33, cu = 2.0, cv = 8.0, skew = 3.0;
+
+  // The camera for CalibrationConfig::intrinsics.
+  Pinhole<double> pinhole() const { return {fu, fv, cu, cv, skew}; }
 
   Eigen::Matrix3d k_matrix() const {
     Eigen::Matrix3d k;

@@ -54,7 +54,7 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   mc::sim::VectorMarkerSource<3> listed(data.frames);
   mc::app::FrameTap<3> markers(listed, nullptr);
   mc::app::HistorySink<Filter> sink(data.frames.size() + 1, nullptr, &markers);
-  mc::firmware::MonotonicClock clock;
+  mc::firmware::SteadyClock clock;
   const auto profiler = std::make_unique<mc::firmware::LoopProfiler>(clock, 5'000'000, 50'000'000);
   mc::firmware::LoopConfig lc;
   lc.profiler = profiler.get();

@@ -20,11 +20,6 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
   const int step = hal::bytes_per_pixel(f.format);
   const int threshold = config_.threshold;
   std::memset(visited_.data(), 0, static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
-  const auto luma = [&](int x, int y) {
-    return static_cast<int>(
-        f.data[static_cast<std::size_t>(y) * static_cast<std::size_t>(f.bytes_per_line) +
-               static_cast<std::size_t>(x * step)]);
-  };
 
   int found = 0;
   for (int y = 0; y < h; ++y) {
@@ -33,42 +28,19 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
     for (int x = 0; x < w; ++x) {
       if (row[x * step] <= threshold || visited_[static_cast<std::size_t>(y * w + x)] != 0)
         continue;
-      // Flood fill (4-connected) from this seed; the stack holds at most every pixel once.
-      int top = 0, area = 0, peak = 0;
-      int x0 = x, x1 = x, y0 = y, y1 = y;
-      stack_[static_cast<std::size_t>(top++)] = y * w + x;
-      visited_[static_cast<std::size_t>(y * w + x)] = 1;
-      while (top > 0) {
-        const int p = stack_[static_cast<std::size_t>(--top)];
-        const int px = p % w, py = p / w;
-        ++area;
-        peak = std::max(peak, luma(px, py));
-        x0 = std::min(x0, px);
-        x1 = std::max(x1, px);
-        y0 = std::min(y0, py);
-        y1 = std::max(y1, py);
-        const int nx[4] = {px - 1, px + 1, px, px};
-        const int ny[4] = {py, py, py - 1, py + 1};
-        for (int k = 0; k < 4; ++k) {
-          if (nx[k] < 0 || nx[k] >= w || ny[k] < 0 || ny[k] >= h) continue;
-          const auto q = static_cast<std::size_t>(ny[k] * w + nx[k]);
-          if (visited_[q] != 0 || luma(nx[k], ny[k]) <= threshold) continue;
-          visited_[q] = 1;
-          stack_[static_cast<std::size_t>(top++)] = static_cast<std::int32_t>(q);
-        }
-      }
-      if (area < config_.min_area) {
+      const Region r = fill(f, x, y);
+      if (r.area < config_.min_area) {
         ++counters_.too_small;
         continue;
       }
-      if (area > config_.max_area) {
+      if (r.area > config_.max_area) {
         ++counters_.too_large;
         continue;
       }
       Blob b;
-      b.area = area;
-      b.peak = peak;
-      if (!measure(f, x0, y0, x1, y1, b)) {
+      b.area = r.area;
+      b.peak = r.peak;
+      if (!measure(f, r.x0, r.y0, r.x1, r.y1, b)) {
         ++counters_.too_small;
         continue;
       }
@@ -86,6 +58,43 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
       if (std::hypot(out[i].u - out[j].u, out[i].v - out[j].v) < near)
         out[i].crowded = out[j].crowded = true;
   return found;
+}
+
+// Flood fill (4-connected) from the seed (x, y) over the pixels above the threshold, marking them
+// visited; the stack holds at most every pixel once.
+BlobDetector::Region BlobDetector::fill(const hal::FrameView& f, int x, int y) {
+  const int w = f.width, h = f.height;
+  const int step = hal::bytes_per_pixel(f.format);
+  const int threshold = config_.threshold;
+  const auto luma = [&](int u, int v) {
+    return static_cast<int>(
+        f.data[static_cast<std::size_t>(v) * static_cast<std::size_t>(f.bytes_per_line) +
+               static_cast<std::size_t>(u * step)]);
+  };
+  int top = 0, area = 0, peak = 0;
+  int x0 = x, x1 = x, y0 = y, y1 = y;
+  stack_[static_cast<std::size_t>(top++)] = y * w + x;
+  visited_[static_cast<std::size_t>(y * w + x)] = 1;
+  while (top > 0) {
+    const int p = stack_[static_cast<std::size_t>(--top)];
+    const int px = p % w, py = p / w;
+    ++area;
+    peak = std::max(peak, luma(px, py));
+    x0 = std::min(x0, px);
+    x1 = std::max(x1, px);
+    y0 = std::min(y0, py);
+    y1 = std::max(y1, py);
+    const int nx[4] = {px - 1, px + 1, px, px};
+    const int ny[4] = {py, py, py - 1, py + 1};
+    for (int k = 0; k < 4; ++k) {
+      if (nx[k] < 0 || nx[k] >= w || ny[k] < 0 || ny[k] >= h) continue;
+      const auto q = static_cast<std::size_t>(ny[k] * w + nx[k]);
+      if (visited_[q] != 0 || luma(nx[k], ny[k]) <= threshold) continue;
+      visited_[q] = 1;
+      stack_[static_cast<std::size_t>(top++)] = static_cast<std::int32_t>(q);
+    }
+  }
+  return {area, peak, x0, y0, x1, y1};
 }
 
 // Centroid, flux and spread over the blob's box grown by the margin: the background is the mean

@@ -181,7 +181,7 @@ bool LoopProfiler::write_histogram(const std::string& path, std::string& err) co
   return out.commit(err);
 }
 
-std::int64_t MonotonicClock::now_ns() {
+std::int64_t SteadyClock::now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();

@@ -142,6 +142,10 @@ class CanImu final : public hal::ImuSource {
 
  private:
   void on_error_frame(std::uint32_t can_id, const std::uint8_t* data);
+  // Parts of next().
+  void set_silence_error(std::uint64_t frames_meanwhile);
+  bool take_data_frame(std::uint32_t can_id, std::uint8_t len, const std::uint8_t* data,
+                       mm710::Part& part);
 
   int fd_;
   std::string device_;

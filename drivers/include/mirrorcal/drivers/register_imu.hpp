@@ -80,6 +80,11 @@ class RegisterImu : public hal::ImuSource {
 
  private:
   bool read_with_retry(std::uint8_t first, std::uint8_t* out, std::size_t n);
+  // The steps of next(), in order; one that returns false has set error().
+  bool wait_data_ready_line(std::int64_t& t_ns);
+  bool poll_data_ready_status(std::int64_t& t_ns);
+  void count_missed_samples(std::int64_t t_ns);
+  bool read_data(std::uint8_t* raw);
   // Why a data block cannot be a sample of a working part (a bus nobody drives, a part that
   // reset), or nullptr when it can.
   const char* no_data(const std::uint8_t* raw) const;

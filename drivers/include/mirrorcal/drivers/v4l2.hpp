@@ -55,6 +55,12 @@ class V4l2Stream {
   explicit V4l2Stream(bool output) : output_(output) {}
   ~V4l2Stream() { close(); }
   bool open_stream(const std::string& path, const V4l2Config& config);
+  // The steps of open_stream, in order; one that returns false has closed the device and set
+  // error().
+  bool open_device();
+  bool set_format(const V4l2Config& config);
+  void read_frame_period();
+  bool map_buffers(const V4l2Config& config);
   bool stream_on();
   bool fail(Fault fault, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
   // Waits up to timeout_ms for the device to be ready (POLLIN for capture, POLLOUT for output):

@@ -12,14 +12,17 @@ struct CalibrationConfig {
   Eigen::Vector3d gravity_n{0.0, -9.81, 0.0};  // wall mirror, y up
   ImuNoise imu{};
   double pixel_sigma = 1.0;  // px, 1-sigma per coordinate
-  // Intrinsics used where the state does not estimate them (stage 1, and skew when NK = 4).
-  Pinhole<double> intrinsics{833.33, 833.33, 2.0, 8.0, 3.0};
+  // Intrinsics used where the state does not estimate them (stage 1, and skew when NK = 4), in
+  // pixels with the origin at the top-left pixel as everywhere else. No default camera: the caller
+  // sets its own (left at zero, no marker projects into the image).
+  Pinhole<double> intrinsics{};
   // Squared Mahalanobis distance (2 dof) above which a marker is rejected: 99.9 % for 2 dof.
   double gate_chi2 = 13.8155;
   // Frames before the gate applies. While the calibration is still far from its prior's
   // linearisation point the innovation covariance is not trustworthy, and gating then rejects the
   // very frames that would correct it (seen with 2.7-sigma marker guesses: locked in after 20
-  // frames). After 10 s at 20 Hz the estimate is near enough for the gate to mean what it says.
+  // frames). After 10 s at 20 Hz the estimate is near enough for the gate to mean what it says
+  // (the 200 frames were chosen at 20 Hz; at the paper scenario's 60 Hz they take 3.3 s).
   std::uint64_t gate_after_frames = 200;
   SigmaPointParams sigma_points{};
   // What the rig may do across an IMU gap (predict's gap_s), and after one too long to cross

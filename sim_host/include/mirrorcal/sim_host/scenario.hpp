@@ -92,7 +92,7 @@ struct Scenario {
 // z-y-x), markers (2,-3,-3), (5,4,-3), (-8,6,1) cm, fu = fv = 833.33, cu = 2, cv = 8, skew = 3 in
 // the paper's centred image coordinates, i.e. cu = 322, cv = 248 in a 640 x 480 image whose origin
 // is the top-left pixel (docs/design.md's convention, which Kalibr and OpenCV use),
-// a wall mirror with y up, ADIS16448 noise (EuRoC imu0), 1 px, 200 Hz IMU, 20 Hz camera, 60 s.
+// a wall mirror with y up, ADIS16448 noise (EuRoC imu0), 1 px, 200 Hz IMU, 60 Hz camera, 60 s.
 Scenario paper_scenario();
 
 // A rig a user could build, in front of a wall or floor mirror, moved by hand or at the paper's

@@ -57,6 +57,11 @@ class BlobDetector {
   const BlobCounters& counters() const { return counters_; }
 
  private:
+  // A connected region of bright pixels: its area, brightest luma and bounding box.
+  struct Region {
+    int area, peak, x0, y0, x1, y1;
+  };
+  Region fill(const hal::FrameView& f, int x, int y);
   bool measure(const hal::FrameView& f, int x0, int y0, int x1, int y1, Blob& b) const;
 
   BlobConfig config_;

@@ -136,9 +136,11 @@ class ImuSampleScope {
   LoopProfiler* p_;
 };
 
-// CLOCK_MONOTONIC (std::chrono::steady_clock): the loop's clock on the board, and the one that
-// times a simulated run, whose own clock is simulated time.
-class MonotonicClock final : public hal::Clock {
+// The host's std::chrono::steady_clock (CLOCK_MONOTONIC on Linux) as a hal::Clock: what the
+// profiler times a simulated run by, whose own clock is simulated time. It only reads the time;
+// the board's drivers pace, sleep and wait on drivers::MonotonicClock (a drivers::Timebase), which
+// firmware does not depend on.
+class SteadyClock final : public hal::Clock {
  public:
   std::int64_t now_ns() override;
 };
