@@ -61,6 +61,14 @@ void expect_reproduces(const std::string& campaign, const std::string& options, 
   std::filesystem::remove(dir.string() + ".log");
 }
 
+TEST(DocsFigures, PaperStageOneCampaignReproduces) {
+  expect_reproduces("docs/campaign", "--seed 1", 4);
+}
+
+TEST(DocsFigures, PaperStageTwoCampaignReproduces) {
+  expect_reproduces("docs/campaign/stage2", "--intrinsics --seed 1", 2);
+}
+
 TEST(DocsFigures, RandomFamilyCampaignReproduces) {
   expect_reproduces("docs/campaign/random", "--scenario random --seed 1", 4);
 }
