@@ -6,6 +6,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 int host_only(const char* command) {

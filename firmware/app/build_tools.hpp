@@ -7,6 +7,8 @@
 
 namespace mirrorcal::app {
 
+using calibration::ReportPlots;
+
 int cmd_sim(int argc, char** argv);
 int cmd_montecarlo(int argc, char** argv);
 

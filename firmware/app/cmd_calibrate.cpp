@@ -13,6 +13,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 template <int NK>
@@ -33,7 +35,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
                  "the calibration will hardly have converged\n",
                  std::size_t(rec.stats.frames), static_cast<unsigned long long>(burn_in));
   std::string err;
-  SimRun<NK> run;
+  CalibrationRun<NK> run;
   const auto t0 = std::chrono::steady_clock::now();
   if (!calibrate_recording<NK>(
           rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
@@ -48,7 +50,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
   std::printf("\n%-17s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
               "final +-1sigma", rec.has_truth ? "  error/sig (truth.yaml)" : "");
-  constexpr CalibrationLayout kLayout = SimRun<NK>::State::kCalibration;
+  constexpr CalibrationLayout kLayout = CalibrationRun<NK>::State::kCalibration;
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
     const int i = int(j) - kLayout[p.group].begin;  // within its group

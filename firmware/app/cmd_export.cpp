@@ -8,6 +8,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 // What the export writers need of a result, as mirrorcal-result.yaml holds it.

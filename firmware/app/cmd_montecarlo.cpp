@@ -23,6 +23,9 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+using namespace evaluation;
+
 namespace {
 
 // One run of a campaign, as the reports need it.

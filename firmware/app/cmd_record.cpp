@@ -16,6 +16,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 // A recording's folder, written whole or not at all: into a temporary folder beside it that

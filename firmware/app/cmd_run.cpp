@@ -27,6 +27,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 // No camera: the marker stream is empty from the start.
@@ -225,10 +227,11 @@ bool calibrate_log(const SessionLog& log, sim::Recording& sensors,
     return true;
   };
   if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
-    return refine(SimRun<8>{});
-  if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew) return refine(SimRun<4>{});
-  if (sensors.priors.estimate_intrinsics) return refine(SimRun<5>{});
-  return refine(SimRun<0>{});
+    return refine(CalibrationRun<8>{});
+  if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
+    return refine(CalibrationRun<4>{});
+  if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<5>{});
+  return refine(CalibrationRun<0>{});
 }
 
 // The result's warnings on stderr, and its files in dir.

@@ -25,6 +25,9 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+using namespace evaluation;
+
 namespace {
 
 // Each calibration state's truth, its estimate after the first frame and at the end with their

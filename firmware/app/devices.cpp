@@ -16,6 +16,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 // Frame buffers the camera gets: a few frames of slack while the loop is busy with an update.

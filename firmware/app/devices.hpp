@@ -23,6 +23,8 @@
 
 namespace mirrorcal::app {
 
+using calibration::kMarkers;
+
 // The camera: V4L2 capture, watched for silence (a camera that stops delivering frames ends the
 // run with a message, FrameWatchdog), and the markers detected in its frames (blobs, labelled by
 // brightness, 1 : 1.5 : 2.25 in id order, and by the filter's prediction once a loop relabels

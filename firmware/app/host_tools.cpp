@@ -4,6 +4,9 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+using namespace evaluation;
+
 ReportPlots report_plots(bool draw) {
   ReportPlots plots;
   plots.draw = draw;

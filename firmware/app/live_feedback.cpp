@@ -6,6 +6,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 namespace {
 
 using State = LiveFeedback::Filter::State;

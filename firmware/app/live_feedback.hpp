@@ -16,6 +16,8 @@
 
 namespace mirrorcal::app {
 
+using calibration::kMarkers;
+
 // The parts of the calibration a user's motion informs differently: the first kFeedbackGroups of
 // CalibrationGroup, those of run's filter (no intrinsics).
 constexpr int kFeedbackGroups = 4;

@@ -8,6 +8,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 const std::vector<std::string> kLoopValueOptions = {"budget-imu-us", "budget-frame-us",
                                                     "rt-priority", "cpu"};
 const std::vector<std::string> kLoopFlagOptions = {"profile", "mlock"};

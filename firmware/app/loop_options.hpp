@@ -14,6 +14,9 @@
 
 namespace mirrorcal::app {
 
+using calibration::imu_period_ns;
+using calibration::Passes;
+
 // Option names to add to parse(): these take a value, these are flags.
 extern const std::vector<std::string> kLoopValueOptions;
 extern const std::vector<std::string> kLoopFlagOptions;

@@ -9,6 +9,8 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+
 int cmd_record(int argc, char** argv);
 int cmd_calibrate(int argc, char** argv);
 int cmd_run(int argc, char** argv);

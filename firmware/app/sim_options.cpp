@@ -5,6 +5,9 @@
 
 namespace mirrorcal::app {
 
+using namespace calibration;
+using namespace evaluation;
+
 bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) {
   frames = FrameMode{};
   frames.enabled = o.flag("frames");

@@ -7,6 +7,8 @@
 
 namespace mirrorcal::app {
 
+using evaluation::FrameMode;
+
 // --frames, --format grey|yuyv, --spot-noise PX and --pixel-sigma PX of sim and montecarlo; an
 // error for a format that is not one, a noise that is negative or a sigma that is not positive, or
 // any of them without --frames.

@@ -17,7 +17,7 @@ Recording paper_recording() {
 std::uint64_t calibrate(const Recording& r) {
   using Filter = CalibrationFilter<double, 3, 0>;
   const auto prior = sim::draw_prior<3>(r.scenario, r.data, 1);
-  Filter filter(app::scenario_config(r.scenario));
+  Filter filter(evaluation::scenario_config(r.scenario));
   Filter::State x0;
   Filter::Covariance p0;
   initialise(prior, x0, p0);
@@ -36,11 +36,12 @@ std::uint64_t calibrate(const Recording& r) {
 
 std::uint64_t calibrate_as_shipped(const Recording& r) {
   const auto prior = sim::draw_prior<3>(r.scenario, r.data, 1);
-  app::SimRun<0>::State x0;
-  app::SimRun<0>::Filter::Covariance p0;
+  calibration::CalibrationRun<0>::State x0;
+  calibration::CalibrationRun<0>::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  const app::SimRun<0> run = app::run_loop<0>(app::scenario_config(r.scenario), x0, p0,
-                                              app::loop_data(r.scenario, r.data), nullptr);
+  const calibration::CalibrationRun<0> run =
+      calibration::run_loop<0>(evaluation::scenario_config(r.scenario), x0, p0,
+                               evaluation::loop_data(r.scenario, r.data), nullptr);
   return run.filter_counters.markers_used;
 }
 

@@ -59,8 +59,8 @@ void expect_campaign_meets_bar(const std::string& options, int params, int runs 
   EXPECT_EQ(rows, params);
   // The average NEES of the states over the runs: chi-square with runs * params dof, divided by
   // the runs; its 99.9 % interval.
-  const double lo = mirrorcal::app::chi2_quantile(0.0005, double(params) * runs) / runs;
-  const double hi = mirrorcal::app::chi2_quantile(0.9995, double(params) * runs) / runs;
+  const double lo = mirrorcal::calibration::chi2_quantile(0.0005, double(params) * runs) / runs;
+  const double hi = mirrorcal::calibration::chi2_quantile(0.9995, double(params) * runs) / runs;
   EXPECT_GT(nees, lo);
   EXPECT_LT(nees, hi);
   std::printf("campaign: average NEES %.2f (99.9 %% interval %.2f..%.2f)\n", nees, lo, hi);
@@ -130,8 +130,8 @@ TEST(Campaign, SixRunsOfStageTwoWithTheRadtanLensEstimatedAreConsistent) {
   ASSERT_EQ(rows, kParams);
   const std::vector<std::string> lens(names.end() - 4, names.end());
   EXPECT_EQ(lens, (std::vector<std::string>{"k1", "k2", "p1", "p2"}));
-  const double lo = mirrorcal::app::chi2_quantile(0.0005, double(kParams) * kRuns) / kRuns;
-  const double hi = mirrorcal::app::chi2_quantile(0.9995, double(kParams) * kRuns) / kRuns;
+  const double lo = mirrorcal::calibration::chi2_quantile(0.0005, double(kParams) * kRuns) / kRuns;
+  const double hi = mirrorcal::calibration::chi2_quantile(0.9995, double(kParams) * kRuns) / kRuns;
   EXPECT_GT(nees, lo);
   EXPECT_LT(nees, hi);
 
@@ -261,8 +261,8 @@ TEST(Campaign, TenRandomRigsOfStageTwoAreConsistent) {
       "RMS against a reported %.3f\n",
       mean, missed, rms_k, sigma_k);
   EXPECT_EQ(runs, 10);
-  const double lo = mirrorcal::app::chi2_quantile(0.0005, 20.0 * runs) / runs;
-  const double hi = mirrorcal::app::chi2_quantile(0.9995, 20.0 * runs) / runs;
+  const double lo = mirrorcal::calibration::chi2_quantile(0.0005, 20.0 * runs) / runs;
+  const double hi = mirrorcal::calibration::chi2_quantile(0.9995, 20.0 * runs) / runs;
   EXPECT_GT(mean, lo);
   EXPECT_LT(mean, hi);
   EXPECT_EQ(missed, 0);

@@ -43,7 +43,7 @@ TEST(FloatLongRun, StaysPositiveDefiniteForTenMinutes) {
   s.duration_s = 600.0;
   const mc::sim::SimData data = mc::sim::simulate(s, 9);
   const auto prior = mc::sim::draw_prior<3>(s, data, 9);
-  FilterF filter(mc::app::scenario_config(s));
+  FilterF filter(mc::evaluation::scenario_config(s));
   FilterF::State x0;
   FilterF::Covariance p0;
   mc::initialise(prior, x0, p0);

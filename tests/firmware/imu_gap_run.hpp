@@ -12,7 +12,7 @@
 
 namespace mirrorcal::gaptest {
 
-using Run = app::SimRun<0>;
+using Run = calibration::CalibrationRun<0>;
 
 constexpr std::int64_t kMs = 1'000'000;
 
@@ -21,7 +21,7 @@ inline Run::State truth_of(const sim::Scenario& s) {
   Run::State t;
   t.p_b_c = s.truth.p_b_c;
   t.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < app::kMarkers; ++i)
+  for (int i = 0; i < calibration::kMarkers; ++i)
     t.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
   t.t_d = s.truth.t_d;
   return t;
@@ -30,18 +30,19 @@ inline Run::State truth_of(const sim::Scenario& s) {
 // The calibration of seed's simulated minute with the IMU samples of [start_ms, start_ms + gap_ms)
 // removed.
 inline Run calibrate_with_gap(const sim::Scenario& s, std::uint64_t seed, std::int64_t start_ms,
-                              std::int64_t gap_ms, app::Passes passes = {}) {
+                              std::int64_t gap_ms, calibration::Passes passes = {}) {
   const sim::SimData data = sim::simulate(s, seed);
-  app::LoopData d = app::loop_data(s, data);
+  calibration::LoopData d = evaluation::loop_data(s, data);
   const std::int64_t from = start_ms * kMs, to = (start_ms + gap_ms) * kMs;
   d.imu.erase(std::remove_if(d.imu.begin(), d.imu.end(),
                              [&](const ImuSample& x) { return x.t_ns >= from && x.t_ns < to; }),
               d.imu.end());
   Run::State x0;
   Run::Filter::Covariance p0;
-  initialise(sim::simulation_prior<app::kMarkers>(s, data, seed), x0, p0);
+  initialise(sim::simulation_prior<calibration::kMarkers>(s, data, seed), x0, p0);
   const Run::State truth = truth_of(s);
-  return app::run_loop<0>(app::scenario_config(s), x0, p0, d, &truth, {}, {}, passes);
+  return calibration::run_loop<0>(evaluation::scenario_config(s), x0, p0, d, &truth, {}, {},
+                                  passes);
 }
 
 // The largest |error| / sigma over a run's calibration states.

@@ -22,9 +22,10 @@ int main(int argc, char** argv) {
   }
   const std::uint64_t first = std::stoull(argv[1]), last = std::stoull(argv[2]);
   const std::int64_t start_ms = std::stoll(argv[3]);
-  const mc::app::Passes passes = std::getenv("ONCE") != nullptr       ? mc::app::Passes::once()
-                                 : std::getenv("NOREFINE") != nullptr ? mc::app::Passes{2, 4, false}
-                                                                      : mc::app::Passes{};
+  const mc::calibration::Passes passes =
+      std::getenv("ONCE") != nullptr       ? mc::calibration::Passes::once()
+      : std::getenv("NOREFINE") != nullptr ? mc::calibration::Passes{2, 4, false}
+                                           : mc::calibration::Passes{};
   for (std::uint64_t seed = first; seed <= last; ++seed) {
     const mc::sim::Scenario s = mc::sim::random_scenario(seed);
     for (int i = 4; i < argc; ++i) {
@@ -44,7 +45,7 @@ int main(int argc, char** argv) {
           "after_gated %d after_nis_per_dof %.3f\n",
           static_cast<unsigned long long>(seed), s.motion_kind.c_str(),
           static_cast<long long>(gap_ms), run.history.back().nees, mc::gaptest::worst_sigmas(run),
-          mc::app::consistent(run.result) ? 1 : 0,
+          mc::calibration::consistent(run.result) ? 1 : 0,
           static_cast<unsigned long long>(run.loop_counters.imu_restarts), gated,
           dof > 0 ? nis / dof : 0.0);
       std::fflush(stdout);

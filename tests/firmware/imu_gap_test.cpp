@@ -44,7 +44,7 @@ void expect_gap_survived(std::int64_t gap_ms, std::uint64_t restarts) {
     EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
     EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
     EXPECT_EQ(run.filter_counters.failures, 0u);
-    EXPECT_FALSE(mc::app::suspect(run.result))
+    EXPECT_FALSE(mc::calibration::suspect(run.result))
         << run.result.markers_gated << " gated of " << run.result.markers_used << " used";
     nees_sum += run.history.back().nees;
   }
@@ -66,7 +66,7 @@ void expect_each_run_right_or_flagged(std::int64_t gap_ms, std::uint64_t restart
     SCOPED_TRACE("random seed " + std::to_string(seed));
     EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
     EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
-    EXPECT_TRUE(mc::gaptest::worst_sigmas(run) <= 4.0 || !mc::app::consistent(run.result))
+    EXPECT_TRUE(mc::gaptest::worst_sigmas(run) <= 4.0 || !mc::calibration::consistent(run.result))
         << mc::gaptest::worst_sigmas(run) << " sigmas, NEES " << run.history.back().nees;
   }
 }

@@ -45,15 +45,15 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   }
   const auto prior = mc::sim::draw_prior<3>(s, data, 21);
   // Start-up: everything the loop needs is made here.
-  Filter filter(mc::app::scenario_config(s));
+  Filter filter(mc::evaluation::scenario_config(s));
   Filter::State x0;
   Filter::Covariance p0;
   mc::initialise(prior, x0, p0);
   filter.reset(x0, p0);
   mc::sim::VectorImuSource imu(data.imu);
   mc::sim::VectorMarkerSource<3> listed(data.frames);
-  mc::app::FrameTap<3> markers(listed, nullptr);
-  mc::app::HistorySink<Filter> sink(data.frames.size() + 1, nullptr, &markers);
+  mc::calibration::FrameTap<3> markers(listed, nullptr);
+  mc::calibration::HistorySink<Filter> sink(data.frames.size() + 1, nullptr, &markers);
   mc::firmware::SteadyClock clock;
   const auto profiler = std::make_unique<mc::firmware::LoopProfiler>(clock, 5'000'000, 50'000'000);
   mc::firmware::LoopConfig lc;

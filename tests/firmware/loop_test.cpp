@@ -33,7 +33,7 @@ class RecordingSink final : public mc::firmware::EstimateSink<Filter> {
 // A filter at rest in front of the mirror, as the paper scenario starts.
 Filter make_filter() {
   const mc::sim::Scenario s = mc::sim::paper_scenario();
-  Filter f(mc::app::scenario_config(s));
+  Filter f(mc::evaluation::scenario_config(s));
   const mc::sim::SimData d = mc::sim::simulate(s, 7);
   auto prior = mc::sim::draw_prior<3>(s, d, 7);
   prior.t_d = 0.0;  // the true offset: frames are exposed at their stamps
@@ -184,7 +184,7 @@ TEST(Loop, MarkerMissingForAWhileIsSurvived) {
     empty_frames += kept.empty() ? 1 : 0;
   }
   ASSERT_GE(empty_frames, static_cast<std::uint64_t>(0.5 * s.camera_rate_hz) - 1);
-  Filter f(mc::app::scenario_config(s));
+  Filter f(mc::evaluation::scenario_config(s));
   Filter::State x;
   Filter::Covariance p;
   auto prior = mc::sim::draw_prior<3>(s, d, 3);
@@ -208,8 +208,8 @@ TEST(Loop, MarkerMissingForAWhileIsSurvived) {
 TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
   mc::sim::Scenario s = mc::sim::paper_scenario();
   s.duration_s = 10.0;
-  const auto a = mc::app::run_simulation(s, 11);
-  const auto b = mc::app::run_simulation(s, 11);
+  const auto a = mc::evaluation::run_simulation(s, 11);
+  const auto b = mc::evaluation::run_simulation(s, 11);
   ASSERT_EQ(a.history.size(), b.history.size());
   for (std::size_t i = 0; i < a.history.size(); ++i) {
     const auto& ra = a.history[i];
@@ -226,7 +226,7 @@ TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
         << i;
   }
   // A different seed gives a different run: the comparison above can fail.
-  const auto c = mc::app::run_simulation(s, 12);
+  const auto c = mc::evaluation::run_simulation(s, 12);
   EXPECT_NE(0, std::memcmp(a.history.back().state.markers.data(),
                            c.history.back().state.markers.data(), sizeof(double) * 9));
 }
@@ -251,14 +251,15 @@ void expect_stage2_calibrated(const Run& run, int intrinsics) {
 // Stage 2 (paper section III): from guesses 100 px off, the intrinsics converge to within a few
 // of their sigmas, which end far below a pixel; the stage 1 parameters stay calibrated.
 TEST(TwoStages, IntrinsicsConvergeFromGuesses100PxOff) {
-  expect_stage2_calibrated(mc::app::run_two_stage_simulation<5>(mc::sim::paper_scenario(), 4), 5);
+  expect_stage2_calibrated(
+      mc::evaluation::run_two_stage_simulation<5>(mc::sim::paper_scenario(), 4), 5);
 }
 
 // Stage 2 holding skew (NK = 4) on a camera without it: the skew stays exactly where it was put,
 // the other four converge as with skew estimated.
 TEST(TwoStages, HoldingSkewKeepsItAtZeroAndCalibratesTheRest) {
   const mc::sim::Scenario s = mc::sim::without_skew(mc::sim::paper_scenario());
-  const auto run = mc::app::run_two_stage_simulation<4>(s, 4);
+  const auto run = mc::evaluation::run_two_stage_simulation<4>(s, 4);
   expect_stage2_calibrated(run, 4);
   EXPECT_EQ(run.result.params.back().name, "cv");
   EXPECT_EQ(run.result.intrinsics.skew, 0.0);

@@ -15,8 +15,8 @@
 
 namespace {
 
-using mirrorcal::app::chi2_quantile;
-using mirrorcal::app::display_angles;
+using mirrorcal::calibration::chi2_quantile;
+using mirrorcal::calibration::display_angles;
 
 TEST(Report, PaperRotationShowsThePapersAngles) {
   const Eigen::Vector3d a = display_angles(mirrorcal::sim::paper_scenario().truth.q_b_c);
@@ -52,7 +52,7 @@ TEST(Report, ChiSquareQuantilesMatchTables) {
 
 // RFC 4648, section 10.
 TEST(Report, Base64MatchesTheRfcsTestVectors) {
-  using mirrorcal::app::base64;
+  using mirrorcal::calibration::base64;
   EXPECT_EQ(base64(""), "");
   EXPECT_EQ(base64("f"), "Zg==");
   EXPECT_EQ(base64("fo"), "Zm8=");
@@ -64,7 +64,7 @@ TEST(Report, Base64MatchesTheRfcsTestVectors) {
 }
 
 TEST(Report, SampleStatisticsOfKnownSamples) {
-  using mirrorcal::app::sample_stats;
+  using mirrorcal::calibration::sample_stats;
   const auto s = sample_stats({4.0, 1.0, 3.0, 2.0});
   EXPECT_EQ(s.n, 4u);
   EXPECT_DOUBLE_EQ(s.mean, 2.5);
@@ -79,7 +79,7 @@ TEST(Report, SampleStatisticsOfKnownSamples) {
 // bounded batch in memory and narrows the rest down pass by pass, against a full sort, on samples
 // beyond its batch (65536 values) with long runs of equal values, a heavy tail and negatives.
 TEST(Report, KthSmallestIsExactOnSamplesLargerThanItsBatch) {
-  using mirrorcal::app::kth_smallest;
+  using mirrorcal::calibration::kth_smallest;
   std::mt19937_64 rng(5);
   std::normal_distribution<double> normal(0.0, 1.0);
   std::cauchy_distribution<double> cauchy(0.0, 1.0);
@@ -91,7 +91,7 @@ TEST(Report, KthSmallestIsExactOnSamplesLargerThanItsBatch) {
       if (kind == 2) values[i] = double(i % 7 == 0 ? 3 : std::int64_t(normal(rng) * 2.0));
     }
     int passes = 0;
-    const mirrorcal::app::Sample sample = [&](const std::function<void(double)>& f) {
+    const mirrorcal::calibration::Sample sample = [&](const std::function<void(double)>& f) {
       ++passes;
       for (double v : values) f(v);
     };
@@ -103,14 +103,14 @@ TEST(Report, KthSmallestIsExactOnSamplesLargerThanItsBatch) {
       EXPECT_EQ(kth_smallest(sample, k), sorted[k]) << "kind " << kind << " k " << k;
       EXPECT_LE(passes, 8) << "kind " << kind << " k " << k;
     }
-    EXPECT_EQ(mirrorcal::app::sample_stats(sample).median, sorted[values.size() / 2]);
+    EXPECT_EQ(mirrorcal::calibration::sample_stats(sample).median, sorted[values.size() / 2]);
   }
 }
 
 // A diverged run's values span more than a double can (infinities, +-1e308): the narrowing stops
 // instead of binning everything into one bin for ever, and the answer is still exact.
 TEST(Report, KthSmallestEndsOnValuesTooFarApartToBin) {
-  using mirrorcal::app::kth_smallest;
+  using mirrorcal::calibration::kth_smallest;
   std::mt19937_64 rng(6);
   std::normal_distribution<double> normal(0.0, 1.0);
   for (const double extreme : {double(INFINITY), 1e308}) {
@@ -118,7 +118,7 @@ TEST(Report, KthSmallestEndsOnValuesTooFarApartToBin) {
     for (double& v : values) v = normal(rng);
     values[17] = extreme;
     values[99] = -extreme;
-    const mirrorcal::app::Sample sample = [&](const std::function<void(double)>& f) {
+    const mirrorcal::calibration::Sample sample = [&](const std::function<void(double)>& f) {
       for (double v : values) f(v);
     };
     std::vector<double> sorted = values;
@@ -130,24 +130,24 @@ TEST(Report, KthSmallestEndsOnValuesTooFarApartToBin) {
 
 // The report says the IMU's gaps and restarts (issue: hiccups counted and reported).
 TEST(Report, ExcitationSaysTheImuGapsAndRestarts) {
-  mirrorcal::app::ReportData d =
-      mirrorcal::app::report_data_without_history(mirrorcal::app::CalibrationResult{}, "test");
-  d.rows.push_back(mirrorcal::app::ReportRow{});
+  mirrorcal::calibration::ReportData d = mirrorcal::calibration::report_data_without_history(
+      mirrorcal::calibration::CalibrationResult{}, "test");
+  d.rows.push_back(mirrorcal::calibration::ReportRow{});
   d.loop.imu_samples = 1200;
   d.loop.imu_gaps = 3;
   d.loop.imu_restarts = 1;
   d.loop.frames_before_filter = 7;
-  const std::string text = mirrorcal::app::report_text(d);
+  const std::string text = mirrorcal::calibration::report_text(d);
   EXPECT_NE(text.find("IMU: 1200 samples, 3 gaps (1 too long to cross"), std::string::npos) << text;
   EXPECT_NE(text.find("7 frames behind the filter skipped"), std::string::npos) << text;
 }
 
 // What the input checks warned of stands beside the verdict, which the self-check alone sets.
 TEST(Report, TheInputsWarningsStandBesideTheVerdict) {
-  mirrorcal::app::ReportData d =
-      mirrorcal::app::report_data_without_history(mirrorcal::app::CalibrationResult{}, "test");
+  mirrorcal::calibration::ReportData d = mirrorcal::calibration::report_data_without_history(
+      mirrorcal::calibration::CalibrationResult{}, "test");
   d.input_warnings = {"imu.yaml: gyroscope_noise_density: 14 times more than the data's"};
-  const std::string text = mirrorcal::app::report_text(d);
+  const std::string text = mirrorcal::calibration::report_text(d);
   const std::size_t verdict = text.find("VERDICT"), calibration = text.find("CALIBRATION");
   const std::size_t warning = text.find(
       "WARNING (the input): imu.yaml: gyroscope_noise_density: 14 times more than the data's");

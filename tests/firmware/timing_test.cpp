@@ -110,7 +110,7 @@ TEST(Timing, EveryStageOfTheLoopIsTimedAndPathsAddUp) {
   const mc::sim::SimData data = mc::sim::simulate(s, 3);
   auto prior = mc::sim::draw_prior<3>(s, data, 3);
   prior.t_d = 0.0;  // the true offset: no frame's exposure falls before the first IMU sample
-  mc::CalibrationFilter<double, 3, 0> filter(mc::app::scenario_config(s));
+  mc::CalibrationFilter<double, 3, 0> filter(mc::evaluation::scenario_config(s));
   mc::CalibrationFilter<double, 3, 0>::State x0;
   mc::CalibrationFilter<double, 3, 0>::Covariance p0;
   mc::initialise(prior, x0, p0);

@@ -379,37 +379,37 @@ int calibrate(mc::hal::PixelFormat format) {
   }
   std::printf("set up in %.1f s\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count());
-  mc::detection::DetectingMarkerSource<mc::app::kMarkers> camera(
-      frames, mc::app::detection_config(rc), 640, 480);
-  using Run = mc::app::SimRun<0>;
-  const mc::Prior<mc::app::kMarkers> prior =
-      mc::sim::simulation_prior<mc::app::kMarkers>(s, data, kSeed);
+  mc::detection::DetectingMarkerSource<mc::calibration::kMarkers> camera(
+      frames, mc::evaluation::detection_config(rc), 640, 480);
+  using Run = mc::calibration::CalibrationRun<0>;
+  const mc::Prior<mc::calibration::kMarkers> prior =
+      mc::sim::simulation_prior<mc::calibration::kMarkers>(s, data, kSeed);
   Run::State x0, truth;
   Run::Filter::Covariance p0;
   mc::initialise(prior, x0, p0);
   truth.p_b_c = s.truth.p_b_c;
   truth.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < mc::app::kMarkers; ++i)
+  for (int i = 0; i < mc::calibration::kMarkers; ++i)
     truth.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
 
   // One pass over the data: the frames cross the kernel once.
   const auto hooks = [&camera](int) {
-    mc::app::LoopHooks h;
+    mc::calibration::LoopHooks h;
     h.source = &camera;
     h.relabeler = &camera;
     return h;
   };
   const auto t0 = std::chrono::steady_clock::now();
-  const Run run =
-      mc::app::run_loop<0>(mc::app::scenario_config(s), x0, p0, mc::app::loop_data(s, data), &truth,
-                           {}, hooks, mc::app::Passes::once());
+  const Run run = mc::calibration::run_loop<0>(mc::evaluation::scenario_config(s), x0, p0,
+                                               mc::evaluation::loop_data(s, data), &truth, {},
+                                               hooks, mc::calibration::Passes::once());
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   // The prior's error against the final estimate's, over the calibration block.
-  Run::Filter prior_filter(mc::app::scenario_config(s));
+  Run::Filter prior_filter(mc::evaluation::scenario_config(s));
   prior_filter.reset(x0, p0);
-  mc::app::HistoryRow<Run::Filter> before;
-  mc::app::calibration_error(prior_filter, truth, before);
+  mc::calibration::HistoryRow<Run::Filter> before;
+  mc::calibration::calibration_error(prior_filter, truth, before);
   const auto& after = run.history.back();
   const double pos0 = before.error.segment<3>(0).norm(), pos1 = after.error.segment<3>(0).norm();
   const double rot0 = before.error.segment<3>(3).norm(), rot1 = after.error.segment<3>(3).norm();

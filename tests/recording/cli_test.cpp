@@ -41,7 +41,7 @@ Result run_mirrorcal(const std::vector<std::string>& args, const std::string& sc
   std::vector<std::string> argv = {MIRRORCAL_BIN};
   argv.insert(argv.end(), args.begin(), args.end());
   Result r;
-  r.code = mc::app::run_program(argv, cwd, log).status;
+  r.code = mc::evaluation::run_program(argv, cwd, log).status;
   r.output = slurp(log);
   return r;
 }
@@ -756,16 +756,16 @@ TEST(Cli, APriorContradictedByTheDataIsFlagged) {
 
 // A run that used under half the markers in its data is not to be trusted, however well they fit.
 TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
-  mc::app::CalibrationResult r;
+  mc::calibration::CalibrationResult r;
   r.markers_observed = 8764;
   r.markers_used = 8700;
-  EXPECT_EQ(mc::app::convergence_warning(r), "");
+  EXPECT_EQ(mc::calibration::convergence_warning(r), "");
   r.markers_used = 109;
-  const std::string w = mc::app::convergence_warning(r);
+  const std::string w = mc::calibration::convergence_warning(r);
   EXPECT_NE(w.find("the filter used 109 of the 8764 markers in the data (1.2 %)"),
             std::string::npos)
       << w;
-  ASSERT_EQ(mc::app::result_warnings(r).size(), 1u);
+  ASSERT_EQ(mc::calibration::result_warnings(r).size(), 1u);
 }
 
 // A refinement whose last Gauss-Newton step still moved the calibration far, in its own sigmas,
@@ -773,14 +773,14 @@ TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
 // runs 78, 71 and 132 of `montecarlo --scenario random --seed 3` end with steps of 70, 2800
 // and 6400 sigmas).
 TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
-  mc::app::CalibrationResult r;
+  mc::calibration::CalibrationResult r;
   r.markers_observed = r.markers_used = 8700;
   r.refinement_step_sigmas = 0.3;
-  EXPECT_EQ(mc::app::convergence_warning(r), "");
-  r.refinement_step_sigmas = 2.0 * mc::app::kRefinementStepLimit;
-  const std::string w = mc::app::convergence_warning(r);
+  EXPECT_EQ(mc::calibration::convergence_warning(r), "");
+  r.refinement_step_sigmas = 2.0 * mc::calibration::kRefinementStepLimit;
+  const std::string w = mc::calibration::convergence_warning(r);
   EXPECT_NE(w.find("still moved the calibration by 16.0 of its sigmas"), std::string::npos) << w;
-  EXPECT_FALSE(mc::app::consistent(r));
+  EXPECT_FALSE(mc::calibration::consistent(r));
 }
 
 namespace {
@@ -957,16 +957,16 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   Result r = run_mirrorcal("record --seed 4 --images --duration 10 --out " + rec, d);
   ASSERT_EQ(r.code, 0) << r.output;
 
-  using Run = mc::app::SimRun<0>;
+  using Run = mc::calibration::CalibrationRun<0>;
   using State = Run::State;
   std::string err;
   mc::sim::Recording features, images;
-  ASSERT_TRUE(mc::sim::open_recording(rec, mc::app::kMarkers, features, err)) << err;
-  ASSERT_TRUE(mc::sim::open_recording(rec, mc::app::kMarkers, images, err, true)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::calibration::kMarkers, features, err)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::calibration::kMarkers, images, err, true)) << err;
   ASSERT_TRUE(images.from_images);
   Run from_features, from_images;
-  ASSERT_TRUE(mc::app::calibrate_recording<0>(features, from_features, err)) << err;
-  ASSERT_TRUE(mc::app::calibrate_recording<0>(images, from_images, err)) << err;
+  ASSERT_TRUE(mc::calibration::calibrate_recording<0>(features, from_features, err)) << err;
+  ASSERT_TRUE(mc::calibration::calibrate_recording<0>(images, from_images, err)) << err;
   const auto& a = from_features.history.back();
   const auto& b = from_images.history.back();
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
@@ -987,7 +987,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   // Detection against the pixels the spots were drawn at (features.csv, the truth of the images):
   // every blob near a listed marker lies within a small fraction of the 1 px spot noise of it.
   mc::sim::Recording listed_frames;
-  ASSERT_TRUE(mc::sim::read_recording(rec, mc::app::kMarkers, listed_frames, err)) << err;
+  ASSERT_TRUE(mc::sim::read_recording(rec, mc::calibration::kMarkers, listed_frames, err)) << err;
   auto source = images.streams->open_images();
   ASSERT_NE(source, nullptr);
   mc::detection::BlobDetector detector(mc::detection::BlobConfig{}, 640, 480);
@@ -1033,7 +1033,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   std::vector<mc::sim::ObservedFrame> found = listed_frames.frames;
   for (auto& f : found) f.markers.clear();
   ASSERT_TRUE(mc::sim::parse_features_csv(slurp(d + "/out/features.csv"), "features.csv",
-                                          mc::app::kMarkers, found, err))
+                                          mc::calibration::kMarkers, found, err))
       << err;
   std::size_t rows = 0, wrong = 0;
   double farthest = 0.0;

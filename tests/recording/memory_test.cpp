@@ -122,19 +122,19 @@ std::vector<double> values(const State& x) {
 // file (a page of one record) or none does (a page that holds a whole store: the in-memory
 // reference).
 TEST(FrameStores, TheCalibrationIsTheSameThroughTheFileAsInMemory) {
-  using Run = mc::app::SimRun<0>;
+  using Run = mc::calibration::CalibrationRun<0>;
   TempDir tmp("frame-stores");
   const auto s = short_scenario(4.0);
   constexpr std::size_t kWholeStore = 4 << 20;
   const auto run_with_page = [&](std::size_t bytes) {
     mc::files::RecordFile::set_default_buffer_bytes(bytes);
-    Run run = mc::app::run_simulation(s, 7);
+    Run run = mc::evaluation::run_simulation(s, 7);
     mc::files::RecordFile::set_default_buffer_bytes(0);
     return run;
   };
   const Run memory = run_with_page(kWholeStore);
   // The largest store, the tracking pass's motion, fits that page whole.
-  ASSERT_LT(memory.history.size() * sizeof(mc::app::MotionRow<Run::Filter>), kWholeStore);
+  ASSERT_LT(memory.history.size() * sizeof(mc::calibration::MotionRow<Run::Filter>), kWholeStore);
   const Run file = run_with_page(1);
   ASSERT_GT(memory.history.size(), 200u);
   ASSERT_EQ(file.history.size(), memory.history.size());
@@ -148,8 +148,8 @@ TEST(FrameStores, TheCalibrationIsTheSameThroughTheFileAsInMemory) {
   }
   std::string err;
   for (const char* d : {"/memory", "/file"}) std::filesystem::create_directories(tmp.path + d);
-  ASSERT_TRUE(mc::app::write_run_outputs(tmp.path + "/memory", memory, err)) << err;
-  ASSERT_TRUE(mc::app::write_run_outputs(tmp.path + "/file", file, err)) << err;
+  ASSERT_TRUE(mc::calibration::write_run_outputs(tmp.path + "/memory", memory, err)) << err;
+  ASSERT_TRUE(mc::calibration::write_run_outputs(tmp.path + "/file", file, err)) << err;
   for (const char* f : {"/camchain-imucam.yaml", "/mirrorcal-result.yaml", "/estimates.csv"}) {
     EXPECT_FALSE(slurp(tmp.path + "/memory" + f).empty()) << f;
     EXPECT_EQ(slurp(tmp.path + "/file" + f), slurp(tmp.path + "/memory" + f)) << f;

@@ -69,7 +69,7 @@ TEST(Recording, StreamsReadBackBitIdentical) {
 TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 4);
-  const auto prior = mc::sim::simulation_prior<mc::app::kMarkers>(s, data, 4);
+  const auto prior = mc::sim::simulation_prior<mc::calibration::kMarkers>(s, data, 4);
   const TempDir tmp("priors");
   const std::string& dir = tmp.path;
   std::string err;
@@ -220,7 +220,7 @@ TEST(Recording, LoopFramesAreWrittenAsTheirObservedFrames) {
 // A calibration written to mirrorcal-result.yaml starts the next one exactly where it ended: the
 // estimate and the calibration block's covariance read back as the same doubles.
 TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
-  mc::app::CalibrationResult r;
+  mc::calibration::CalibrationResult r;
   r.p_b_c = Eigen::Vector3d(0.01 / 3.0, -0.05, 0.1 + 1e-17);
   r.q_b_c = Eigen::Quaterniond(Eigen::AngleAxisd(1.0 / 7.0, Eigen::Vector3d(1, 2, 3).normalized()));
   r.markers = {Eigen::Vector3d(0.02, -1.0 / 30.0, -0.03), Eigen::Vector3d(0.05, 0.04, -0.03),
@@ -228,7 +228,7 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   r.t_d = std::nextafter(0.0123, 1.0);
   r.width = 640;  // the camera is read too (for export), and checked
   r.height = 480;
-  r.params = mc::app::calibration_params(3, 5);
+  r.params = mc::calibration::calibration_params(3, 5);
   const int n = static_cast<int>(r.params.size());
   Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n);
   r.covariance = 1e-6 * (a * a.transpose() + Eigen::MatrixXd::Identity(n, n));
@@ -236,8 +236,9 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   const TempDir tmp("start");
   std::string err;
   mc::files::OutputSet out;
-  ASSERT_TRUE(mc::app::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
-              out.commit(err))
+  ASSERT_TRUE(
+      mc::calibration::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
+      out.commit(err))
       << err;
 
   mc::sim::CalibrationStart start;
@@ -306,14 +307,14 @@ TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {
 // camchain-imucam.yaml (the %YAML directive and the rows Kalibr's and OpenVINS's readers need)
 // as a recording's camchain.yaml, and from mirrorcal-result.yaml for `export`.
 TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
-  mc::app::CalibrationResult r;
+  mc::calibration::CalibrationResult r;
   r.intrinsics = {831.25, 829.5, 321.75, 247.125, 2.5};
   r.intrinsics.distortion = mc::Distortion::kEquidistant;
   r.intrinsics.coeffs = {-0.01, 0.002, -0.0003, 0.00004};
   r.width = 752;
   r.height = 480;
   r.rostopic = "/rig/front/image_raw";
-  r.params = mc::app::calibration_params(3, 0);
+  r.params = mc::calibration::calibration_params(3, 0);
   const int n = static_cast<int>(r.params.size());
   r.covariance = 1e-6 * Eigen::MatrixXd::Identity(n, n);
   r.sigma.assign(std::size_t(n), 1e-3);
@@ -323,9 +324,10 @@ TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
   const std::string chain = tmp.path + "/camchain-imucam.yaml";
   r.intrinsics.line_delay_s = 2.5e-5;
   mc::files::OutputSet out;
-  ASSERT_TRUE(mc::app::write_camchain_imucam(out, chain, r, err) &&
-              mc::app::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
-              out.commit(err))
+  ASSERT_TRUE(
+      mc::calibration::write_camchain_imucam(out, chain, r, err) &&
+      mc::calibration::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", r, err) &&
+      out.commit(err))
       << err;
   EXPECT_EQ(slurp(chain).rfind("%YAML 1.0\n---\n", 0), 0u);  // OpenCV needs the directive first
 

@@ -29,7 +29,7 @@ int run_mirrorcal(const std::string& args, const std::string& scratch) {
   std::vector<std::string> argv = {MIRRORCAL_BIN};
   std::istringstream words(args);
   for (std::string w; words >> w;) argv.push_back(w);
-  return mc::app::run_program(argv, "", scratch + "/command.log").status;
+  return mc::evaluation::run_program(argv, "", scratch + "/command.log").status;
 }
 
 // The line of text that starts with prefix ("" if none).
@@ -360,7 +360,7 @@ TEST(ReportFiles, HtmlIsWellFormedAndSelfContained) {
   EXPECT_EQ(tag_nesting_error(html), "");
   EXPECT_TRUE(attribute_values(html, "href").empty());
   const std::vector<std::string> sources = attribute_values(html, "src");
-  if (mc::app::run_program({"gnuplot", "--version"}, "", d + "/gnuplot.log").status != 0) {
+  if (mc::evaluation::run_program({"gnuplot", "--version"}, "", d + "/gnuplot.log").status != 0) {
     EXPECT_TRUE(sources.empty());
     EXPECT_NE(html.find("Plots unavailable: "), std::string::npos);
     GTEST_SKIP() << "gnuplot is not installed: the page without plots was checked";
@@ -389,7 +389,7 @@ TEST(ReportFiles, ChromiumRendersTheReport) {
   ASSERT_EQ(run_mirrorcal("sim --seed 3 --out " + d + "/sim", d), 0) << slurp(d + "/command.log");
   const std::string shot = d + "/screenshot.png";
   // As root (a container, CI) chromium runs only without its sandbox; timeout ends a hung one.
-  const mc::app::ProgramExit chromium = mc::app::run_program(
+  const mc::evaluation::ProgramExit chromium = mc::evaluation::run_program(
       {"timeout", "300", "chromium", "--headless", "--no-sandbox", "--disable-gpu",
        "--hide-scrollbars", "--user-data-dir=" + d + "/profile", "--window-size=1200,2400",
        "--screenshot=" + shot, "file://" + d + "/sim/report.html"},

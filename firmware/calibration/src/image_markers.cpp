@@ -2,7 +2,7 @@
 
 #include <chrono>
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 ImageMarkers::ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
                            DetectionReport* report)
@@ -42,4 +42,4 @@ void ImageMarkers::relabel(const hal::MarkerPrediction<kMarkers>& prediction,
   for (const bool seen : frame.seen) labelled_ += seen ? 1 : 0;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -1,6 +1,6 @@
 #include "mirrorcal/calibration/recording_run.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 CalibrationConfig recording_config(const sim::Recording& r) {
   CalibrationConfig c;
@@ -25,17 +25,17 @@ LoopData recording_loop_data(const sim::Recording& r) {
 }
 
 template <int NK>
-bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& error,
+bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::string& error,
                          const std::function<void(double)>& progress,
                          const sim::CalibrationStart* from) {
   Prior<kMarkers> prior;
   if (!sim::to_prior(r.priors, prior, error)) return false;
-  typename SimRun<NK>::State x0;
-  typename SimRun<NK>::Filter::Covariance p0;
+  typename CalibrationRun<NK>::State x0;
+  typename CalibrationRun<NK>::Filter::Covariance p0;
   initialise(prior, x0, p0);
   if (from != nullptr) start_from(*from, x0, p0);  // read_calibration_start checked its M
   // A simulated recording's truth: each history row gets the error and NEES against it.
-  typename SimRun<NK>::State truth;
+  typename CalibrationRun<NK>::State truth;
   if (r.has_truth) {
     if (r.truth.features_c.size() != static_cast<std::size_t>(kMarkers)) {
       error = "truth.yaml lists " + std::to_string(r.truth.features_c.size()) +
@@ -72,17 +72,17 @@ bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& 
   return true;
 }
 
-template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
+template bool calibrate_recording<0>(const sim::Recording&, CalibrationRun<0>&, std::string&,
                                      const std::function<void(double)>&,
                                      const sim::CalibrationStart*);
-template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::string&,
+template bool calibrate_recording<4>(const sim::Recording&, CalibrationRun<4>&, std::string&,
                                      const std::function<void(double)>&,
                                      const sim::CalibrationStart*);
-template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
+template bool calibrate_recording<5>(const sim::Recording&, CalibrationRun<5>&, std::string&,
                                      const std::function<void(double)>&,
                                      const sim::CalibrationStart*);
-template bool calibrate_recording<8>(const sim::Recording&, SimRun<8>&, std::string&,
+template bool calibrate_recording<8>(const sim::Recording&, CalibrationRun<8>&, std::string&,
                                      const std::function<void(double)>&,
                                      const sim::CalibrationStart*);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -9,7 +9,7 @@
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 std::array<const char*, 4> distortion_coeff_names(Distortion lens) {
   if (lens == Distortion::kEquidistant) return {"k1", "k2", "k3", "k4"};
@@ -574,4 +574,4 @@ template bool write_estimates_csv(files::OutputSet&, const std::string&,
                                   const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
                                   Distortion, std::string&);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -6,7 +6,7 @@
 
 #include "mirrorcal/calibration/image_markers.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 std::unique_ptr<hal::ImuSource> LoopData::open_imu() const {
   if (streams) return streams->open_imu();
@@ -46,13 +46,13 @@ namespace {
 // file, read by the filter as its frames come.
 template <int NK>
 struct TrajectoryPoint {
-  typename SimRun<NK>::State state;
+  typename CalibrationRun<NK>::State state;
   std::int64_t t_ns = 0;
 };
 template <int NK>
-class Trajectory final : public SimRun<NK>::Filter::LinearisationPoints {
+class Trajectory final : public CalibrationRun<NK>::Filter::LinearisationPoints {
  public:
-  using State = typename SimRun<NK>::State;
+  using State = typename CalibrationRun<NK>::State;
   std::size_t count() const override { return points_.size(); }
   std::int64_t stamp(std::size_t k) override { return at(k).t_ns; }
   const State& state(std::size_t k) override { return at(k).state; }
@@ -77,19 +77,20 @@ class Trajectory final : public SimRun<NK>::Filter::LinearisationPoints {
 
 // Every frame a pass's loop met, used or not: the same in every replay of the same data.
 template <int NK>
-std::uint64_t frames_met(const SimRun<NK>& run) {
+std::uint64_t frames_met(const CalibrationRun<NK>& run) {
   const firmware::LoopCounters& c = run.loop_counters;
   return c.frames + c.frames_before_filter + c.frames_after_imu;
 }
 
 // One pass of the loop over the data from (x0, p0).
 template <int NK>
-SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
-                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress, const LoopHooks& input,
-                    Trajectory<NK>* along = nullptr, bool keep_motion = false) {
-  using Run = SimRun<NK>;
+CalibrationRun<NK> run_pass(const CalibrationConfig& config,
+                            const typename CalibrationRun<NK>::State& x0,
+                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
+                            const std::function<void(double)>& progress, const LoopHooks& input,
+                            Trajectory<NK>* along = nullptr, bool keep_motion = false) {
+  using Run = CalibrationRun<NK>;
   using Filter = typename Run::Filter;
   Run run;
   if (truth != nullptr) run.truth = *truth;
@@ -142,12 +143,12 @@ SimRun<NK> run_pass(const CalibrationConfig& config, const typename SimRun<NK>::
 // frame's linearisation point then rests on every frame, not on those before it, and holds its
 // own frame's noise no more than any other's.
 template <int NK>
-void smoothed_trajectory(const SimRun<NK>& track, Trajectory<NK>& out) {
-  using State = typename SimRun<NK>::State;
+void smoothed_trajectory(const CalibrationRun<NK>& track, Trajectory<NK>& out) {
+  using State = typename CalibrationRun<NK>::State;
   using Mat15 = Eigen::Matrix<double, 15, 15>;
   const std::size_t n = track.motion ? std::min(track.history.size(), track.motion->size()) : 0;
   if (n == 0) return;
-  const RecordStore<MotionRow<typename SimRun<NK>::Filter>>& motion = *track.motion;
+  const RecordStore<MotionRow<typename CalibrationRun<NK>::Filter>>& motion = *track.motion;
   // Backwards over the frames, reading each row and motion step once: what step k needs of k + 1
   // is carried over from the step before.
   const State final_estimate = track.history[n - 1].state;
@@ -160,12 +161,12 @@ void smoothed_trajectory(const SimRun<NK>& track, Trajectory<NK>& out) {
     s.intrinsics = final_estimate.intrinsics;
     return s;
   };
-  HistoryRow<typename SimRun<NK>::Filter> next_row = track.history[n - 1];
-  MotionRow<typename SimRun<NK>::Filter> next = motion[n - 1], row_motion;
+  HistoryRow<typename CalibrationRun<NK>::Filter> next_row = track.history[n - 1];
+  MotionRow<typename CalibrationRun<NK>::Filter> next = motion[n - 1], row_motion;
   State next_smoothed = final_estimate;
   out.set(n - 1, held(final_estimate), next_row.t_ns);
   for (std::size_t k = n - 1; k-- > 0;) {
-    const HistoryRow<typename SimRun<NK>::Filter> row = track.history[k];
+    const HistoryRow<typename CalibrationRun<NK>::Filter> row = track.history[k];
     row_motion = motion[k];
     State smoothed = row.state;
     // A row that followed no update (the final one) says nothing new about the one before it.
@@ -221,11 +222,11 @@ LoopData first_stretch(const LoopData& data) {
 // The prior's covariance with the calibration block replaced by a pass's (and no correlation
 // between the two blocks): a pass from it holds the calibration near that pass's estimate.
 template <int NK>
-typename SimRun<NK>::Filter::Covariance calibration_held(
-    const typename SimRun<NK>::Filter::Covariance& p0, const SimRun<NK>& pass) {
-  using State = typename SimRun<NK>::State;
+typename CalibrationRun<NK>::Filter::Covariance calibration_held(
+    const typename CalibrationRun<NK>::Filter::Covariance& p0, const CalibrationRun<NK>& pass) {
+  using State = typename CalibrationRun<NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
-  typename SimRun<NK>::Filter::Covariance p = p0;
+  typename CalibrationRun<NK>::Filter::Covariance p = p0;
   p.template block<L, State::kDim>(B, 0).setZero();
   p.template block<State::kDim, L>(0, B).setZero();
   p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
@@ -237,10 +238,10 @@ typename SimRun<NK>::Filter::Covariance calibration_held(
 // from the mirror, its tilt and their rates within a fraction of a second, then integrated back to
 // the first IMU sample. False (x unchanged) if the stretch has too few frames or the run fails.
 template <int NK>
-bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
-                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    typename SimRun<NK>::State& x) {
-  using State = typename SimRun<NK>::State;
+bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<NK>& pass,
+                    const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
+                    typename CalibrationRun<NK>::State& x) {
+  using State = typename CalibrationRun<NK>::State;
   const LoopData stretch = first_stretch(data);
   if (stretch.imu.size() < 2) return false;
   State start = pass.history.back().state;
@@ -249,8 +250,8 @@ bool imu_start_from(const CalibrationConfig& config, const SimRun<NK>& pass,
   start.q_n_b = x.q_n_b;
   start.b_a = x.b_a;
   start.b_g = x.b_g;
-  const SimRun<NK> fit = run_pass<NK>(config, start, calibration_held<NK>(p0, pass), stretch,
-                                      nullptr, {}, LoopHooks{});
+  const CalibrationRun<NK> fit = run_pass<NK>(config, start, calibration_held<NK>(p0, pass),
+                                              stretch, nullptr, {}, LoopHooks{});
   if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
   State back = fit.history.back().state;
   for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
@@ -272,9 +273,10 @@ std::uint64_t markers_in(const LoopData& data) {
 // For the self-check: the calibration state the final estimate lies furthest from its prior guess,
 // in the prior's sigmas (rotations as the error vector, R = R_guess Exp(e)).
 template <int NK>
-void record_prior_offset(const typename SimRun<NK>::State& x0,
-                         const typename SimRun<NK>::Filter::Covariance& p0, SimRun<NK>& run) {
-  using State = typename SimRun<NK>::State;
+void record_prior_offset(const typename CalibrationRun<NK>::State& x0,
+                         const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                         CalibrationRun<NK>& run) {
+  using State = typename CalibrationRun<NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const auto d = run.history.back().state.template boxminus_block<B, L>(x0);
   CalibrationResult& r = run.result;
@@ -290,8 +292,8 @@ void record_prior_offset(const typename SimRun<NK>::State& x0,
 // How far a refinement step moved the calibration from the estimate it started at, in the step's
 // own sigmas (Mahalanobis distance under its covariance): the self-check's convergence test.
 template <int NK>
-double step_sigmas(const SimRun<NK>& after, const SimRun<NK>& before) {
-  using State = typename SimRun<NK>::State;
+double step_sigmas(const CalibrationRun<NK>& after, const CalibrationRun<NK>& before) {
+  using State = typename CalibrationRun<NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const Eigen::Matrix<double, L, 1> d =
       after.history.back().state.template boxminus_block<B, L>(before.history.back().state);
@@ -302,15 +304,16 @@ double step_sigmas(const SimRun<NK>& after, const SimRun<NK>& before) {
 }  // namespace
 
 template <int NK>
-SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
-                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress,
-                    const std::function<LoopHooks(int pass)>& hooks, Passes passes) {
-  using State = typename SimRun<NK>::State;
+CalibrationRun<NK> run_loop(const CalibrationConfig& config,
+                            const typename CalibrationRun<NK>::State& x0,
+                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
+                            const std::function<void(double)>& progress,
+                            const std::function<LoopHooks(int pass)>& hooks, Passes passes) {
+  using State = typename CalibrationRun<NK>::State;
   State start = x0;
-  SimRun<NK> run;
-  HistoryRow<typename SimRun<NK>::Filter> first_frame;
+  CalibrationRun<NK> run;
+  HistoryRow<typename CalibrationRun<NK>::Filter> first_frame;
   for (int pass = 0; pass < passes.max; ++pass) {
     if (pass >= passes.min && !suspect(run.result)) break;
     const int planned = std::max(passes.min, pass + 1);
@@ -357,7 +360,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
   // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
   if (passes.refine && !run.history.empty()) {
     constexpr int B = State::kCalibrationBegin;
-    const typename SimRun<NK>::Filter::Covariance own = run.covariance;
+    const typename CalibrationRun<NK>::Filter::Covariance own = run.covariance;
     const int free_passes = run.result.passes;
     // Their markers come from where the passes' did (rendered frames through detection with
     // sim --frames): hooks numbered on from the passes'.
@@ -368,8 +371,8 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       from.p = start.p;
       from.v = start.v;
       from.q_n_b = start.q_n_b;
-      const SimRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run), data,
-                                            nullptr, {}, next_hooks(), nullptr, true);
+      const CalibrationRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run),
+                                                    data, nullptr, {}, next_hooks(), nullptr, true);
       // Each frame is linearised at the track smoothed over the whole pass, never at the track's
       // estimate after that frame's update: an estimate that holds the frame's own noise moves
       // the linearisation with that noise, and where the rig's motion leaves a direction weak
@@ -388,7 +391,7 @@ SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::
       prior.p = from.p;
       prior.v = from.v;
       prior.q_n_b = from.q_n_b;
-      SimRun<NK> refined =
+      CalibrationRun<NK> refined =
           run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
       // A replay that did not meet the same frames (a source that ran dry) refines nothing.
       if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
@@ -424,14 +427,17 @@ template MIRRORCAL_RUN_LOOP(5);
 template MIRRORCAL_RUN_LOOP(8);
 
 template <int NK>
-SimRun<NK> run_single_pass(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
-                           const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                           const typename SimRun<NK>::State* truth) {
+CalibrationRun<NK> run_single_pass(const CalibrationConfig& config,
+                                   const typename CalibrationRun<NK>::State& x0,
+                                   const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                                   const LoopData& data,
+                                   const typename CalibrationRun<NK>::State* truth) {
   return run_pass<NK>(config, x0, p0, data, truth, {}, LoopHooks{});
 }
-template SimRun<0> run_single_pass<0>(const CalibrationConfig&, const SimRun<0>::State&,
-                                      const SimRun<0>::Filter::Covariance&, const LoopData&,
-                                      const SimRun<0>::State*);
+template CalibrationRun<0> run_single_pass<0>(const CalibrationConfig&,
+                                              const CalibrationRun<0>::State&,
+                                              const CalibrationRun<0>::Filter::Covariance&,
+                                              const LoopData&, const CalibrationRun<0>::State*);
 
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   sim::CalibrationStart s;
@@ -445,4 +451,4 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   return s;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

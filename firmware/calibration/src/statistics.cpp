@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 Eigen::Vector3d display_angles(const Eigen::Quaterniond& q) {
   Eigen::Vector3d zyx = q.toRotationMatrix().eulerAngles(2, 1, 0);
@@ -28,4 +28,4 @@ double chi2_quantile(double p, double k) {
   return k * std::pow(1.0 - a + z * std::sqrt(a), 3.0);
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

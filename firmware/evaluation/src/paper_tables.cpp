@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using namespace calibration;
 
 std::vector<double> truth_display(const sim::Scenario& s, int intrinsics) {
   std::vector<double> t;
@@ -52,4 +54,4 @@ const std::vector<PaperRow>& paper_tables() {
   return rows;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

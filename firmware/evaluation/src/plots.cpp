@@ -6,7 +6,9 @@
 
 #include "mirrorcal/evaluation/process.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using namespace calibration;
 
 std::vector<PlotGroup> plot_groups(const std::vector<ParamInfo>& params) {
   std::vector<PlotGroup> g = {
@@ -140,4 +142,4 @@ std::vector<std::string> plot_errors(const std::string& dir, const std::string& 
   return written;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

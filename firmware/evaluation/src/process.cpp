@@ -9,7 +9,7 @@
 
 extern char** environ;
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
 
 namespace {
 
@@ -73,4 +73,4 @@ ProgramExit run_program(const std::vector<std::string>& argv, const std::string&
   return exit;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

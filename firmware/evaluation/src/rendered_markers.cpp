@@ -5,7 +5,9 @@
 #include <cmath>
 #include <cstdio>
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using namespace calibration;
 
 DetectionReport combine(const std::vector<DetectionReport>& runs) {
   DetectionReport all;
@@ -106,4 +108,4 @@ DetectionReport RenderedMarkers::report() const {
   return r;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -11,7 +11,9 @@
 #include "mirrorcal/evaluation/plots.hpp"
 #include "mirrorcal/evaluation/process.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using namespace calibration;
 
 namespace {
 
@@ -250,4 +252,4 @@ std::vector<ReportFigure> draw_report_figures(const ReportData& d, std::string& 
   return drawn;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -4,7 +4,9 @@
 
 #include "mirrorcal/evaluation/rendered_markers.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using namespace calibration;
 
 CalibrationConfig scenario_config(const sim::Scenario& s) {
   CalibrationConfig c;
@@ -26,10 +28,11 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
-SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress, const FrameMode& frames,
-                         firmware::LoopProfiler* profiler, Passes passes) {
-  using Run = SimRun<0>;
+CalibrationRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                 const std::function<void(double)>& progress,
+                                 const FrameMode& frames, firmware::LoopProfiler* profiler,
+                                 Passes passes) {
+  using Run = CalibrationRun<0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
   Run::State x0;
@@ -66,7 +69,7 @@ SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
 }
 
 std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed) {
-  using Run = SimRun<0>;
+  using Run = CalibrationRun<0>;
   const sim::SimData noisy = sim::simulate(s, seed);
   Run::State x0;
   Run::Filter::Covariance p0;
@@ -91,16 +94,16 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
 }
 
 template <int NK>
-SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                    const std::function<void(double)>& progress) {
+CalibrationRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                            const std::function<void(double)>& progress) {
   const auto half = [&](double offset) {
     return [&progress, offset](double f) {
       if (progress) progress(offset + 0.5 * f);
     };
   };
-  const SimRun<0> stage1 = run_simulation(s, seed, half(0.0));
+  const CalibrationRun<0> stage1 = run_simulation(s, seed, half(0.0));
 
-  using Run = SimRun<NK>;
+  using Run = CalibrationRun<NK>;
   using State = typename Run::State;
   const std::uint64_t seed2 = sim::derive_seed(seed, sim::kStage2SeedStream);
   const sim::SimData data = sim::simulate(s, seed2);
@@ -116,17 +119,17 @@ SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
   return run;
 }
 
-template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                               const std::function<void(double)>&);
-template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                               const std::function<void(double)>&);
-template SimRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                               const std::function<void(double)>&);
+template CalibrationRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                                       const std::function<void(double)>&);
+template CalibrationRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                       const std::function<void(double)>&);
+template CalibrationRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                                       const std::function<void(double)>&);
 
 template <int NK>
-SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                    const std::function<void(double)>& progress) {
-  using Run = SimRun<NK>;
+CalibrationRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                            const std::function<void(double)>& progress) {
+  using Run = CalibrationRun<NK>;
   const sim::SimData data = sim::simulate(s, seed);
   typename Run::State x0;
   typename Run::Filter::Covariance p0;
@@ -137,11 +140,11 @@ SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
   return run;
 }
 
-template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                               const std::function<void(double)>&);
-template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                               const std::function<void(double)>&);
-template SimRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                               const std::function<void(double)>&);
+template CalibrationRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                                       const std::function<void(double)>&);
+template CalibrationRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                       const std::function<void(double)>&);
+template CalibrationRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                                       const std::function<void(double)>&);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -14,7 +14,7 @@
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/hal/frames.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 // A calibration parameter as printed and written: rows of the paper's tables.
 struct ParamInfo {
@@ -194,4 +194,4 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
   MotionRow<Filter> motion_row_{};
 };
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

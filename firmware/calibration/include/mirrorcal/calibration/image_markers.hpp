@@ -8,7 +8,7 @@
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 // The marker source of a calibration from a recording's images: the board's detection on each
 // image (the default DetectionConfig, as `run` and `record` on the board use), labelled by
@@ -35,4 +35,4 @@ class ImageMarkers final : public hal::MarkerSource<kMarkers>,
   double read_seconds_ = 0.0;
 };
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -12,7 +12,7 @@
 
 #include "mirrorcal/sim_host/files.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 template <class T>
 class RecordStore {
@@ -64,4 +64,4 @@ class RecordStore {
   files::RecordFile file_;
 };
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -7,7 +7,7 @@
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 // The filter's configuration a recording describes (imu.yaml, camchain.yaml, mirrorcal.yaml).
 CalibrationConfig recording_config(const sim::Recording& r);
@@ -21,21 +21,21 @@ LoopData recording_loop_data(const sim::Recording& r);
 // another number of markers).
 // With from, the camera pose and markers start from that earlier calibration (start_from).
 template <int NK>
-bool calibrate_recording(const sim::Recording& r, SimRun<NK>& run, std::string& error,
+bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::string& error,
                          const std::function<void(double)>& progress = {},
                          const sim::CalibrationStart* from = nullptr);
 
-extern template bool calibrate_recording<0>(const sim::Recording&, SimRun<0>&, std::string&,
+extern template bool calibrate_recording<0>(const sim::Recording&, CalibrationRun<0>&, std::string&,
                                             const std::function<void(double)>&,
                                             const sim::CalibrationStart*);
-extern template bool calibrate_recording<4>(const sim::Recording&, SimRun<4>&, std::string&,
+extern template bool calibrate_recording<4>(const sim::Recording&, CalibrationRun<4>&, std::string&,
                                             const std::function<void(double)>&,
                                             const sim::CalibrationStart*);
-extern template bool calibrate_recording<5>(const sim::Recording&, SimRun<5>&, std::string&,
+extern template bool calibrate_recording<5>(const sim::Recording&, CalibrationRun<5>&, std::string&,
                                             const std::function<void(double)>&,
                                             const sim::CalibrationStart*);
-extern template bool calibrate_recording<8>(const sim::Recording&, SimRun<8>&, std::string&,
+extern template bool calibrate_recording<8>(const sim::Recording&, CalibrationRun<8>&, std::string&,
                                             const std::function<void(double)>&,
                                             const sim::CalibrationStart*);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -17,7 +17,7 @@
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 // A calibration state whose final sigma is still above this fraction of its prior's is reported as
 // weakly observed: the motion left it mostly to the prior.
@@ -82,7 +82,7 @@ struct ReportData {
 };
 
 template <int NK>
-ReportData report_data(const SimRun<NK>& run, const std::string& title);
+ReportData report_data(const CalibrationRun<NK>& run, const std::string& title);
 
 // A sample visited value by value: sample(f) calls f with each of its values (not NaN), in the
 // same order each time it is called (one pass over a file-backed store, or over a vector).
@@ -139,7 +139,7 @@ ReportData report_data_without_history(const CalibrationResult& r, const std::st
 // camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
 // a run, in dir, written as one set; input_warnings: ReportData's.
 template <int NK>
-bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
+bool write_run_outputs_and_report(const std::string& dir, const CalibrationRun<NK>& run,
                                   const std::string& title, bool from_earlier,
                                   const ReportPlots& plots, std::string& error,
                                   const std::vector<std::string>& input_warnings = {}) {
@@ -154,4 +154,4 @@ bool write_run_outputs_and_report(const std::string& dir, const SimRun<NK>& run,
 // RFC 4648 base64 of bytes, for data: URIs.
 std::string base64(const std::string& bytes);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

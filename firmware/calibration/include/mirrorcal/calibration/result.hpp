@@ -14,7 +14,7 @@
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 // A final calibration, in SI units, with 1-sigma from the filter.
 struct CalibrationResult {
@@ -199,4 +199,4 @@ template <class Filter>
 bool write_features_csv(files::OutputSet& out, const std::string& path,
                         const RecordStore<HistoryRow<Filter>>& rows, std::string& error);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

@@ -18,7 +18,7 @@
 #include "mirrorcal/sim_host/scenario.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 constexpr int kMarkers = 3;  // M of the product build: the paper's three markers
 
@@ -39,8 +39,10 @@ struct DetectionReport {
   double read_ms_per_frame = 0.0;           // reading the image first (calibrate from images)
 };
 
+// One calibration: its final estimate and result, the estimate after every frame (history), and
+// what the loop, the filter and detection met on the way.
 template <int NK>
-struct SimRun {
+struct CalibrationRun {
   using Filter = CalibrationFilter<double, kMarkers, NK>;
   using State = typename Filter::State;
   State truth{};
@@ -64,8 +66,6 @@ struct SimRun {
   // Beside history, when a smoother asked for them (a temporary file too).
   std::optional<RecordStore<MotionRow<Filter>>> motion;
 };
-template <int NK>
-using CalibrationRun = SimRun<NK>;
 
 // What the loop consumes, filled before it starts (the loop itself never allocates): the streams
 // held in memory, or read from a recording's files again in each pass (calibrate), so that memory
@@ -152,20 +152,23 @@ struct Passes {
 // now and then (an extra pass starts it again from the fraction the passes before it make);
 // hooks(pass), if given, adds a marker source or profiler to a pass.
 template <int NK>
-SimRun<NK> run_loop(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
-                    const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    const typename SimRun<NK>::State* truth,
-                    const std::function<void(double)>& progress = {},
-                    const std::function<LoopHooks(int pass)>& hooks = {}, Passes passes = {});
+CalibrationRun<NK> run_loop(const CalibrationConfig& config,
+                            const typename CalibrationRun<NK>::State& x0,
+                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
+                            const std::function<void(double)>& progress = {},
+                            const std::function<LoopHooks(int pass)>& hooks = {},
+                            Passes passes = {});
 
 // The filters the product instantiates: stage 1 (NK = 0), stage 2 (NK = 5), stage 2 with the
 // skew held at the configured value (NK = 4: Kalibr and OpenVINS have no slot for skew), and
 // stage 2 with the lens's distortion coefficients too, skew held (NK = 8, estimate_distortion).
-#define MIRRORCAL_RUN_LOOP(NK)                                                          \
-  SimRun<NK> run_loop<NK>(const CalibrationConfig&, const SimRun<NK>::State&,           \
-                          const SimRun<NK>::Filter::Covariance&, const LoopData&,       \
-                          const SimRun<NK>::State*, const std::function<void(double)>&, \
-                          const std::function<LoopHooks(int)>&, Passes)
+#define MIRRORCAL_RUN_LOOP(NK)                                                                    \
+  CalibrationRun<NK> run_loop<NK>(const CalibrationConfig&, const CalibrationRun<NK>::State&,     \
+                                  const CalibrationRun<NK>::Filter::Covariance&, const LoopData&, \
+                                  const CalibrationRun<NK>::State*,                               \
+                                  const std::function<void(double)>&,                             \
+                                  const std::function<LoopHooks(int)>&, Passes)
 extern template MIRRORCAL_RUN_LOOP(0);
 extern template MIRRORCAL_RUN_LOOP(4);
 extern template MIRRORCAL_RUN_LOOP(5);
@@ -174,12 +177,16 @@ extern template MIRRORCAL_RUN_LOOP(8);
 // One pass of the loop over the data from (x0, p0), nothing more: no further pass, no refinement
 // (what a filter linearised at the truth ends with: evaluation's data_limit_sigmas).
 template <int NK>
-SimRun<NK> run_single_pass(const CalibrationConfig& config, const typename SimRun<NK>::State& x0,
-                           const typename SimRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                           const typename SimRun<NK>::State* truth);
-extern template SimRun<0> run_single_pass<0>(const CalibrationConfig&, const SimRun<0>::State&,
-                                             const SimRun<0>::Filter::Covariance&, const LoopData&,
-                                             const SimRun<0>::State*);
+CalibrationRun<NK> run_single_pass(const CalibrationConfig& config,
+                                   const typename CalibrationRun<NK>::State& x0,
+                                   const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                                   const LoopData& data,
+                                   const typename CalibrationRun<NK>::State* truth);
+extern template CalibrationRun<0> run_single_pass<0>(const CalibrationConfig&,
+                                                     const CalibrationRun<0>::State&,
+                                                     const CalibrationRun<0>::Filter::Covariance&,
+                                                     const LoopData&,
+                                                     const CalibrationRun<0>::State*);
 
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
@@ -207,7 +214,7 @@ void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0)
 // camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir: added to out, or
 // written.
 template <int NK>
-bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun<NK>& run,
+bool add_run_outputs(files::OutputSet& out, const std::string& dir, const CalibrationRun<NK>& run,
                      std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
@@ -217,9 +224,9 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir, const SimRun
           write_features_csv(out, dir + "/features.csv", run.history, error));
 }
 template <int NK>
-bool write_run_outputs(const std::string& dir, const SimRun<NK>& run, std::string& error) {
+bool write_run_outputs(const std::string& dir, const CalibrationRun<NK>& run, std::string& error) {
   files::OutputSet out;
   return add_run_outputs(out, dir, run, error) && out.commit(error);
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

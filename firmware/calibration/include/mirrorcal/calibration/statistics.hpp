@@ -4,7 +4,7 @@
 
 #include <Eigen/Geometry>
 
-namespace mirrorcal::app {
+namespace mirrorcal::calibration {
 
 // A rotation R_b_c as the three angles (deg) the scenarios state it by: R = Rz(c) Ry(b) Rx(a),
 // returned as (a, b, c).
@@ -14,4 +14,4 @@ Eigen::Vector3d display_angles(const Eigen::Quaterniond& q);
 // (Wilson-Hilferty; accurate to <1 % for k > 10).
 double chi2_quantile(double p, double k);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::calibration

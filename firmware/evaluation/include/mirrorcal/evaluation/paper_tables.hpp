@@ -8,7 +8,7 @@
 
 #include "mirrorcal/sim_host/scenario.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
 
 // Display value of the truth of each calibration parameter, in the row order of
 // calibration_params(): p and markers in cm, the rotation as the scenario's three angles in deg.
@@ -21,4 +21,4 @@ struct PaperRow {
 };
 const std::vector<PaperRow>& paper_tables();
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -7,7 +7,11 @@
 
 #include "mirrorcal/calibration/history.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using calibration::HistoryRow;
+using calibration::ParamInfo;
+using calibration::RecordStore;
 
 // Error and 1-sigma of every calibration parameter over time, in display units.
 struct ErrorSeries {
@@ -55,4 +59,4 @@ std::vector<std::string> plot_errors(const std::string& dir, const std::string& 
                                      const std::vector<ErrorSeries>& runs, double nees_lo,
                                      double nees_hi, std::string& error);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
 
 // How a program run by run_program ended.
 struct ProgramExit {
@@ -19,4 +19,4 @@ struct ProgramExit {
 ProgramExit run_program(const std::vector<std::string>& argv, const std::string& cwd = "",
                         const std::string& output_path = "");
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -11,7 +11,10 @@
 #include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using calibration::DetectionReport;
+using calibration::kMarkers;
 
 // The detection of several runs as one: counts summed, the centroid RMS over all labelled markers,
 // the maximum of the maxima, time per frame over all frames.
@@ -44,4 +47,4 @@ class RenderedMarkers final : public hal::MarkerSource<kMarkers>,
   double sum_sq_ = 0.0, sum_u_ = 0.0, sum_v_ = 0.0;
 };
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

@@ -9,10 +9,13 @@
 
 #include "mirrorcal/calibration/report.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using calibration::ReportData;
+using calibration::ReportFigure;
 
 // The figures, drawn in a temporary folder that is removed after; none, with the reason in why,
 // if there is nothing to draw or gnuplot cannot draw it.
 std::vector<ReportFigure> draw_report_figures(const ReportData& d, std::string& why);
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation

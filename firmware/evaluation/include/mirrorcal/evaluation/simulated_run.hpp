@@ -11,7 +11,11 @@
 #include "mirrorcal/sim_host/scenario.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
 
-namespace mirrorcal::app {
+namespace mirrorcal::evaluation {
+
+using calibration::CalibrationRun;
+using calibration::LoopData;
+using calibration::Passes;
 
 // mirrorcal sim --frames: find the markers in rendered frames with the board's detection code
 // (sim_frames.hpp) instead of taking the listed reflections. By default the frames carry the
@@ -32,10 +36,10 @@ CalibrationConfig scenario_config(const sim::Scenario& s);
 LoopData loop_data(const sim::Scenario& s, const sim::SimData& data);
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
-SimRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                         const std::function<void(double)>& progress = {},
-                         const FrameMode& frames = {}, firmware::LoopProfiler* profiler = nullptr,
-                         Passes passes = {});
+CalibrationRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                 const std::function<void(double)>& progress = {},
+                                 const FrameMode& frames = {},
+                                 firmware::LoopProfiler* profiler = nullptr, Passes passes = {});
 
 // What the data of a simulated run can hold: the 1-sigma of each calibration state (SI, in
 // calibration_params() order) that a filter linearised at the truth ends with, on the same rig,
@@ -51,26 +55,26 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
 // its prior. Stage 2's state is what the run reports. NK = 5 estimates the skew; NK = 4 holds it at
 // the scenario camera's (simulate a camera without skew to hold it at zero: sim::without_skew()).
 template <int NK>
-SimRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                    const std::function<void(double)>& progress = {});
-extern template SimRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                                      const std::function<void(double)>&);
-extern template SimRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                                      const std::function<void(double)>&);
-extern template SimRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                                      const std::function<void(double)>&);
+CalibrationRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                            const std::function<void(double)>& progress = {});
+extern template CalibrationRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                                              const std::function<void(double)>&);
+extern template CalibrationRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                              const std::function<void(double)>&);
+extern template CalibrationRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                                              const std::function<void(double)>&);
 
 // The paper's "everything at once" mode: one minute of data, the intrinsics estimated with the
 // rest from the prior's guesses (100 px off), the same as `record --intrinsics` then `calibrate`.
 template <int NK>
-SimRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                    const std::function<void(double)>& progress = {});
-extern template SimRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                                      const std::function<void(double)>&);
-extern template SimRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                                      const std::function<void(double)>&);
-extern template SimRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                                      const std::function<void(double)>&);
+CalibrationRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                            const std::function<void(double)>& progress = {});
+extern template CalibrationRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
+                                                              const std::function<void(double)>&);
+extern template CalibrationRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
+                                                              const std::function<void(double)>&);
+extern template CalibrationRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
+                                                              const std::function<void(double)>&);
 
 // The calibration state a scenario's truth is (the IMU's motion block left at zero).
 template <class State>
@@ -88,4 +92,4 @@ State truth_state(const sim::Scenario& s) {
   return t;
 }
 
-}  // namespace mirrorcal::app
+}  // namespace mirrorcal::evaluation
