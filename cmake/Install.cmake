@@ -8,10 +8,8 @@ set_target_properties(mirrorcal_estimator PROPERTIES EXPORT_NAME estimator)
 set_target_properties(mirrorcal_hal PROPERTIES EXPORT_NAME hal)
 set_target_properties(mirrorcal_loop PROPERTIES EXPORT_NAME loop)
 set_target_properties(mirrorcal_detection PROPERTIES EXPORT_NAME detection)
-# The loop's safe file writing (timing histograms): linked by the loop, no headers of its own here.
-set_target_properties(mirrorcal_files PROPERTIES EXPORT_NAME files)
 
-install(TARGETS mirrorcal_estimator mirrorcal_hal mirrorcal_loop mirrorcal_detection mirrorcal_files
+install(TARGETS mirrorcal_estimator mirrorcal_hal mirrorcal_loop mirrorcal_detection
         EXPORT mirrorcalTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/estimator/include/ ${PROJECT_SOURCE_DIR}/hal/include/

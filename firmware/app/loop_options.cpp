@@ -5,6 +5,7 @@
 #include <string>
 
 #include "mirrorcal/firmware/realtime.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::app {
 
@@ -56,7 +57,11 @@ bool report_profile(const firmware::LoopProfiler& p, const std::string& title,
                     const std::string& dir, std::string& error) {
   std::printf("\ntiming budget (%s):\n%s", title.c_str(), p.table().c_str());
   const std::string path = dir + "/timing-histogram.txt";
-  if (!p.write_histogram(path, error)) return false;
+  files::OutputSet out;
+  std::FILE* f = out.add(path, error);
+  if (f == nullptr) return false;
+  p.write_histogram(f);
+  if (!out.commit(error)) return false;
   std::printf("wrote %s (cyclictest histogram format)\n", path.c_str());
   return true;
 }

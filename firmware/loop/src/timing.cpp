@@ -5,8 +5,6 @@
 #include <cmath>
 #include <cstdio>
 
-#include "mirrorcal/sim_host/files.hpp"
-
 namespace mirrorcal::firmware {
 
 const char* stage_name(Stage s) {
@@ -145,10 +143,7 @@ std::string LoopProfiler::table() const {
 
 // The layout of cyclictest -h (rt-tests' print_hist): one line per bin, one column per "thread"
 // (here per stage), then the summary lines. Lines starting with # are comments to its readers.
-bool LoopProfiler::write_histogram(const std::string& path, std::string& err) const {
-  files::OutputSet out;
-  std::FILE* f = out.add(path, err);
-  if (f == nullptr) return false;
+void LoopProfiler::write_histogram(std::FILE* f) const {
   const std::size_t n = hist_.size();
   std::fprintf(f, "# mirrorcal loop timing, 1 us bins; columns (cyclictest threads):");
   for (std::size_t j = 0; j < n; ++j) std::fprintf(f, " %s", stage_name(static_cast<Stage>(j)));
@@ -178,7 +173,6 @@ bool LoopProfiler::write_histogram(const std::string& path, std::string& err) co
     std::fprintf(f, "\n");
   }
   std::fprintf(f, "\n");
-  return out.commit(err);
 }
 
 std::int64_t SteadyClock::now_ns() {

@@ -93,8 +93,9 @@ class LoopProfiler {
   StageReport report(Stage s) const;
   // The table of every stage that ran, one line each, with a title line.
   std::string table() const;
-  // Writes every stage and path as one column of a cyclictest histogram. False (and err) on error.
-  bool write_histogram(const std::string& path, std::string& err) const;
+  // Writes every stage and path as one column of a cyclictest histogram to f (the caller's file:
+  // the loop itself writes no file).
+  void write_histogram(std::FILE* f) const;
 
  private:
   static std::size_t index(Stage s) { return static_cast<std::size_t>(s); }
