@@ -301,17 +301,45 @@ double step_sigmas(const CalibrationRun<NK>& after, const CalibrationRun<NK>& be
   return std::sqrt(d.dot(p.ldlt().solve(d)));
 }
 
-}  // namespace
-
+// The start of the pass after run: the calibration parameters at its estimate, and the IMU's start.
 template <int NK>
-CalibrationRun<NK> run_loop(const CalibrationConfig& config,
-                            const typename CalibrationRun<NK>::State& x0,
-                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
-                            const std::function<void(double)>& progress,
-                            const std::function<LoopHooks(int pass)>& hooks, Passes passes) {
+void carry_estimate(const CalibrationConfig& config, const CalibrationRun<NK>& run,
+                    const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
+                    typename CalibrationRun<NK>::State& start) {
   using State = typename CalibrationRun<NK>::State;
-  State start = x0;
+  // The next pass starts the calibration parameters at this pass's estimate, with the prior's
+  // covariance: the data are linearised about a far better guess (see run.hpp). Only where
+  // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result
+  // in stage 2) keeps its own mean, or the data would count twice.
+  const State& est = run.history.back().state;
+  const auto prior_negligible = [&](int begin, int dim) {
+    for (int i = begin; i < begin + dim; ++i)
+      if (!(run.covariance(i, i) < kNegligiblePriorWeight * p0(i, i))) return false;
+    return true;
+  };
+  if (prior_negligible(State::kPbc, 3)) start.p_b_c = est.p_b_c;
+  if (prior_negligible(State::kTd, 1)) start.t_d = est.t_d;
+  if (prior_negligible(State::kPhi, 3)) start.q_b_c = est.q_b_c;
+  for (int m = 0; m < kMarkers; ++m)
+    if (prior_negligible(State::kPi + 3 * m, 3))
+      start.markers.template segment<3>(3 * m) = est.markers.template segment<3>(3 * m);
+  if (NK > 0 && prior_negligible(State::kK, NK)) start.intrinsics = est.intrinsics;
+  // And the IMU's start, which every pass otherwise begins from the prior's guess (10 cm and
+  // 5 deg off for a user's hand-held start): the frames of the first seconds would pull the
+  // calibration towards that guess again.
+  imu_start_from<NK>(config, run, p0, data, start);
+}
+
+// The free passes: passes.min of them, and more while the last gated too many (Passes); each
+// after the first starts where the one before ended (carry_estimate), and so would the next.
+template <int NK>
+CalibrationRun<NK> free_passes(const CalibrationConfig& config,
+                               const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                               const LoopData& data,
+                               const typename CalibrationRun<NK>::State* truth,
+                               const std::function<void(double)>& progress,
+                               const std::function<LoopHooks(int pass)>& hooks, Passes passes,
+                               typename CalibrationRun<NK>::State& start) {
   CalibrationRun<NK> run;
   HistoryRow<typename CalibrationRun<NK>::Filter> first_frame;
   for (int pass = 0; pass < passes.max; ++pass) {
@@ -325,93 +353,97 @@ CalibrationRun<NK> run_loop(const CalibrationConfig& config,
     run.result.passes = pass + 1;
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
     run.first_frame = first_frame;
-    // The next pass starts the calibration parameters at this pass's estimate, with the prior's
-    // covariance: the data are linearised about a far better guess (see sim_run.hpp). Only where
-    // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result
-    // in stage 2) keeps its own mean, or the data would count twice.
     if (run.history.empty()) break;
-    const State& est = run.history.back().state;
-    const auto prior_negligible = [&](int begin, int dim) {
-      for (int i = begin; i < begin + dim; ++i)
-        if (!(run.covariance(i, i) < kNegligiblePriorWeight * p0(i, i))) return false;
-      return true;
-    };
-    if (prior_negligible(State::kPbc, 3)) start.p_b_c = est.p_b_c;
-    if (prior_negligible(State::kTd, 1)) start.t_d = est.t_d;
-    if (prior_negligible(State::kPhi, 3)) start.q_b_c = est.q_b_c;
-    for (int m = 0; m < kMarkers; ++m)
-      if (prior_negligible(State::kPi + 3 * m, 3))
-        start.markers.template segment<3>(3 * m) = est.markers.template segment<3>(3 * m);
-    if (NK > 0 && prior_negligible(State::kK, NK)) start.intrinsics = est.intrinsics;
-    // And the IMU's start, which every pass otherwise begins from the prior's guess (10 cm and
-    // 5 deg off for a user's hand-held start): the frames of the first seconds would pull the
-    // calibration towards that guess again.
+    carry_estimate<NK>(config, run, p0, data, start);
+  }
+  return run;
+}
+
+// Gauss-Newton over the whole recording, the filter its linear solver: a pass from the estimate
+// with the calibration held near it by its own covariance gives a trajectory, and a pass from
+// the prior with every measurement linearised along that trajectory
+// (CalibrationFilter::linearise_along) is the Kalman filter of the linearised problem, whose
+// final estimate of the constant calibration is that problem's batch solution and whose
+// covariance is the inverse of the information along the trajectory. The free passes
+// linearised along the estimates they passed through, and where those were far off, their
+// covariance holds information the data do not (random family: sigmas down to a third of the
+// linearised one's) and their estimate lies further from the truth than the data allow. How
+// much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
+template <int NK>
+void refine(const CalibrationConfig& config, const typename CalibrationRun<NK>::State& x0,
+            const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
+            const typename CalibrationRun<NK>::State* truth,
+            const std::function<LoopHooks(int pass)>& hooks,
+            typename CalibrationRun<NK>::State& start, CalibrationRun<NK>& run) {
+  using State = typename CalibrationRun<NK>::State;
+  constexpr int B = State::kCalibrationBegin;
+  const typename CalibrationRun<NK>::Filter::Covariance own = run.covariance;
+  const int free_passes = run.result.passes;
+  // Their markers come from where the passes' did (rendered frames through detection with
+  // sim --frames): hooks numbered on from the passes'.
+  int hook = free_passes;
+  const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks{}; };
+  for (int it = 0; it < kMaxRefinements; ++it) {
+    State from = run.history.back().state;
+    from.p = start.p;
+    from.v = start.v;
+    from.q_n_b = start.q_n_b;
+    const CalibrationRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run), data,
+                                                  nullptr, {}, next_hooks(), nullptr, true);
+    // Each frame is linearised at the track smoothed over the whole pass, never at the track's
+    // estimate after that frame's update: an estimate that holds the frame's own noise moves
+    // the linearisation with that noise, and where the rig's motion leaves a direction weak
+    // (slow sweeps: the markers' scale against the mirror's distance), the measurement's slope
+    // along it grows with that offset, so every frame adds information the data do not hold.
+    // From the truth, one pass on data with pixel noise alone ended with marker sigmas 0.3-0.8
+    // of the same pass's on noise-free data on such rigs, 1.00 on others. Random family, 200
+    // rigs, runs beyond 4 sigma and the consistent runs' marker RMS over the data's limit:
+    // linearised after each update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05;
+    // smoothed 3 and 0.96 (along the true motion, a diagnostic: 3 and 0.97).
+    Trajectory<NK> trajectory;
+    smoothed_trajectory<NK>(track, trajectory);
+    // From the prior's guesses of the calibration (the data count once), and the IMU start the
+    // trajectory has.
+    State prior = x0;
+    prior.p = from.p;
+    prior.v = from.v;
+    prior.q_n_b = from.q_n_b;
+    CalibrationRun<NK> refined =
+        run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
+    // A replay that did not meet the same frames (a source that ran dry) refines nothing.
+    if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
+        refined.filter_counters.failures > 0)
+      break;
+    // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
+    // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
+    if (suspect(refined.result) && !suspect(run.result)) break;
+    refined.result.refinement_step_sigmas = step_sigmas<NK>(refined, run);
+    refined.first_frame = run.first_frame;
+    refined.result.passes = free_passes;
+    run = std::move(refined);
     imu_start_from<NK>(config, run, p0, data, start);
+    if (run.result.refinement_step_sigmas < kConvergedStepSigmas) break;
   }
-  // Gauss-Newton over the whole recording, the filter its linear solver: a pass from the estimate
-  // with the calibration held near it by its own covariance gives a trajectory, and a pass from
-  // the prior with every measurement linearised along that trajectory
-  // (CalibrationFilter::linearise_along) is the Kalman filter of the linearised problem, whose
-  // final estimate of the constant calibration is that problem's batch solution and whose
-  // covariance is the inverse of the information along the trajectory. The free passes above
-  // linearised along the estimates they passed through, and where those were far off, their
-  // covariance holds information the data do not (random family: sigmas down to a third of the
-  // linearised one's) and their estimate lies further from the truth than the data allow. How
-  // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
-  if (passes.refine && !run.history.empty()) {
-    constexpr int B = State::kCalibrationBegin;
-    const typename CalibrationRun<NK>::Filter::Covariance own = run.covariance;
-    const int free_passes = run.result.passes;
-    // Their markers come from where the passes' did (rendered frames through detection with
-    // sim --frames): hooks numbered on from the passes'.
-    int hook = free_passes;
-    const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks{}; };
-    for (int it = 0; it < kMaxRefinements; ++it) {
-      State from = run.history.back().state;
-      from.p = start.p;
-      from.v = start.v;
-      from.q_n_b = start.q_n_b;
-      const CalibrationRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run),
-                                                    data, nullptr, {}, next_hooks(), nullptr, true);
-      // Each frame is linearised at the track smoothed over the whole pass, never at the track's
-      // estimate after that frame's update: an estimate that holds the frame's own noise moves
-      // the linearisation with that noise, and where the rig's motion leaves a direction weak
-      // (slow sweeps: the markers' scale against the mirror's distance), the measurement's slope
-      // along it grows with that offset, so every frame adds information the data do not hold.
-      // From the truth, one pass on data with pixel noise alone ended with marker sigmas 0.3-0.8
-      // of the same pass's on noise-free data on such rigs, 1.00 on others. Random family, 200
-      // rigs, runs beyond 4 sigma and the consistent runs' marker RMS over the data's limit:
-      // linearised after each update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05;
-      // smoothed 3 and 0.96 (along the true motion, a diagnostic: 3 and 0.97).
-      Trajectory<NK> trajectory;
-      smoothed_trajectory<NK>(track, trajectory);
-      // From the prior's guesses of the calibration (the data count once), and the IMU start the
-      // trajectory has.
-      State prior = x0;
-      prior.p = from.p;
-      prior.v = from.v;
-      prior.q_n_b = from.q_n_b;
-      CalibrationRun<NK> refined =
-          run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
-      // A replay that did not meet the same frames (a source that ran dry) refines nothing.
-      if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
-          refined.filter_counters.failures > 0)
-        break;
-      // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
-      // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
-      if (suspect(refined.result) && !suspect(run.result)) break;
-      refined.result.refinement_step_sigmas = step_sigmas<NK>(refined, run);
-      refined.first_frame = run.first_frame;
-      refined.result.passes = free_passes;
-      run = std::move(refined);
-      imu_start_from<NK>(config, run, p0, data, start);
-      if (run.result.refinement_step_sigmas < kConvergedStepSigmas) break;
-    }
-    double lowest = INFINITY;
-    for (int i = B; i < State::kDim; ++i)
-      lowest = std::min(lowest, std::sqrt(own(i, i) / run.covariance(i, i)));
-    run.result.sigma_ratio = lowest;
-  }
+  double lowest = INFINITY;
+  for (int i = B; i < State::kDim; ++i)
+    lowest = std::min(lowest, std::sqrt(own(i, i) / run.covariance(i, i)));
+  run.result.sigma_ratio = lowest;
+}
+
+}  // namespace
+
+template <int NK>
+CalibrationRun<NK> run_loop(const CalibrationConfig& config,
+                            const typename CalibrationRun<NK>::State& x0,
+                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
+                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
+                            const std::function<void(double)>& progress,
+                            const std::function<LoopHooks(int pass)>& hooks, Passes passes) {
+  using State = typename CalibrationRun<NK>::State;
+  State start = x0;
+  CalibrationRun<NK> run = free_passes<NK>(config, p0, data, truth, progress, hooks, passes, start);
+  if (passes.refine && !run.history.empty())
+    refine<NK>(config, x0, p0, data, truth, hooks, start, run);
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<NK>(x0, p0, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
