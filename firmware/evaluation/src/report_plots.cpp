@@ -115,13 +115,11 @@ std::pair<double, double> settled_band(const ReportData& d, std::size_t j) {
   return {lo - margin, hi + margin};
 }
 
-// The gnuplot script, and the figures it draws.
-std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
-  std::vector<Figure> figures;
+// The residuals: scattered against their 3-sigma circle, their histogram against the normal
+// density, their length over time, and the normalised innovation squared against its band.
+void write_residual_plots(std::ostream& g, const ReportData& d, std::vector<Figure>& figures) {
   const double sigma = d.pixel_sigma;
   const int count = marker_count(d);
-  // Titles hold names such as p_b_c: no subscripts.
-  g << "set terminal pngcairo size 1200,700 font 'DejaVu Sans,10' noenhanced\nset grid\n";
   g << "set output 'residual_scatter.png'\nset size ratio -1\nset key outside right\n"
     << "set title 'Reprojection residuals (measured - predicted) once the estimate settled, with "
        "the 3-sigma circle'\nset xlabel 'u [px]'\nset ylabel 'v [px]'\nset parametric\nplot ";
@@ -156,7 +154,10 @@ std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
        "'' using 1:3 with lines dt 2 lc rgb '#cc2222' title '2.5 %', '' using 1:4 with lines dt "
        "2 lc rgb '#cc2222' title '97.5 %'\n";
   figures.push_back({"nis.png", "Normalised innovation squared against its chi-square band"});
+}
 
+// Each calibration group's estimate over time with its +-3 sigma band.
+void write_estimate_plots(std::ostream& g, const ReportData& d, std::vector<Figure>& figures) {
   g << "set key off\n";
   const std::vector<ParamInfo>& params = d.result.params;
   for (const PlotGroup& grp : plot_groups(params)) {
@@ -183,7 +184,12 @@ std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
                                  " over time (the first seconds, before the estimate settled, "
                                  "may run off the scale)"});
   }
+}
 
+// The IMU's biases, and the excitation: rotation, motion along the mirror's normal, markers seen.
+void write_motion_plots(std::ostream& g, const ReportData& d, std::vector<Figure>& figures) {
+  const int count = marker_count(d);
+  const std::vector<ParamInfo>& params = d.result.params;
   const std::size_t extra = 2 + 2 * params.size();  // first column after the states'
   g << "set output 'imu_bias.png'\nset key on\nset multiplot layout 1,2 title 'IMU bias "
        "estimates'\n";
@@ -210,6 +216,16 @@ std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
     << "]\nplot 'series.dat' using 1:" << extra + 10
     << " with points pt 7 ps 0.2 lc rgb '#336699'\nunset multiplot\n";
   figures.push_back({"excitation.png", "Motion and markers seen"});
+}
+
+// The gnuplot script, and the figures it draws.
+std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
+  std::vector<Figure> figures;
+  // Titles hold names such as p_b_c: no subscripts.
+  g << "set terminal pngcairo size 1200,700 font 'DejaVu Sans,10' noenhanced\nset grid\n";
+  write_residual_plots(g, d, figures);
+  write_estimate_plots(g, d, figures);
+  write_motion_plots(g, d, figures);
   return figures;
 }
 
