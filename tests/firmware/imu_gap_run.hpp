@@ -16,17 +16,6 @@ using Run = calibration::CalibrationRun<0>;
 
 constexpr std::int64_t kMs = 1'000'000;
 
-// The true calibration of a scenario, for the NEES.
-inline Run::State truth_of(const sim::Scenario& s) {
-  Run::State t;
-  t.p_b_c = s.truth.p_b_c;
-  t.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < calibration::kMarkers; ++i)
-    t.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
-  t.t_d = s.truth.t_d;
-  return t;
-}
-
 // The calibration of seed's simulated minute with the IMU samples of [start_ms, start_ms + gap_ms)
 // removed.
 inline Run calibrate_with_gap(const sim::Scenario& s, std::uint64_t seed, std::int64_t start_ms,
@@ -40,7 +29,7 @@ inline Run calibrate_with_gap(const sim::Scenario& s, std::uint64_t seed, std::i
   Run::State x0;
   Run::Filter::Covariance p0;
   initialise(sim::simulation_prior<calibration::kMarkers>(s, data, seed), x0, p0);
-  const Run::State truth = truth_of(s);
+  const Run::State truth = evaluation::truth_state<Run::State>(s);
   return calibration::run_loop<0>(evaluation::scenario_config(s), x0, p0, d, &truth, {}, {},
                                   passes);
 }

@@ -23,25 +23,6 @@ std::unique_ptr<hal::MarkerSource<kMarkers>> LoopData::open_markers() const {
 
 namespace {
 
-template <class State>
-State truth_state(const sim::Scenario& s) {
-  State t;
-  t.p_b_c = s.truth.p_b_c;
-  t.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < State::kMarkers; ++i)
-    t.markers.template segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
-  t.t_d = s.truth.t_d;
-  if constexpr (State::kIntrinsics > 0) {
-    const auto k = camera_parameters<State::kIntrinsics>(s.truth.intrinsics);
-    for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = k[static_cast<std::size_t>(j)];
-  }
-  return t;
-}
-
-}  // namespace
-
-namespace {
-
 // The estimates a pass published at its frames, to linearise another pass along: in a temporary
 // file, read by the filter as its frames come.
 template <int NK>
