@@ -508,7 +508,8 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
 
 bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::string& error) {
   std::string t =
-      "# mirrorcal priors: what is known before calibrating (docs/recordings.md, \"mirrorcal.yaml\").\n"
+      "# mirrorcal priors: what is known before calibrating (docs/recordings.md, "
+      "\"mirrorcal.yaml\").\n"
       "# SI units (m, m/s, rad, m/s^2, rad/s, px); quaternions Hamilton [w, x, y, z];\n"
       "# sigma_* are 1-sigma per axis (rotations: of the error vector, R = R_guess Exp(e)).\n";
   t += "gravity_n: " + list(r.gravity_n) + "\n";
@@ -611,6 +612,8 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
   if (y.has("recording_fingerprint") &&
       !y.string("recording_fingerprint", out.recording_fingerprint))
     return false;
+  out.trusted = true;
+  if (y.has("consistent") && !y.flag("consistent", out.trusted)) return false;
   out.has_camera = y.has("intrinsics");
   return !out.has_camera || read_camera(y, "skew", out.camera);
 }

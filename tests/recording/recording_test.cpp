@@ -253,6 +253,7 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   EXPECT_EQ(start.t_d, r.t_d);
   ASSERT_EQ(start.covariance.rows(), 16);
   EXPECT_TRUE(start.covariance == r.covariance.topLeftCorner(16, 16));
+  EXPECT_EQ(start.trusted, mc::calibration::consistent(r));  // its self-check's verdict
 }
 
 TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {

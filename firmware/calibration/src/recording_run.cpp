@@ -58,6 +58,7 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::
   }
   const LoopData data = recording_loop_data(r);
   run = run_loop<NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
+  run.result.from_untrusted = from != nullptr && !from->trusted;
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();
     return false;

@@ -250,10 +250,21 @@ std::string prior_warning(const CalibrationResult& r) {
   return text;
 }
 
+// A calibration that started from one its own self-check did not trust (stage 2 from a stage 1
+// that locked on, or used no marker) rests on a prior that may hold information it does not have,
+// and its own checks cannot see that: its fit to the prior and the data can look as good.
+std::string start_warning(const CalibrationResult& r) {
+  if (!r.from_untrusted) return {};
+  return "it started from an earlier calibration (--from) that said consistent: false: whatever "
+         "that one got wrong with confidence, this one took as its prior. Calibrate that stage "
+         "again until it is consistent, then this one from it.";
+}
+
 }  // namespace
 
 std::string convergence_warning(const CalibrationResult& r) {
-  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r)})
+  for (std::string w :
+       {fit_warning(r), markers_used_warning(r), prior_warning(r), start_warning(r)})
     if (!w.empty()) return w;
   return {};
 }
@@ -280,7 +291,8 @@ std::string skew_warning(const CalibrationResult& r) {
 
 std::vector<std::string> result_warnings(const CalibrationResult& r) {
   std::vector<std::string> w;
-  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), skew_warning(r)})
+  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), start_warning(r),
+                        skew_warning(r)})
     if (!s.empty()) w.push_back(std::move(s));
   return w;
 }
@@ -332,10 +344,14 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
     std::fprintf(
         o, "recording_fingerprint: \"%s\"  # of the CSV files calibrated (calibrate --from)\n",
         r.recording_fingerprint.c_str());
+  std::fprintf(o, "passes: %d", r.passes);
+  if (r.restarted_pass > 0)
+    std::fprintf(o, "  # pass %d restarted from the guesses, the pixel noise inflated: locked on",
+                 r.restarted_pass);
   std::fprintf(o,
-               "passes: %d\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
+               "\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
                "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
-               r.passes, static_cast<unsigned long long>(r.markers_used),
+               static_cast<unsigned long long>(r.markers_used),
                static_cast<unsigned long long>(r.markers_gated),
                static_cast<unsigned long long>(r.markers_invalid));
   if (r.markers_observed > 0)
@@ -353,8 +369,8 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
                "above 1, sigma_ratio below 0.5, refinement_step above 8, under half the markers "
-               "used or a prior "
-               "contradicted by 5 sigma: do not trust it\n",
+               "used, a prior contradicted by 5 sigma or a start (--from) that said false: do "
+               "not trust it\n",
                consistent(r) ? "true" : "false");
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)

@@ -283,10 +283,12 @@ double step_sigmas(const CalibrationRun<NK>& after, const CalibrationRun<NK>& be
 }
 
 // The start of the pass after run: the calibration parameters at its estimate, and the IMU's start.
+// noise_scale: the pixel noise of run's pass over the true one (kAnnealedPixelNoise after a
+// restart), whose square its covariance is larger than what the data hold.
 template <int NK>
 void carry_estimate(const CalibrationConfig& config, const CalibrationRun<NK>& run,
                     const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    typename CalibrationRun<NK>::State& start) {
+                    typename CalibrationRun<NK>::State& start, double noise_scale = 1.0) {
   using State = typename CalibrationRun<NK>::State;
   // The next pass starts the calibration parameters at this pass's estimate, with the prior's
   // covariance: the data are linearised about a far better guess (see run.hpp). Only where
@@ -295,7 +297,8 @@ void carry_estimate(const CalibrationConfig& config, const CalibrationRun<NK>& r
   const State& est = run.history.back().state;
   const auto prior_negligible = [&](int begin, int dim) {
     for (int i = begin; i < begin + dim; ++i)
-      if (!(run.covariance(i, i) < kNegligiblePriorWeight * p0(i, i))) return false;
+      if (!(run.covariance(i, i) < kNegligiblePriorWeight * noise_scale * noise_scale * p0(i, i)))
+        return false;
     return true;
   };
   if (prior_negligible(State::kPbc, 3)) start.p_b_c = est.p_b_c;
@@ -321,21 +324,33 @@ CalibrationRun<NK> free_passes(const CalibrationConfig& config,
                                const std::function<void(double)>& progress,
                                const std::function<LoopHooks(int pass)>& hooks, Passes passes,
                                typename CalibrationRun<NK>::State& start) {
+  const typename CalibrationRun<NK>::State guess = start;
   CalibrationRun<NK> run;
   HistoryRow<typename CalibrationRun<NK>::Filter> first_frame;
+  int restarted = 0;
   for (int pass = 0; pass < passes.max; ++pass) {
-    if (pass >= passes.min && !suspect(run.result)) break;
+    const bool after_restart = restarted > 0 && restarted == pass;  // wants the true noise next
+    if (pass >= passes.min && !after_restart && !suspect(run.result)) break;
     const int planned = std::max(passes.min, pass + 1);
     const auto pass_progress = [&](double f) {
       if (progress) progress((pass + f) / planned);
     };
-    run = run_pass<NK>(config, start, p0, data, truth, pass_progress,
+    // Still suspect after the default passes, with a pass left to follow: locked on (run.hpp).
+    const bool restart = pass == passes.min && pass + 1 < passes.max;
+    CalibrationConfig pass_config = config;
+    if (restart) {
+      start = guess;
+      pass_config.pixel_sigma *= kAnnealedPixelNoise;
+      restarted = pass + 1;
+    }
+    run = run_pass<NK>(pass_config, start, p0, data, truth, pass_progress,
                        hooks ? hooks(pass) : LoopHooks{});
     run.result.passes = pass + 1;
+    run.result.restarted_pass = restarted;
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
     run.first_frame = first_frame;
     if (run.history.empty()) break;
-    carry_estimate<NK>(config, run, p0, data, start);
+    carry_estimate<NK>(config, run, p0, data, start, restart ? kAnnealedPixelNoise : 1.0);
   }
   return run;
 }
@@ -401,6 +416,7 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<NK>::
     refined.result.refinement_step_sigmas = step_sigmas<NK>(refined, run);
     refined.first_frame = run.first_frame;
     refined.result.passes = free_passes;
+    refined.result.restarted_pass = run.result.restarted_pass;
     run = std::move(refined);
     imu_start_from<NK>(config, run, p0, data, start);
     if (run.result.refinement_step_sigmas < kConvergedStepSigmas) break;
@@ -461,6 +477,7 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   s.t_d = earlier.t_d;
   const int n = s.layout().size();
   s.covariance = earlier.covariance.topLeftCorner(n, n);
+  s.trusted = consistent(earlier);
   return s;
 }
 

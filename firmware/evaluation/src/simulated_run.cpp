@@ -112,9 +112,11 @@ CalibrationRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_
   typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
-  start_from(calibration_start(stage1.result), x0, p0);
+  const sim::CalibrationStart start = calibration_start(stage1.result);
+  start_from(start, x0, p0);
   const State truth = truth_state<State>(s);
   Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  run.result.from_untrusted = !start.trusted;
   run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
 }

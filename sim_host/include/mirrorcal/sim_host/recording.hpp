@@ -256,6 +256,7 @@ struct CalibrationStart {
   bool has_camera = false;
   CameraInfo camera;
   std::string recording_fingerprint;  // Recording::fingerprint of its data; empty in older results
+  bool trusted = true;  // its self-check's `consistent` (true where a hand-written start has none)
 
   // The covariance's rows: the calibration block of these markers, without the intrinsics.
   CalibrationLayout layout() const {

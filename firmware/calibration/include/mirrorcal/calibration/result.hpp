@@ -36,6 +36,8 @@ struct CalibrationResult {
   std::uint64_t markers_used = 0, markers_gated = 0, markers_invalid = 0;
   std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
   int passes = 1;                     // passes over the data (sim_run.hpp)
+  bool from_untrusted = false;  // started from an earlier calibration that said consistent: false
+  int restarted_pass = 0;       // 1-based; the pass restarted from the guesses (run.hpp), or 0
   // What the filter saw itself, for the self-check (no truth needed): the normalised innovation
   // squared per degree of freedom over the last pass once the gate was on.
   double nis_per_dof = 0.0;
