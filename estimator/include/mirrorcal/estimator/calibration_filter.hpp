@@ -141,7 +141,7 @@ class CalibrationFilter {
   // Bytes of thread_workspace (one per configuration and thread, outside the object) that update
   // and restart_motion use (predict changes the covariance in place).
   static constexpr std::size_t workspace_bytes() {
-    return Filter::template update_workspace_bytes<State::kMarkerReads, 2>() +
+    return Filter::template update_workspace_bytes<State::kMeasuredDim, 2 * M>() +
            sizeof(RestartWorkspace);
   }
 
@@ -304,20 +304,13 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
   const Exposure<S> exposed = exposure(frame.t_ns);
   const std::array<S, M> readout = marker_readout_s(fixed, frame);
   const bool gate_on = counters_.updates >= config_.gate_after_frames;
-  // Each marker is a block of its own, reading only its states (State::marker_reads): the filter
-  // takes the markers one after another (SigmaPointFilter::update).
-  static constexpr std::array<StateIndices<State::kMarkerReads>, M> reads = [] {
-    std::array<StateIndices<State::kMarkerReads>, M> r{};
-    for (int i = 0; i < M; ++i) r[static_cast<std::size_t>(i)] = State::marker_reads(i);
-    return r;
-  }();
-  const UpdateResult res = filter_.template update<State::kMeasuredBegin, State::kMeasuredDim,
-                                                   State::kMarkerReads, 2, M>(
-      [&](const State& x, int i, Vec2<S>& uv) {
-        return predict_marker(x, fixed, exposed, readout[static_cast<std::size_t>(i)], i, uv);
-      },
-      reads, z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY),
-      linearisation_point(frame.t_ns));
+  const UpdateResult res =
+      filter_.template update<State::kMeasuredBegin, State::kMeasuredDim, 2, M>(
+          [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, std::array<bool, M>& ok) {
+            predict_markers(x, fixed, exposed, readout, zp, ok);
+          },
+          z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY),
+          linearisation_point(frame.t_ns));
   if (gate_on && res.status == FilterStatus::kOk) {
     counters_.nis_sum += res.nis;
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);

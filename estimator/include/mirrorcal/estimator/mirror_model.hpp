@@ -232,20 +232,6 @@ struct MirrorState {
                        kPi = 21, kTd = 21 + 3 * M, kK = 22 + 3 * M, kDim = 22 + 3 * M + NK;
   static constexpr int kDynamicBegin = 0, kDynamicDim = 15;
   static constexpr int kMeasuredBegin = kP, kMeasuredDim = kDim - kP;
-  // The error states one marker's pixel reads, all in the measured block: the IMU's pose, the
-  // camera's in b, the time offset, the intrinsics and the marker itself (the filter samples only
-  // these per marker). The rotations lead: a sigma point moves the states from its Cholesky
-  // column's diagonal on, so only the first six columns' points rotate anything.
-  static constexpr int kMarkerReads = 16 + NK;
-  static constexpr std::array<int, kMarkerReads> marker_reads(int i) {
-    std::array<int, kMarkerReads> r{};
-    int n = 0;
-    for (const int begin : {kTheta, kPhi, kP, kPbc})
-      for (int k = 0; k < 3; ++k) r[static_cast<std::size_t>(n++)] = begin + k;
-    for (int k = kTd; k < kDim; ++k) r[static_cast<std::size_t>(n++)] = k;
-    for (int k = 0; k < 3; ++k) r[static_cast<std::size_t>(n++)] = kPi + 3 * i + k;
-    return r;
-  }
   // The calibration block [p_b_c, phi, markers, t_d, intrinsics], what a calibration reports, and
   // its groups (counted from kCalibrationBegin).
   static constexpr int kCalibrationBegin = kPbc, kCalibrationDim = kDim - kPbc;
@@ -579,18 +565,6 @@ std::array<S, M> marker_readout_s(const Pinhole<S>& k, const MarkerFrame<M>& fra
   return t;
 }
 
-// The predicted pixel of marker i of state x in a frame exposed at e, read out readout_s later (a
-// rolling shutter; zero for a global one); false where its mirror image is not in front of the
-// camera.
-template <class State>
-bool predict_marker(const State& x, const Pinhole<typename State::Scalar>& fixed,
-                    const Exposure<typename State::Scalar>& e, typename State::Scalar readout_s,
-                    int i, Vec2<typename State::Scalar>& uv) {
-  Exposure<typename State::Scalar> row = e;
-  row.stamp_minus_filter_s += readout_s;
-  return project(intrinsics_of(x, fixed), mirror_in_camera(x, row).image(x.marker(i)), uv);
-}
-
 // The predicted pixel of every marker flagged in ok, in a frame exposed at e, marker i read out
 // readout_s[i] later (a rolling shutter; all zero for a global one); clears ok[i] for a marker
 // whose mirror image is not in front of the camera.
@@ -601,10 +575,21 @@ void predict_markers(const State& x, const Pinhole<typename State::Scalar>& fixe
                      Eigen::Matrix<typename State::Scalar, 2 * State::kMarkers, 1>& z,
                      std::array<bool, State::kMarkers>& ok) {
   using S = typename State::Scalar;
+  MirrorInCamera<S> mirror;
+  bool seen = false;
+  S seen_at = S(0);
+  const Pinhole<S> k = intrinsics_of(x, fixed);
   for (int i = 0; i < State::kMarkers; ++i) {
     if (!ok[i]) continue;
+    if (!seen || readout_s[i] != seen_at) {  // a global shutter sees the mirror once
+      Exposure<S> row = e;
+      row.stamp_minus_filter_s += readout_s[i];
+      mirror = mirror_in_camera(x, row);
+      seen = true;
+      seen_at = readout_s[i];
+    }
     Vec2<S> uv;
-    if (predict_marker(x, fixed, e, readout_s[i], i, uv))
+    if (project<S>(k, mirror.image(x.marker(i)), uv))
       z.template segment<2>(2 * i) = uv;
     else
       ok[i] = false;

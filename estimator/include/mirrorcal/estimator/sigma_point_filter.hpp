@@ -58,14 +58,10 @@ template <class Mat>
 bool cholesky_in_place(Mat& m) {
   using S = typename Mat::Scalar;
   constexpr int n = Mat::RowsAtCompileTime;
-  static_assert(Mat::IsRowMajor == 0, "columns contiguous");
   for (int j = 0; j < n; ++j) {
-    // Columns k < j and j do not overlap: restrict lets the compiler vectorise without checking.
-    S* __restrict col_j = m.data() + j * n;
     for (int k = 0; k < j; ++k) {
-      const S* __restrict col_k = m.data() + k * n;
-      const S f = col_k[j];
-      for (int i = j; i < n; ++i) col_j[i] -= col_k[i] * f;
+      const S f = m(j, k);
+      for (int i = j; i < n; ++i) m(i, j) -= m(i, k) * f;
     }
     if (!(m(j, j) > S(0))) return false;
     const S d = std::sqrt(m(j, j));
@@ -84,18 +80,6 @@ void solve_lower_transposed(const Lower& l, Rhs& x) {
     for (int i = n - 1; i >= 0; --i) {
       typename Lower::Scalar sum = x(i, c);
       for (int k = i + 1; k < n; ++k) sum -= l(k, i) * x(k, c);
-      x(i, c) = sum / l(i, i);
-    }
-}
-
-// x <- l^-1 x for a lower triangular l: forward substitution, column by column of x.
-template <class Lower, class Rhs>
-void solve_lower(const Lower& l, Rhs& x) {
-  constexpr int n = Lower::RowsAtCompileTime;
-  for (int c = 0; c < x.cols(); ++c)
-    for (int i = 0; i < n; ++i) {
-      typename Lower::Scalar sum = x(i, c);
-      for (int k = 0; k < i; ++k) sum -= l(i, k) * x(k, c);
       x(i, c) = sum / l(i, i);
     }
 }
@@ -192,10 +176,6 @@ struct UpdateResult {
   double nis = 0.0;          // normalised innovation squared of the blocks used
 };
 
-// The error-state indices a measurement block reads (SigmaPointFilter::update).
-template <int K>
-using StateIndices = std::array<int, K>;
-
 // A Euclidean state R^N: the simplest manifold, used for linear models and in tests.
 template <typename Scalar_, int N>
 struct EuclideanState {
@@ -246,10 +226,10 @@ class SigmaPointFilter {
   const State& mean() const { return mean_; }
   const Covariance& covariance() const { return cov_; }
   const SigmaPointParams& params() const { return params_; }
-  // Bytes of thread_workspace an update of blocks of kRows rows reading K states each uses.
-  template <int K, int kRows>
+  // Bytes of thread_workspace an update of a block of L states by Z measurement rows uses.
+  template <int L, int Z>
   static constexpr std::size_t update_workspace_bytes() {
-    return sizeof(UpdateWorkspace<K, kRows>);
+    return sizeof(UpdateWorkspace<L, Z>);
   }
 
   // Propagates the state through f(State&), which may change only the error-state block
@@ -323,18 +303,11 @@ class SigmaPointFilter {
     return FilterStatus::kOk;
   }
 
-  // Updates with a measurement of up to kBlocks independent blocks of kRows rows each, processed
-  // one after another. Block b reads only the K error states reads[b], all within the block
-  // [B, B+L); h(state, b, z_b) writes block b's kRows predicted rows and returns false where it
-  // cannot evaluate them. active[b] says block b was measured; r_diag is the measurement noise
-  // variance of each row. Each block is an update of its own: sigma points over its K states (2K +
-  // 1 evaluations of that block alone), the Mahalanobis gate on its own innovation covariance (a
-  // block beyond it is rejected), then the Kalman step, from which the next block starts. For a
-  // linear model this is the joint update of all blocks exactly (their noises being independent),
-  // NIS included (the blocks' NIS add up to the joint one); for a nonlinear one each block is
-  // linearised, by its sigma points, at the estimate the blocks before it left, as an iterated
-  // filter would. A block that fails numerically leaves the filter as the blocks before it left it,
-  // and ends the update with its status.
+  // Updates with a measurement of up to kBlocks independent blocks of kRows rows each; h reads
+  // only the error-state block [B, B+L). active[b] says block b was measured; r_diag is the
+  // measurement noise variance of each row. h(state, z, ok) writes the predicted measurement of
+  // every active block and clears ok[b] where it cannot evaluate block b. Each block passes the
+  // Mahalanobis gate (squared distance under its marginal innovation covariance) or is rejected.
   //
   // A measurement far more certain than the prediction (the first frames, with a 10 cm marker
   // prior) is applied progressively (Hanebeck's progressive Gaussian filtering): in steps with the
@@ -345,31 +318,135 @@ class SigmaPointFilter {
   // the measurement function instead of trusting one linearisation over the whole prior. (Equal
   // steps of R / K, used before, leave the first step almost all the work: a ratio of 1000 in 20
   // steps, and one paper run in 140 diverged after its first frame.)
-  //
-  // linearise_at: the measurement is the regression's line through that state (the points are
-  // drawn around it with this filter's spread), for every block.
-  template <int B, int L, int K, int kRows, int kBlocks, class Measure>
-  UpdateResult update(Measure&& h, const std::array<StateIndices<K>, kBlocks>& reads,
-                      const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& z,
+  template <int B, int L, int kRows, int kBlocks, class Measure>
+  UpdateResult update(Measure&& h, const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& z,
                       const std::array<bool, kBlocks>& active,
                       const Eigen::Matrix<Scalar, kRows * kBlocks, 1>& r_diag, Scalar gate,
                       const State* linearise_at = nullptr) {
-    static_assert(B >= 0 && L > 0 && B + L <= N && K <= L, "block out of range");
-    using Rows = Eigen::Matrix<Scalar, kRows, 1>;
+    static_assert(B >= 0 && L > 0 && B + L <= N, "block out of range");
+    constexpr int Z = kRows * kBlocks;
+    using ZVec = Eigen::Matrix<Scalar, Z, 1>;
+    using ZMat = Eigen::Matrix<Scalar, Z, Z>;
+
     UpdateResult result;
+    std::array<bool, kBlocks> ok = active;
+    int n_active = 0;
+    for (bool a : active) n_active += a ? 1 : 0;
+    if (n_active == 0) return result;
+
+    UpdateWorkspace<L, Z>& ws = thread_workspace<UpdateWorkspace<L, Z>>();
+    MeasurementSample<L, Z>& ms = ws.ms;
+    // Linearised at a reference (a trajectory the caller follows): the points are drawn around it
+    // with this filter's spread, and the measurement is the regression's line through it.
+    const State own = mean_;
+    if (linearise_at != nullptr) mean_ = *linearise_at;
+    bool sampled = false;
+    for (int shrink = 0;; ++shrink) {
+      ok = active;
+      std::array<bool, kBlocks> centre_ok;
+      ws.w = SigmaWeights<Scalar, L>::make(params_.unscented, std::ldexp(1.0, -shrink));
+      sampled = sample_measurement<B, L, kRows, kBlocks>(h, ok, ws, &centre_ok);
+      if (!sampled || ok == centre_ok || shrink >= params_.max_shrinks) break;
+    }
+    if (sampled &&
+        spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag) > Scalar(params_.cross_terms_above)) {
+      add_cross_terms<B, L, kRows, kBlocks>(h, ok, ws);
+      result.cross_terms = true;
+    }
+    mean_ = own;
+    if (!sampled) {
+      result.status = FilterStatus::kCovarianceNotPositiveDefinite;
+      return result;
+    }
+    for (int b = 0; b < kBlocks; ++b)
+      if (active[b] && !ok[b]) ++result.invalid;
+
+    // Gate each block on its own marginal innovation covariance.
+    ZVec innovation = z - ms.z_centre;
+    if (linearise_at != nullptr)  // z ~ h(ref) + A (x - ref), A = (P_bb^-1 P_bz)^T
+      innovation.noalias() -= ms.reg.transpose() * own.template boxminus_block<B, L>(*linearise_at);
+    ZMat& s = ws.s;
+    s = ms.p_zz;
+    s.diagonal() += r_diag;
     for (int b = 0; b < kBlocks; ++b) {
-      if (!active[b]) continue;
-      const auto h_b = [&h, b](const State& x, Rows& z_b) -> bool { return h(x, b, z_b); };
-      const Rows z_b = z.template segment<kRows>(b * kRows);
-      const Rows r_b = r_diag.template segment<kRows>(b * kRows);
-      const FilterStatus st =
-          update_block<B, L, K, kRows>(h_b, reads[b], z_b, r_b, gate, linearise_at, result);
+      if (!ok[b]) continue;
+      const int r0 = b * kRows;
+      const Eigen::Matrix<Scalar, kRows, 1> nu_b = innovation.template segment<kRows>(r0);
+      Eigen::LLT<Eigen::Matrix<Scalar, kRows, kRows>> llt_b(s.template block<kRows, kRows>(r0, r0));
+      const Scalar d2 =
+          llt_b.info() == Eigen::Success ? nu_b.dot(llt_b.solve(nu_b)) : Scalar(INFINITY);
+      if (!(d2 <= gate) || !std::isfinite(d2)) {  // also rejects NaN, and inf under an open gate
+        ok[b] = false;
+        ++result.gated;
+        continue;
+      }
+      ++result.used;
+    }
+    if (result.used == 0) {
+      result.status = FilterStatus::kNoMeasurement;
+      return result;
+    }
+    {
+      ZMat& s_used = ws.s_used;
+      s_used = s;
+      ZVec nu_used = innovation;
+      make_inert<kRows, kBlocks>(ok, s_used, nu_used);
+      Eigen::LLT<ZMat>& llt_s = ws.llt_s;
+      llt_s.compute(s_used);
+      if (llt_s.info() != Eigen::Success) {
+        result.status = FilterStatus::kInnovationNotPositiveDefinite;
+        return result;
+      }
+      result.nis = static_cast<double>(nu_used.dot(llt_s.solve(nu_used)));  // inert blocks add 0
+    }
+
+    // A step that fails after others were applied must not leave them applied. A failed step
+    // changes nothing (apply_update), so the covariance is kept only before a step that is not the
+    // last: an ordinary update, one step, copies no N x N matrix.
+    const State mean_before = mean_;
+    bool kept = false;
+    const auto restore = [&] {
+      mean_ = mean_before;
+      if (kept) cov_ = ws.cov_before;
+    };
+    Scalar remaining = 1;  // of the measurement's information
+    int steps = 0;
+    for (int k = 0; remaining > 0; ++k) {
+      if (k > 0) {
+        if (!sample_measurement<B, L, kRows, kBlocks>(h, ok, ws)) {
+          restore();
+          result.status = FilterStatus::kCovarianceNotPositiveDefinite;
+          return result;
+        }
+        if (result.cross_terms) add_cross_terms<B, L, kRows, kBlocks>(h, ok, ws);
+        innovation = z - ms.z_centre;
+      }
+      const Scalar ratio = spread_ratio_of<kRows, kBlocks>(ms, ok, r_diag);
+      const Scalar most = Scalar(params_.spread_per_step) / ratio;  // inf for a zero spread
+      const bool last =
+          k + 1 >= params_.max_steps || !(most < remaining) || linearise_at != nullptr;
+      const Scalar beta = last ? remaining : most;
+      remaining -= beta;
+      if (!last && !kept) {
+        ws.cov_before = cov_;
+        kept = true;
+      }
+      // One step with the whole measurement: S is s_used, factored above for the NIS.
+      const bool factored = k == 0 && beta == Scalar(1);
+      if (!factored) {
+        s = ms.p_zz;
+        s.diagonal() += r_diag / beta;
+      }
+      const FilterStatus st = apply_update<B, L, kRows, kBlocks>(ws, innovation, ok, factored);
+      ++steps;
       if (st != FilterStatus::kOk) {
+        restore();
         result.status = st;
         return result;
       }
     }
-    result.status = result.used > 0 ? FilterStatus::kOk : FilterStatus::kNoMeasurement;
+    result.steps = steps;
+    result.status = FilterStatus::kOk;
     return result;
   }
 
@@ -389,239 +466,185 @@ class SigmaPointFilter {
     dst.noalias() += lhs * rhs;
   }
 
-  // One block's update in thread_workspace: its unscented transform (the prediction h at the mean,
-  // z_centre; the spread about it without noise, p_zz; the regression of the measurement on the
-  // sampled states, P_ss^-1 P_sz, and their Cholesky factor) and the Kalman step's matrices (the
-  // innovation covariance's factor L_S, the gain's factor W = P_xz L_S^-T, the covariance kept for
-  // a split update).
-  template <int K, int kRows>
+  // The unscented transform of the measurement: its prediction h at the mean (z_centre), its
+  // spread about it (without noise), the regression of the measurement on the sampled block
+  // (P_bb^-1 P_bz, with P_bz the cross-covariance), and that block's Cholesky factorisation.
+  template <int L, int Z>
+  struct MeasurementSample {
+    Eigen::Matrix<Scalar, Z, Z> p_zz;
+    Eigen::Matrix<Scalar, L, Z> reg;
+    Eigen::Matrix<Scalar, L, L> chol;      // lower Cholesky factor of the sampled block
+    Eigen::Matrix<Scalar, Z, 1> z_centre;  // h at the centre
+    Eigen::Matrix<Scalar, Z, L> z_plus;    // h at the + sigma points
+  };
+
+  // The update's matrices of the sampled block (L) and measurement (Z) sizes and of the state's,
+  // in thread_workspace: the measurement sample, the transform's deviations, the innovation
+  // covariance, the covariance kept for a multi-step update and the gain's factor W.
+  template <int L, int Z>
   struct UpdateWorkspace {
-    StateIndices<K> reads;
-    SigmaWeights<Scalar, K> w;  // of this update's sigma points
-    Eigen::Matrix<Scalar, K, K> chol;
-    Eigen::Matrix<Scalar, kRows, 1> z_centre;
-    Eigen::Matrix<Scalar, kRows, K> z_plus, z_minus;  // h at the + and - sigma points
+    MeasurementSample<L, Z> ms;
+    SigmaWeights<Scalar, L> w;            // of this update's sigma points
+    Eigen::Matrix<Scalar, Z, L> z_minus;  // h at the - sigma points
     // The transform's a and b (see UnscentedParams) transposed: a column per measurement row, so
     // that the products read contiguous columns.
-    Eigen::Matrix<Scalar, K, kRows> a_t, b_t, reg, reg_w;  // reg_w: the regression times L_S^-T
-    Eigen::Matrix<Scalar, kRows, kRows> p_zz, l_s;
-    Eigen::Matrix<Scalar, N, kRows> w_gain;
+    Eigen::Matrix<Scalar, L, Z> a_t, b_t;
+    Eigen::Matrix<Scalar, Z, Z> s, s_used;  // innovation covariance; with unused blocks inert
+    Eigen::LLT<Eigen::Matrix<Scalar, Z, Z>> llt_s;
     Covariance cov_before;
+    Eigen::Matrix<Scalar, L, Z> reg_w;  // the regression times L_S^-T
+    Eigen::Matrix<Scalar, Z, N> w_t;    // W^T, W = P_xz L_S^-T
   };
 
-  enum class Sampled : std::uint8_t {
-    kOk,
-    kNotPositiveDefinite,
-    kInvalidAtCentre,
-    kInvalidAtPoint
-  };
+  template <int B, int L, int kRows, int kBlocks, class Measure>
+  bool sample_measurement(Measure& h, std::array<bool, kBlocks>& ok,
+                          UpdateWorkspace<L, kRows * kBlocks>& ws,
+                          std::array<bool, kBlocks>* centre_ok = nullptr) const {
+    constexpr int Z = kRows * kBlocks;
+    using BlockVec = Eigen::Matrix<Scalar, L, 1>;
+    using ZVec = Eigen::Matrix<Scalar, Z, 1>;
+    MeasurementSample<L, Z>& ms = ws.ms;
+    ms.chol = cov_.template block<L, L>(B, B);
+    if (!cholesky_in_place(ms.chol)) return false;
+    const auto& chol = ms.chol;
+    const SigmaWeights<Scalar, L>& w = ws.w;
 
-  // The mean moved by the tangent vector whose ws.reads entries are `step` from its entry `from` on
-  // (a column of the Cholesky factor, which is zero above its diagonal) and zero elsewhere.
-  template <int B, int L, int K, class Step>
-  State moved(const StateIndices<K>& reads, const Step& step, int from) const {
-    Eigen::Matrix<Scalar, L, 1> d = Eigen::Matrix<Scalar, L, 1>::Zero();
-    for (int r = from; r < K; ++r) d(reads[r] - B) = step(r);
-    State x = mean_;
-    x.template boxplus_block<B, L>(d);
-    return x;
-  }
-
-  // The unscented transform of one block (see UpdateWorkspace), over the states ws.reads.
-  template <int B, int L, int K, int kRows, class Measure>
-  Sampled sample_measurement(Measure& h, UpdateWorkspace<K, kRows>& ws) const {
-    const StateIndices<K>& reads = ws.reads;
-    for (int c = 0; c < K; ++c)  // the lower triangle, all the factorisation reads
-      for (int r = c; r < K; ++r) ws.chol(r, c) = cov_(reads[r], reads[c]);
-    if (!cholesky_in_place(ws.chol)) return Sampled::kNotPositiveDefinite;
-    if (!h(mean_, ws.z_centre)) return Sampled::kInvalidAtCentre;
-    const SigmaWeights<Scalar, K>& w = ws.w;
-    for (int j = 0; j < K; ++j)
+    ZVec z0 = ZVec::Zero();
+    h(mean_, z0, ok);
+    if (centre_ok != nullptr) *centre_ok = ok;
+    auto& z_plus = ms.z_plus;
+    auto& z_minus = ws.z_minus;
+    for (int j = 0; j < L; ++j) {
       for (int sign = 0; sign < 2; ++sign) {
-        const Scalar g = sign == 0 ? w.gamma : -w.gamma;
-        const State sp = moved<B, L, K>(reads, g * ws.chol.col(j), j);
-        Eigen::Matrix<Scalar, kRows, 1> zj;
-        if (!h(sp, zj)) return Sampled::kInvalidAtPoint;
-        (sign == 0 ? ws.z_plus : ws.z_minus).col(j) = zj;
+        State sp = mean_;
+        const BlockVec d = (sign == 0 ? w.gamma : -w.gamma) * chol.col(j);
+        sp.template boxplus_block<B, L>(d);
+        ZVec zj = ZVec::Zero();
+        h(static_cast<const State&>(sp), zj, ok);
+        (sign == 0 ? z_plus : z_minus).col(j) = zj;
       }
-    ws.a_t = Scalar(0.5) * (ws.z_plus - ws.z_minus).transpose();
-    ws.b_t = (Scalar(0.5) * (ws.z_plus + ws.z_minus) - ws.z_centre.replicate(1, K)).transpose();
+    }
+    for (int b = 0; b < kBlocks; ++b) {
+      if (ok[b]) continue;
+      z0.template segment<kRows>(b * kRows).setZero();  // rows of unusable blocks stay inert
+      z_plus.template middleRows<kRows>(b * kRows).setZero();
+      z_minus.template middleRows<kRows>(b * kRows).setZero();
+    }
+    auto& a_t = ws.a_t;
+    auto& b_t = ws.b_t;
+    a_t = Scalar(0.5) * (z_plus - z_minus).transpose();
+    b_t = (Scalar(0.5) * (z_plus + z_minus) - z0.replicate(1, L)).transpose();
     // The prediction is h at the mean, and p_zz the sigma points' mean square deviation from it:
     // inv_gamma2 (a a^T + b b^T). Not the transform's mean h0 + sum(b) / gamma^2: that shift is the
     // curvature of h averaged over the prior, right on average over draws of the truth but the same
     // error in every frame for one truth, and a filter that takes each frame as independent
     // evidence adds it up (from the truth with the random family's priors, marker errors of 3-5
     // sigma after two seconds of frames; see SigmaPointFilter's header).
-    for (int j = 0; j < kRows; ++j)  // symmetric: each pair once
-      for (int i = j; i < kRows; ++i)
-        ws.p_zz(i, j) = ws.p_zz(j, i) =
-            w.inv_gamma2 * (ws.a_t.col(i).dot(ws.a_t.col(j)) + ws.b_t.col(i).dot(ws.b_t.col(j)));
-    // The cross-covariance is P_sz = sum of w (chi - x)(z - z0)^T = chol a^T / gamma, so the
-    // regression P_ss^-1 P_sz = chol^-T a^T / gamma: one triangular solve.
-    ws.reg = ws.a_t / w.gamma;
-    solve_lower_transposed(ws.chol, ws.reg);
-    return Sampled::kOk;
+    for (int j = 0; j < Z; ++j)  // symmetric: each pair once
+      for (int i = j; i < Z; ++i)
+        ms.p_zz(i, j) = ms.p_zz(j, i) =
+            w.inv_gamma2 * (a_t.col(i).dot(a_t.col(j)) + b_t.col(i).dot(b_t.col(j)));
+    // The cross-covariance is P_bz = sum of w (chi - x)(z - z0)^T = chol a^T / gamma, so the
+    // regression P_bb^-1 P_bz = chol^-T a^T / gamma: one triangular solve.
+    ms.reg = a_t / w.gamma;
+    solve_lower_transposed(chol, ms.reg);
+    ms.z_centre = z0;
+    return true;
   }
 
-  // Adds to ws.p_zz what the unscented transform cannot see: the variance of the cross terms of
+  // Adds to ms.p_zz what the unscented transform cannot see: the variance of the cross terms of
   // the measurement's second-order part. Sigma points lie on the axes of the Cholesky factor, so
   // a product of two deviations (a marker's offset along its ray times a rotation error) is zero
   // at every one of them; over a wide prior such a product moves the image by pixels, and an
   // update without it is confident where it should not be (with the paper's priors, a mean NEES
   // of ~300 instead of 15 after 60 s). For h ~ 1/2 xi^T H xi in whitened coordinates the cross
   // terms H_ij xi_i xi_j (i < j) are uncorrelated with variance H_ij^2, and gamma^2 H_ij is the
-  // mixed second difference along columns i and j: K(K-1)/2 more evaluations of h.
-  template <int B, int L, int K, int kRows, class Measure>
-  void add_cross_terms(Measure& h, UpdateWorkspace<K, kRows>& ws) const {
-    const Scalar g = ws.w.gamma;
-    for (int i = 0; i < K; ++i)
-      for (int j = i + 1; j < K; ++j) {
-        const State sp = moved<B, L, K>(ws.reads, g * (ws.chol.col(i) + ws.chol.col(j)), i);
-        Eigen::Matrix<Scalar, kRows, 1> zij;
-        if (!h(sp, zij)) continue;  // where h cannot evaluate the block, it adds nothing
-        const Eigen::Matrix<Scalar, kRows, 1> c =
-            ws.w.inv_gamma2 * (zij - ws.z_plus.col(i) - ws.z_plus.col(j) + ws.z_centre);
+  // mixed second difference along columns i and j: L(L-1)/2 more evaluations of h.
+  template <int B, int L, int kRows, int kBlocks, class Measure>
+  void add_cross_terms(Measure& h, const std::array<bool, kBlocks>& ok,
+                       UpdateWorkspace<L, kRows * kBlocks>& ws) const {
+    using ZVec = Eigen::Matrix<Scalar, kRows * kBlocks, 1>;
+    MeasurementSample<L, kRows* kBlocks>& ms = ws.ms;
+    const auto& chol = ms.chol;
+    const SigmaWeights<Scalar, L>& w = ws.w;
+    for (int i = 0; i < L; ++i) {
+      for (int j = i + 1; j < L; ++j) {
+        State sp = mean_;
+        const Eigen::Matrix<Scalar, L, 1> d = w.gamma * (chol.col(i) + chol.col(j));
+        sp.template boxplus_block<B, L>(d);
+        std::array<bool, kBlocks> ok_ij = ok;
+        ZVec zij = ZVec::Zero();
+        h(static_cast<const State&>(sp), zij, ok_ij);
+        ZVec c = w.inv_gamma2 * (zij - ms.z_plus.col(i) - ms.z_plus.col(j) + ms.z_centre);
+        for (int b = 0; b < kBlocks; ++b)  // a block h cannot evaluate there adds nothing
+          if (!ok_ij[b]) c.template segment<kRows>(b * kRows).setZero();
         // The outer product added in place: each term c_i c_j is the one its temporary would hold.
-        ws.p_zz.noalias() += c * c.transpose();
+        ms.p_zz.noalias() += c * c.transpose();
       }
+    }
   }
 
-  // How much more the prediction spreads than the noise.
-  template <class ZMat, class ZVec>
-  static Scalar spread_ratio_of(const ZMat& p_zz, const ZVec& r_diag) {
-    return p_zz.diagonal().sum() / r_diag.sum();
+  // How much more the prediction spreads than the noise: the largest ratio over the blocks in ok.
+  template <int kRows, int kBlocks, class Sample, class ZVec>
+  static Scalar spread_ratio_of(const Sample& ms, const std::array<bool, kBlocks>& ok,
+                                const ZVec& r_diag) {
+    Scalar worst = 0;
+    for (int b = 0; b < kBlocks; ++b) {
+      if (!ok[b]) continue;
+      const Scalar ratio = ms.p_zz.diagonal().template segment<kRows>(b * kRows).sum() /
+                           r_diag.template segment<kRows>(b * kRows).sum();
+      worst = ratio > worst ? ratio : worst;
+    }
+    return worst;
   }
 
-  // One block of update() (see there), its outcome added to result: kOk unless it failed
-  // numerically (a block gated or not evaluable is counted, and is no failure).
-  template <int B, int L, int K, int kRows, class Measure>
-  FilterStatus update_block(Measure& h, const StateIndices<K>& reads,
-                            const Eigen::Matrix<Scalar, kRows, 1>& z,
-                            const Eigen::Matrix<Scalar, kRows, 1>& r_diag, Scalar gate,
-                            const State* linearise_at, UpdateResult& result) {
-    using Rows = Eigen::Matrix<Scalar, kRows, 1>;
-    UpdateWorkspace<K, kRows>& ws = thread_workspace<UpdateWorkspace<K, kRows>>();
-    ws.reads = reads;
-    // Linearised at a reference: the points are drawn around it with this filter's spread.
-    const State own = mean_;
-    if (linearise_at != nullptr) mean_ = *linearise_at;
-    Sampled sampled = Sampled::kOk;
-    for (int shrink = 0;; ++shrink) {
-      ws.w = SigmaWeights<Scalar, K>::make(params_.unscented, std::ldexp(1.0, -shrink));
-      sampled = sample_measurement<B, L>(h, ws);
-      if (sampled != Sampled::kInvalidAtPoint || shrink >= params_.max_shrinks) break;
+  // Rows of blocks not used get unit variance, no correlation and zero innovation.
+  template <int kRows, int kBlocks, class ZMat, class ZVec>
+  static void make_inert(const std::array<bool, kBlocks>& ok, ZMat& s, ZVec& innovation) {
+    for (int b = 0; b < kBlocks; ++b) {
+      if (ok[b]) continue;
+      const int r0 = b * kRows;
+      s.template middleRows<kRows>(r0).setZero();
+      s.template middleCols<kRows>(r0).setZero();
+      s.template block<kRows, kRows>(r0, r0).setIdentity();
+      innovation.template segment<kRows>(r0).setZero();
     }
-    const bool cross = sampled == Sampled::kOk &&
-                       spread_ratio_of(ws.p_zz, r_diag) > Scalar(params_.cross_terms_above);
-    if (cross) add_cross_terms<B, L>(h, ws);
-    mean_ = own;
-    if (sampled == Sampled::kNotPositiveDefinite)
-      return FilterStatus::kCovarianceNotPositiveDefinite;
-    if (sampled != Sampled::kOk) {
-      ++result.invalid;
-      return FilterStatus::kOk;
-    }
-
-    Rows innovation = z - ws.z_centre;
-    if (linearise_at != nullptr) {  // z ~ h(ref) + A (x - ref), A = (P_ss^-1 P_sz)^T
-      const Eigen::Matrix<Scalar, L, 1> off = own.template boxminus_block<B, L>(*linearise_at);
-      for (int k = 0; k < K; ++k) innovation -= ws.reg.row(k).transpose() * off(reads[k] - B);
-    }
-    // The gate, on the block's innovation covariance S = p_zz + R = L_S L_S^T: the squared
-    // Mahalanobis distance |L_S^-1 nu|^2, also the block's NIS.
-    ws.l_s = ws.p_zz;
-    ws.l_s.diagonal() += r_diag;
-    Scalar d2 = Scalar(INFINITY);
-    if (cholesky_in_place(ws.l_s)) {
-      Rows white = innovation;
-      solve_lower(ws.l_s, white);
-      d2 = white.squaredNorm();
-    }
-    if (!(d2 <= gate) || !std::isfinite(d2)) {  // also rejects NaN, and inf under an open gate
-      ++result.gated;
-      return FilterStatus::kOk;
-    }
-
-    // A step that fails after others were applied must not leave them applied. A failed step
-    // changes nothing (apply_update), so the covariance is kept only before a step that is not the
-    // last: an ordinary update, one step, copies no N x N matrix.
-    const State mean_before = mean_;
-    bool kept = false;
-    const auto fail = [&](FilterStatus st) {
-      mean_ = mean_before;
-      if (kept) cov_ = ws.cov_before;
-      return st;
-    };
-    Scalar remaining = 1;  // of the measurement's information
-    int steps = 0;
-    for (int k = 0; remaining > 0; ++k) {
-      if (k > 0) {
-        const Sampled again = sample_measurement<B, L>(h, ws);
-        if (again == Sampled::kNotPositiveDefinite)
-          return fail(FilterStatus::kCovarianceNotPositiveDefinite);
-        if (again != Sampled::kOk) break;  // the rest cannot be evaluated: the steps made stand
-        if (cross) add_cross_terms<B, L>(h, ws);
-        innovation = z - ws.z_centre;
-      }
-      const Scalar most = Scalar(params_.spread_per_step) / spread_ratio_of(ws.p_zz, r_diag);
-      const bool last =
-          k + 1 >= params_.max_steps || !(most < remaining) || linearise_at != nullptr;
-      const Scalar beta = last ? remaining : most;  // inf for a zero spread: then last
-      remaining -= beta;
-      if (!last && !kept) {
-        ws.cov_before = cov_;
-        kept = true;
-      }
-      if (k > 0 || beta != Scalar(1)) {  // else L_S is the gate's
-        ws.l_s = ws.p_zz;
-        ws.l_s.diagonal() += r_diag / beta;
-        if (!cholesky_in_place(ws.l_s)) return fail(FilterStatus::kInnovationNotPositiveDefinite);
-      }
-      const FilterStatus st = apply_update(ws, innovation);
-      ++steps;
-      if (st != FilterStatus::kOk) return fail(st);
-    }
-    ++result.used;
-    result.nis += static_cast<double>(d2);
-    result.steps = steps > result.steps ? steps : result.steps;
-    result.cross_terms = result.cross_terms || cross;
-    return FilterStatus::kOk;
   }
 
-  // One Kalman step with the innovation covariance's factor L_S in ws.l_s. With S = L_S L_S^T and
-  // W = P_xz L_S^-T, the gain is K = W L_S^-1, so dx = W (L_S^-1 nu) and P - K P_xz^T = P - W W^T:
-  // one triangular solve of the regression's rows, W as a sum of the sampled states' columns of P,
-  // and a symmetric rank-kRows update of P in place, each entry once (exactly symmetric, no copy).
-  // A step that fails changes nothing.
-  template <int K, int kRows>
-  FilterStatus apply_update(UpdateWorkspace<K, kRows>& ws,
-                            Eigen::Matrix<Scalar, kRows, 1>& innovation) {
-    // P_xz = P[:, s] P_ss^-1 P_sz (the regression carries the rest of the state), so
-    // W = P[:, s] (reg L_S^-T), P[:, s] being the sampled states' columns.
-    ws.reg_w = ws.reg;
-    solve_right_lower_transposed(ws.l_s, ws.reg_w);
-    auto& w = ws.w_gain;
-    w.setZero();
-    for (int k = 0; k < K; ++k)
-      for (int r = 0; r < kRows; ++r) w.col(r) += ws.reg_w(k, r) * cov_.col(ws.reads[k]);
-    solve_lower(ws.l_s, innovation);
-    ErrorVector dx = innovation(0) * w.col(0);
-    for (int r = 1; r < kRows; ++r) dx += innovation(r) * w.col(r);
-    if (!dx.allFinite() || !w.allFinite()) return FilterStatus::kNonFinite;
+  // One Kalman step with the innovation covariance in ws.s (factored into ws.llt_s already if
+  // `factored`). With S = L_S L_S^T and W = P_xz L_S^-T, the gain is K = W L_S^-1, so
+  // dx = W (L_S^-1 nu) and P - K P_xz^T = P - W W^T: one triangular solve of the regression's
+  // Z columns, one product with the block's rows of P, and a symmetric rank-Z update of P in
+  // place, each entry once (exactly symmetric, no copy). A step that fails changes nothing.
+  template <int B, int L, int kRows, int kBlocks>
+  FilterStatus apply_update(UpdateWorkspace<L, kRows * kBlocks>& ws,
+                            Eigen::Matrix<Scalar, kRows * kBlocks, 1>& innovation,
+                            const std::array<bool, kBlocks>& ok, bool factored) {
+    MeasurementSample<L, kRows* kBlocks>& ms = ws.ms;
+    make_inert<kRows, kBlocks>(ok, ws.s, innovation);
+    for (int b = 0; b < kBlocks; ++b)
+      if (!ok[b]) ms.reg.template middleCols<kRows>(b * kRows).setZero();
+    auto& llt_s = ws.llt_s;
+    if (!factored) {
+      llt_s.compute(ws.s);
+      if (llt_s.info() != Eigen::Success) return FilterStatus::kInnovationNotPositiveDefinite;
+    }
+    // P_xz = P[:, block] P_bb^-1 P_bz (the regression carries the rest of the state), so
+    // W^T = (reg L_S^-T)^T P[block, :], P being symmetric.
+    ws.reg_w = ms.reg;
+    solve_right_lower_transposed(llt_s.matrixLLT(), ws.reg_w);  // its lower triangle is L_S
+    auto& w_t = ws.w_t;
+    // Each entry a dot product of two contiguous columns (Eigen's blocked product packs both).
+    w_t.noalias() = ws.reg_w.transpose().lazyProduct(cov_.template middleRows<L>(B));
+    llt_s.matrixL().solveInPlace(innovation);
+    const ErrorVector dx = w_t.transpose() * innovation;
+    if (!dx.allFinite() || !w_t.allFinite()) return FilterStatus::kNonFinite;
     // Every variance must stay positive; then |W_i . W_j| < sqrt(P_ii P_jj) bounds every entry.
     for (int i = 0; i < N; ++i)
-      if (!(cov_(i, i) - w.row(i).squaredNorm() > Scalar(0))) return FilterStatus::kNonFinite;
+      if (!(cov_(i, i) - w_t.col(i).squaredNorm() > Scalar(0))) return FilterStatus::kNonFinite;
     mean_.template boxplus_block<0, N>(dx);
-    // Whole columns, contiguous: entry (i, j) and (j, i) are the same products summed in the same
-    // order, so P stays exactly symmetric.
-    for (int j = 0; j < N; ++j) {
-      Scalar* col = cov_.col(j).data();
-      for (int i = 0; i < N; ++i) {
-        Scalar sum = w(i, 0) * w(j, 0);
-        for (int r = 1; r < kRows; ++r) sum += w(i, r) * w(j, r);
-        col[i] -= sum;
-      }
-    }
+    for (int j = 0; j < N; ++j)
+      for (int i = j; i < N; ++i) cov_(j, i) = cov_(i, j) -= w_t.col(i).dot(w_t.col(j));
     return FilterStatus::kOk;
   }
 
