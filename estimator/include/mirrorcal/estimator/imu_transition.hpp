@@ -62,6 +62,30 @@ struct ImuTransition {
     out.template middleRows<3>(12) = theta_bg.lazyProduct(xbg) + theta_theta.lazyProduct(xth);
   }
 
+  // out = x F^T, for x with the 15 columns of the IMU block; out must not alias x. Each column of
+  // out is x's columns combined by a row of F: whole columns of x, contiguous, so for x = P's
+  // IMU columns (P F^T = (F P)^T, P symmetric) this vectorises where left_multiply's 3-row blocks
+  // cannot.
+  template <class In, class Out>
+  void right_multiply_transposed(const Eigen::MatrixBase<In>& x,
+                                 Eigen::MatrixBase<Out>& out) const {
+    const auto xv = x.template middleCols<3>(0), xba = x.template middleCols<3>(3),
+               xbg = x.template middleCols<3>(6), xp = x.template middleCols<3>(9),
+               xth = x.template middleCols<3>(12);
+    // Row r of a 3x3 block applied to three columns, as one expression: the sums below are each
+    // a single pass over the rows.
+    const auto by = [](const auto& x3, const Mat3<S>& m, int r) {
+      return m(r, 0) * x3.col(0) + m(r, 1) * x3.col(1) + m(r, 2) * x3.col(2);
+    };
+    for (int r = 0; r < 3; ++r) {
+      out.col(r) = xv.col(r) + by(xba, v_ba, r) + by(xbg, v_bg, r) + by(xth, v_theta, r);
+      out.col(9 + r) =
+          dt * xv.col(r) + by(xba, p_ba, r) + by(xbg, p_bg, r) + xp.col(r) + by(xth, p_theta, r);
+      out.col(12 + r) = by(xbg, theta_bg, r) + by(xth, theta_theta, r);
+    }
+    out.template middleCols<6>(3) = x.template middleCols<6>(3);
+  }
+
   Eigen::Matrix<S, 15, 15> dense() const {
     Eigen::Matrix<S, 15, 15> f;
     left_multiply(Eigen::Matrix<S, 15, 15>::Identity(), f);
