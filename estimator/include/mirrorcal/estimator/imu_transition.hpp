@@ -23,9 +23,9 @@ Mat3<S> so3_right_jacobian(const Vec3<S>& phi) {
   const S a2 = phi.squaredNorm();
   const Mat3<S> h = so3::hat<S>(phi);
   S c1, c2;  // J_r = I - c1 [phi]x + c2 [phi]x^2
-  if (a2 < so3::small_angle<S>() * so3::small_angle<S>()) {
-    c1 = S(0.5) - a2 / S(24);
-    c2 = S(1) / S(6) - a2 / S(120);
+  if (a2 < so3::series_angle<S>() * so3::series_angle<S>()) {
+    c1 = S(0.5) * (S(1) - a2 / S(12) * (S(1) - a2 / S(30) * (S(1) - a2 / S(56))));
+    c2 = (S(1) - a2 / S(20) * (S(1) - a2 / S(42) * (S(1) - a2 / S(72)))) / S(6);
   } else {
     const S a = std::sqrt(a2);
     c1 = (S(1) - std::cos(a)) / a2;
