@@ -1,9 +1,11 @@
 // Runs one operation a given number of times, for instruction counts under callgrind, which do
 // not depend on the machine's load: the count of N operations less that of none is N times the
 // cost of one.
-//   mirrorcal_opcount predict|update|restore <M> <float|double> <N>
+//   mirrorcal_opcount predict|predict2|update|restore <M> <float|double> <N>
 //                                            (restore: the filter reset that precedes each
-//                                            operation, alone, to subtract)
+//                                            operation, alone, to subtract; predict2: two
+//                                            predicts, the second following a predict as most
+//                                            do in the loop: predict2 less predict)
 //   mirrorcal_opcount stage2-update|stage2-restore <NK> <N>
 //                                            stage 2 (M = 3, double, radtan lens) with NK = 4
 //                                            (lens known) or 8 (its coefficients estimated)
@@ -29,7 +31,7 @@ namespace {
 
 int usage() {
   std::fputs(
-      "usage: mirrorcal_opcount predict|update|restore <M> <float|double> <N>\n"
+      "usage: mirrorcal_opcount predict|predict2|update|restore <M> <float|double> <N>\n"
       "       mirrorcal_opcount stage2-update|stage2-restore <4|8> <N>\n"
       "       mirrorcal_opcount recording|shipped <N>\n"
       "       mirrorcal_opcount sizes|stack\n",
@@ -106,7 +108,8 @@ int main(int argc, char** argv) {
     std::printf("markers used %llu\n", static_cast<unsigned long long>(used));
     return 0;
   }
-  if ((what == "predict" || what == "update" || what == "restore") && argc == 5) {
+  if ((what == "predict" || what == "predict2" || what == "update" || what == "restore") &&
+      argc == 5) {
     const std::string type = argv[3];
     if (type != "float" && type != "double") return usage();
     const auto ops = mb::make_filter_ops(std::atoi(argv[2]), type == "float");
@@ -119,7 +122,8 @@ int main(int argc, char** argv) {
     for (long i = 0; i < n; ++i) {
       ops->restore();
       if (what == "update") failed += ops->update() ? 0 : 1;
-      if (what == "predict") failed += ops->predict() ? 0 : 1;
+      if (what == "predict" || what == "predict2") failed += ops->predict() ? 0 : 1;
+      if (what == "predict2") failed += ops->predict() ? 0 : 1;
     }
     return failed == 0 ? 0 : 1;
   }

@@ -102,6 +102,10 @@ TEST(ImuTransition, BlockProductEqualsTheDenseOne) {
   Eigen::Matrix<double, 15, 40> out;
   f.left_multiply(x, out);
   EXPECT_LT((out - dense * x).cwiseAbs().maxCoeff(), 1e-14);
+  const Eigen::Matrix<double, 40, 15> xt = x.transpose();
+  Eigen::Matrix<double, 40, 15> out_t;
+  f.right_multiply_transposed(xt, out_t);
+  EXPECT_LT((out_t - xt * dense.transpose()).cwiseAbs().maxCoeff(), 1e-14);
   EXPECT_EQ(f.dense(), dense);
 }
 

@@ -61,7 +61,10 @@ class CalibrationFilter {
         fixed_(config.intrinsics.template cast<S>()) {}
 
   // A new estimate for the filter's present time (which reset leaves as it is).
-  void reset(const State& x, const Covariance& p) { filter_.reset(x, p); }
+  void reset(const State& x, const Covariance& p) {
+    filter_.reset(x, p);
+    imu_block_checked_ = false;
+  }
   // The IMU signal at the time the estimate holds for: the loop's first sample, then every
   // predict's end. Until it is known, frames are taken at t_cam + t_d with the rig at rest
   // (Exposure is then the velocity alone).
@@ -187,6 +190,10 @@ class CalibrationFilter {
   // parabola gave (imu_signal_at), so a short interval does not amplify the noise.
   Vec3<S> gyro_rate_ = Vec3<S>::Zero();
   bool timed_ = false;
+  // Whether the covariance's IMU block is known positive definite: predict checks it when
+  // anything else (reset, update, restart) changed the covariance since its last check, not
+  // after its own steps, which keep it so (F P F^T + Q, Q positive definite).
+  bool imu_block_checked_ = false;
 };
 
 template <typename S, int M, int NK>
@@ -231,30 +238,35 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   static_assert(State::kDynamicBegin == 0, "the IMU block leads the error state");
   ++counters_.predicts;
   const Covariance& p = filter_.covariance();
-  Eigen::Matrix<S, D, D> factor = p.template topLeftCorner<D, D>();
-  if (!cholesky_in_place(factor)) {
-    ++counters_.failures;
-    return FilterStatus::kCovarianceNotPositiveDefinite;
+  if (!imu_block_checked_) {
+    Eigen::Matrix<S, D, D> factor = p.template topLeftCorner<D, D>();
+    if (!cholesky_in_place(factor)) {
+      ++counters_.failures;
+      return FilterStatus::kCovarianceNotPositiveDefinite;
+    }
+    imu_block_checked_ = true;
   }
   const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
   const ImuTransition<S> f = imu_transition(filter_.mean(), s0, s1);
   State x = filter_.mean();
   propagate_imu(x, s0, s1, gravity_, before);
-  // F times the IMU rows of P; then P_dd' = (F P_dd) F^T = F (F P_dd)^T, P being symmetric.
-  Eigen::Matrix<S, D, kDim> fp;
-  f.left_multiply(p.template topRows<D>(), fp);
-  const Eigen::Matrix<S, D, D> fp_dd_t = fp.template leftCols<D>().transpose();
+  // P's IMU columns times F^T, (F P)^T: its rows below the IMU block are the new P_cd. Then
+  // P_dd' = F (P_dd F^T).
+  Eigen::Matrix<S, kDim, D> pf_t;
+  f.right_multiply_transposed(p.template leftCols<D>(), pf_t);
   Eigen::Matrix<S, D, D> p_dd;
-  f.left_multiply(fp_dd_t, p_dd);
+  f.left_multiply(pf_t.template topRows<D>(), p_dd);
   const ImuNoise noise =
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
   add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum
-  if (!p_dd.allFinite() || !fp.template rightCols<C>().allFinite() || !x.v.allFinite() ||
-      !x.p.allFinite() || !x.q_n_b.coeffs().allFinite()) {
+  // P is finite, so a non-finite entry of F shows on the diagonal of F P F^T: every entry of F's
+  // row i enters P_dd'(i, i), and P_cd's column i comes from the same row.
+  if (!p_dd.diagonal().allFinite() || !x.v.allFinite() || !x.p.allFinite() ||
+      !x.q_n_b.coeffs().allFinite()) {
     ++counters_.failures;
     return FilterStatus::kNonFinite;
   }
-  filter_.template reset_leading<D>(x, p_dd, fp.template rightCols<C>());
+  filter_.template reset_leading<D>(x, p_dd, pf_t.template bottomRows<C>());
   if (keep_steps_) {
     Eigen::Matrix<S, D, D> moved;
     f.left_multiply(since_update_, moved);
@@ -281,7 +293,7 @@ void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
   restart(State::kP, r.position);
   restart(State::kV, r.velocity);
   restart(State::kTheta, r.attitude);
-  filter_.reset(x, p);
+  reset(x, p);
   since_update_.setZero();  // the motion before the gap says nothing of the motion after it
   start_at(s);
 }
@@ -311,6 +323,7 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
           },
           z, frame.seen, r, gate_on ? S(config_.gate_chi2) : S(INFINITY),
           linearisation_point(frame.t_ns));
+  if (res.status == FilterStatus::kOk) imu_block_checked_ = false;
   if (gate_on && res.status == FilterStatus::kOk) {
     counters_.nis_sum += res.nis;
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);

@@ -23,9 +23,9 @@ Mat3<S> so3_right_jacobian(const Vec3<S>& phi) {
   const S a2 = phi.squaredNorm();
   const Mat3<S> h = so3::hat<S>(phi);
   S c1, c2;  // J_r = I - c1 [phi]x + c2 [phi]x^2
-  if (a2 < so3::small_angle<S>() * so3::small_angle<S>()) {
-    c1 = S(0.5) - a2 / S(24);
-    c2 = S(1) / S(6) - a2 / S(120);
+  if (a2 < so3::series_angle<S>() * so3::series_angle<S>()) {
+    c1 = S(0.5) * (S(1) - a2 / S(12) * (S(1) - a2 / S(30) * (S(1) - a2 / S(56))));
+    c2 = (S(1) - a2 / S(20) * (S(1) - a2 / S(42) * (S(1) - a2 / S(72)))) / S(6);
   } else {
     const S a = std::sqrt(a2);
     c1 = (S(1) - std::cos(a)) / a2;
@@ -60,6 +60,30 @@ struct ImuTransition {
     out.template middleRows<3>(9) =
         dt * xv + p_ba.lazyProduct(xba) + p_bg.lazyProduct(xbg) + xp + p_theta.lazyProduct(xth);
     out.template middleRows<3>(12) = theta_bg.lazyProduct(xbg) + theta_theta.lazyProduct(xth);
+  }
+
+  // out = x F^T, for x with the 15 columns of the IMU block; out must not alias x. Each column of
+  // out is x's columns combined by a row of F: whole columns of x, contiguous, so for x = P's
+  // IMU columns (P F^T = (F P)^T, P symmetric) this vectorises where left_multiply's 3-row blocks
+  // cannot.
+  template <class In, class Out>
+  void right_multiply_transposed(const Eigen::MatrixBase<In>& x,
+                                 Eigen::MatrixBase<Out>& out) const {
+    const auto xv = x.template middleCols<3>(0), xba = x.template middleCols<3>(3),
+               xbg = x.template middleCols<3>(6), xp = x.template middleCols<3>(9),
+               xth = x.template middleCols<3>(12);
+    // Row r of a 3x3 block applied to three columns, as one expression: the sums below are each
+    // a single pass over the rows.
+    const auto by = [](const auto& x3, const Mat3<S>& m, int r) {
+      return m(r, 0) * x3.col(0) + m(r, 1) * x3.col(1) + m(r, 2) * x3.col(2);
+    };
+    for (int r = 0; r < 3; ++r) {
+      out.col(r) = xv.col(r) + by(xba, v_ba, r) + by(xbg, v_bg, r) + by(xth, v_theta, r);
+      out.col(9 + r) =
+          dt * xv.col(r) + by(xba, p_ba, r) + by(xbg, p_bg, r) + xp.col(r) + by(xth, p_theta, r);
+      out.col(12 + r) = by(xbg, theta_bg, r) + by(xth, theta_theta, r);
+    }
+    out.template middleCols<6>(3) = x.template middleCols<6>(3);
   }
 
   Eigen::Matrix<S, 15, 15> dense() const {

@@ -483,32 +483,43 @@ struct Exposure {
   Vec3<S> gravity_n = Vec3<S>::Zero();
 };
 
-// The IMU pose at the exposure: rotation by the bias-corrected rate, moved on by its derivative,
-// over the shift; position by the velocity and the navigation-frame acceleration (second order).
+// The mirror as the camera sees it at an exposure: the mirror's normal (e_z of n) in c and the
+// camera's height above the mirror plane. It is all the mirror image needs (mirror_image): row 2
+// of R_n_c and the height of p_n_c, so the camera's pose is never formed as a matrix.
+template <typename S>
+struct MirrorInCamera {
+  Vec3<S> normal_c;  // R_n_c^T e_z
+  S height;          // e_z^T p_n_c
+  // The mirror image, in c, of a point pi_c fixed in the camera frame (paper eq. 11):
+  // pi_hat = pi - 2 n (n . pi + height), the point's height above the mirror being n . pi + height.
+  Vec3<S> image(const Vec3<S>& pi_c) const {
+    return pi_c - (S(2) * (normal_c.dot(pi_c) + height)) * normal_c;
+  }
+};
+
+// The mirror seen from the camera at the exposure, shift = stamp_minus_filter_s + t_d after the
+// filter's time: the IMU rotated on by the bias-corrected rate, moved on by its derivative,
+// R_n_b' = R_n_b Exp(w shift), and moved by the velocity and the navigation-frame acceleration
+// (second order). Only e_z^T R_n_b' = (Exp(-w shift) R_n_b^T e_z)^T and the height of p' enter.
 // A state's velocity and biases are the filter's mean in every sigma point (the update samples
 // [p, kDim)); the shift is milliseconds at most, so their errors enter h only at second order,
 // and the mean is all they need.
 template <class State>
-void imu_pose_at_exposure(const State& x, const Exposure<typename State::Scalar>& e,
-                          Mat3<typename State::Scalar>& r_n_b, Vec3<typename State::Scalar>& p) {
+MirrorInCamera<typename State::Scalar> mirror_in_camera(const State& x,
+                                                        const Exposure<typename State::Scalar>& e) {
   using S = typename State::Scalar;
   const S dt = e.stamp_minus_filter_s + x.t_d;
-  const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
-  r_n_b = (x.q_n_b * so3::exp<S>((e.gyro - x.b_g + (S(0.5) * dt) * e.gyro_rate) * dt))
-              .toRotationMatrix();
-  const Vec3<S> a_n = r0 * (e.accel - x.b_a) + e.gravity_n;
-  p = x.p + dt * x.v + (S(0.5) * dt * dt) * a_n;
-}
-
-// Camera pose in n at a frame's exposure, from the IMU pose there and the camera pose in b.
-template <class State>
-void camera_pose(const State& x, const Exposure<typename State::Scalar>& e,
-                 Mat3<typename State::Scalar>& r_n_c, Vec3<typename State::Scalar>& p_n_c) {
-  Mat3<typename State::Scalar> r_n_b;
-  Vec3<typename State::Scalar> p;
-  imu_pose_at_exposure(x, e, r_n_b, p);
-  r_n_c = r_n_b * x.q_b_c.toRotationMatrix();
-  p_n_c = p + r_n_b * x.p_b_c;
+  const Quat<S>& q = x.q_n_b;
+  // R_n_b^T e_z, the third row of R_n_b.
+  const Vec3<S> up_b0(S(2) * (q.x() * q.z() - q.w() * q.y()),
+                      S(2) * (q.y() * q.z() + q.w() * q.x()),
+                      S(1) - S(2) * (q.x() * q.x() + q.y() * q.y()));
+  const Vec3<S> up_b = so3::exp<S>(-(e.gyro - x.b_g + (S(0.5) * dt) * e.gyro_rate) * dt) * up_b0;
+  const S accel_up = up_b0.dot(e.accel - x.b_a) + e.gravity_n.z();  // e_z^T a_n
+  MirrorInCamera<S> m;
+  m.normal_c = x.q_b_c.conjugate() * up_b;
+  m.height = x.p.z() + dt * x.v.z() + (S(0.5) * dt * dt) * accel_up + up_b.dot(x.p_b_c);
+  return m;
 }
 
 // The intrinsics a state implies: its own for stage 2, the configured ones otherwise. NK = 8 takes
@@ -564,23 +575,21 @@ void predict_markers(const State& x, const Pinhole<typename State::Scalar>& fixe
                      Eigen::Matrix<typename State::Scalar, 2 * State::kMarkers, 1>& z,
                      std::array<bool, State::kMarkers>& ok) {
   using S = typename State::Scalar;
-  constexpr int M = State::kMarkers;
-  Mat3<S> r_n_c;
-  Vec3<S> p_n_c;
-  bool posed = false;
-  S posed_at = S(0);
+  MirrorInCamera<S> mirror;
+  bool seen = false;
+  S seen_at = S(0);
   const Pinhole<S> k = intrinsics_of(x, fixed);
-  for (int i = 0; i < M; ++i) {
+  for (int i = 0; i < State::kMarkers; ++i) {
     if (!ok[i]) continue;
-    if (!posed || readout_s[i] != posed_at) {  // a global shutter poses the camera once
+    if (!seen || readout_s[i] != seen_at) {  // a global shutter sees the mirror once
       Exposure<S> row = e;
       row.stamp_minus_filter_s += readout_s[i];
-      camera_pose(x, row, r_n_c, p_n_c);
-      posed = true;
-      posed_at = readout_s[i];
+      mirror = mirror_in_camera(x, row);
+      seen = true;
+      seen_at = readout_s[i];
     }
     Vec2<S> uv;
-    if (project<S>(k, mirror_image<S>(r_n_c, p_n_c, x.marker(i)), uv))
+    if (project<S>(k, mirror.image(x.marker(i)), uv))
       z.template segment<2>(2 * i) = uv;
     else
       ok[i] = false;

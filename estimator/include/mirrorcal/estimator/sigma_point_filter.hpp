@@ -211,17 +211,18 @@ class SigmaPointFilter {
     symmetrise(cov_);
   }
   // A new mean, and new rows and columns [0, D) of the covariance: the block's own covariance
-  // (symmetrised) and its cross-covariance with the states after it, whose covariance stays.
-  // What a predict that moves only the leading block needs, in place: reset() with the same
-  // covariance gives the same bits, from two copies of the N x N matrix and a pass over it.
-  template <int D>
+  // (symmetrised) and the cross-covariance p_cd of the states after it with it, whose covariance
+  // stays. What a predict that moves only the leading block needs, in place: reset() with the
+  // same covariance gives the same bits, from two copies of the N x N matrix and a pass over it.
+  template <int D, class Cross>
   void reset_leading(const State& mean, const Eigen::Matrix<Scalar, D, D>& p_dd,
-                     const Eigen::Matrix<Scalar, D, N - D>& p_dc) {
+                     const Eigen::MatrixBase<Cross>& p_cd) {
+    static_assert(Cross::RowsAtCompileTime == N - D && Cross::ColsAtCompileTime == D, "P_cd");
     mean_ = mean;
     for (int j = 0; j < D; ++j)
       for (int i = j; i < D; ++i) cov_(i, j) = cov_(j, i) = Scalar(0.5) * (p_dd(i, j) + p_dd(j, i));
-    cov_.template topRightCorner<D, N - D>() = p_dc;
-    cov_.template bottomLeftCorner<N - D, D>() = p_dc.transpose();
+    cov_.template bottomLeftCorner<N - D, D>() = p_cd;
+    cov_.template topRightCorner<D, N - D>() = p_cd.transpose();
   }
   const State& mean() const { return mean_; }
   const Covariance& covariance() const { return cov_; }

@@ -15,8 +15,9 @@ using Mat3 = Eigen::Matrix<S, 3, 3>;
 template <typename S>
 using Quat = Eigen::Quaternion<S>;
 
-// Below this angle (rad) the series forms are used; chosen so that the truncation error of the
-// series is below the scalar's epsilon (angle^4/1920 for exp in double at 1e-4 is ~5e-20).
+// Below this angle (rad) log, and exp below series_angle, take the first two terms of their
+// series, whose truncation error is then below the scalar's epsilon (angle^4/1920 for exp in
+// double at 1e-4 is ~5e-20).
 template <typename S>
 constexpr S small_angle() {
   return sizeof(S) == sizeof(float) ? S(1e-2) : S(1e-4);
@@ -29,16 +30,28 @@ Mat3<S> hat(const Vec3<S>& w) {
   return m;
 }
 
+// Below this angle (rad) exp and the right Jacobian use their series to the sixth power, whose
+// truncation (angle^8 / 1e7 relative) is below the scalar's epsilon there. The filter's rotations
+// are mostly this small (a 5 ms IMU step, a sigma point's few milliradians), and the series costs
+// a few multiplications where the trigonometric functions cost a library call each.
+template <typename S>
+constexpr S series_angle() {
+  return sizeof(S) == sizeof(float) ? S(0.2) : S(0.05);
+}
+
 // Exp: rotation vector -> unit quaternion.
 template <typename S>
 Quat<S> exp(const Vec3<S>& phi) {
-  const S angle2 = phi.squaredNorm();
-  const S angle = std::sqrt(angle2);
-  S w, k;  // q = (w, k * phi)
-  if (angle < small_angle<S>()) {
-    w = S(1) - angle2 / S(8);
-    k = S(0.5) - angle2 / S(48);
+  const S a2 = phi.squaredNorm();
+  S w, k;  // q = (w, k * phi): w = cos(angle / 2), k = sin(angle / 2) / angle
+  if (a2 < small_angle<S>() * small_angle<S>()) {  // the series' first two terms suffice
+    w = S(1) - a2 / S(8);
+    k = S(0.5) - a2 / S(48);
+  } else if (a2 < series_angle<S>() * series_angle<S>()) {
+    w = S(1) - a2 / S(8) * (S(1) - a2 / S(48) * (S(1) - a2 / S(120)));
+    k = S(0.5) * (S(1) - a2 / S(24) * (S(1) - a2 / S(80) * (S(1) - a2 / S(168))));
   } else {
+    const S angle = std::sqrt(a2);
     w = std::cos(S(0.5) * angle);
     k = std::sin(S(0.5) * angle) / angle;
   }
