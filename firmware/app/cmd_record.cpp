@@ -164,12 +164,13 @@ int record_devices(const Options& o, const std::string& dir) {
 // With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
 // guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
 // true ones. False, with the error, when a file cannot be written.
+template <int M>
 bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
                                bool hold_skew, bool lens, RecordingFolder& folder,
                                const std::string& sub, std::string& err, bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
-  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
+  const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
 
   sim::RecordingWriter writer;
   if (!writer.open(dir, err)) return false;
@@ -226,8 +227,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
 }  // namespace
 
 int cmd_record(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario",  "seed",       "out",       "config",
-                                         "timeshift", "distortion", "line-delay"};
+  std::vector<std::string> with_value = {"scenario",  "seed",       "out",        "config",
+                                         "timeshift", "distortion", "line-delay", "markers"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   Options o;
@@ -266,31 +267,35 @@ int cmd_record(int argc, char** argv) {
       fail("--duration: '" + text + "' is not seconds of simulated data within 1..600");
     s.duration_s = seconds;
   }
-  RecordingFolder folder(dir, o.flag("force"));
-  const bool images = o.flag("images");
-  if (!two_stage) {
-    if (!write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
-                                   error, images))
+  return with_markers(int(s.truth.markers.size()), [&](auto markers) {
+    constexpr int M = decltype(markers)::value;
+    RecordingFolder folder(dir, o.flag("force"));
+    const bool images = o.flag("images");
+    if (!two_stage) {
+      if (!write_simulated_recording<M>(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
+                                        error, images))
+        folder.fail_with(error);
+      folder.commit();
+      return 0;
+    }
+    // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
+    // together.
+    const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
+    if (!write_simulated_recording<M>(s, seed, false, false, false, folder, "/stage1", error,
+                                      images) ||
+        !write_simulated_recording<M>(s, sim::derive_seed(seed, sim::kStage2SeedStream), true,
+                                      hold_skew, lens, folder, "/stage2", error, images))
       folder.fail_with(error);
     folder.commit();
+    std::printf(
+        "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
+        "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",
+        hold_skew ? " --hold-skew" : "", o.flag("distortion") ? " --distortion " : "",
+        o.flag("distortion") ? o.get("distortion", "").c_str() : "",
+        lens ? " --estimate-distortion" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
+        stage2.c_str());
     return 0;
-  }
-  // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
-  // together.
-  const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  if (!write_simulated_recording(s, seed, false, false, false, folder, "/stage1", error, images) ||
-      !write_simulated_recording(s, sim::derive_seed(seed, sim::kStage2SeedStream), true, hold_skew,
-                                 lens, folder, "/stage2", error, images))
-    folder.fail_with(error);
-  folder.commit();
-  std::printf(
-      "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
-      "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",
-      hold_skew ? " --hold-skew" : "", o.flag("distortion") ? " --distortion " : "",
-      o.flag("distortion") ? o.get("distortion", "").c_str() : "",
-      lens ? " --estimate-distortion" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
-      stage2.c_str());
-  return 0;
+  });
 }
 
 }  // namespace mirrorcal::app

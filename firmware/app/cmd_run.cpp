@@ -227,11 +227,11 @@ bool calibrate_log(const SessionLog& log, sim::Recording& sensors,
     return true;
   };
   if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
-    return refine(CalibrationRun<8>{});
+    return refine(CalibrationRun<kMarkers, 8>{});
   if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
-    return refine(CalibrationRun<4>{});
-  if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<5>{});
-  return refine(CalibrationRun<0>{});
+    return refine(CalibrationRun<kMarkers, 4>{});
+  if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<kMarkers, 5>{});
+  return refine(CalibrationRun<kMarkers, 0>{});
 }
 
 // The result's warnings on stderr, and its files in dir.

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "cli.hpp"
+#include "live_feedback.hpp"  // kMarkers
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/drivers/frame_watchdog.hpp"
@@ -22,8 +23,6 @@
 #include "run_config.hpp"
 
 namespace mirrorcal::app {
-
-using calibration::kMarkers;
 
 // The camera: V4L2 capture, watched for silence (a camera that stops delivering frames ends the
 // run with a message, FrameWatchdog), and the markers detected in its frames (blobs, labelled by

@@ -10,13 +10,16 @@
 
 #include <Eigen/Core>
 
-#include "mirrorcal/calibration/run.hpp"  // kMarkers
+#include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 
 namespace mirrorcal::app {
 
-using calibration::kMarkers;
+// The markers of `run` and `record` on the board's devices: the paper's three (the live loop, its
+// feedback and the camera's detection are instantiated for this M only; calibrate, sim, montecarlo
+// and the simulated record take every built count).
+constexpr int kMarkers = sim::kPaperMarkers;
 
 // The parts of the calibration a user's motion informs differently: the first kFeedbackGroups of
 // CalibrationGroup, those of run's filter (no intrinsics).

@@ -208,8 +208,8 @@ TEST(Loop, MarkerMissingForAWhileIsSurvived) {
 TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
   mc::sim::Scenario s = mc::sim::paper_scenario();
   s.duration_s = 10.0;
-  const auto a = mc::evaluation::run_simulation(s, 11);
-  const auto b = mc::evaluation::run_simulation(s, 11);
+  const auto a = mc::evaluation::run_simulation<3>(s, 11);
+  const auto b = mc::evaluation::run_simulation<3>(s, 11);
   ASSERT_EQ(a.history.size(), b.history.size());
   for (std::size_t i = 0; i < a.history.size(); ++i) {
     const auto& ra = a.history[i];
@@ -226,7 +226,7 @@ TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
         << i;
   }
   // A different seed gives a different run: the comparison above can fail.
-  const auto c = mc::evaluation::run_simulation(s, 12);
+  const auto c = mc::evaluation::run_simulation<3>(s, 12);
   EXPECT_NE(0, std::memcmp(a.history.back().state.markers.data(),
                            c.history.back().state.markers.data(), sizeof(double) * 9));
 }
@@ -252,14 +252,14 @@ void expect_stage2_calibrated(const Run& run, int intrinsics) {
 // of their sigmas, which end far below a pixel; the stage 1 parameters stay calibrated.
 TEST(TwoStages, IntrinsicsConvergeFromGuesses100PxOff) {
   expect_stage2_calibrated(
-      mc::evaluation::run_two_stage_simulation<5>(mc::sim::paper_scenario(), 4), 5);
+      mc::evaluation::run_two_stage_simulation<3, 5>(mc::sim::paper_scenario(), 4), 5);
 }
 
 // Stage 2 holding skew (NK = 4) on a camera without it: the skew stays exactly where it was put,
 // the other four converge as with skew estimated.
 TEST(TwoStages, HoldingSkewKeepsItAtZeroAndCalibratesTheRest) {
   const mc::sim::Scenario s = mc::sim::without_skew(mc::sim::paper_scenario());
-  const auto run = mc::evaluation::run_two_stage_simulation<4>(s, 4);
+  const auto run = mc::evaluation::run_two_stage_simulation<3, 4>(s, 4);
   expect_stage2_calibrated(run, 4);
   EXPECT_EQ(run.result.params.back().name, "cv");
   EXPECT_EQ(run.result.intrinsics.skew, 0.0);

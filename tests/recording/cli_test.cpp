@@ -957,16 +957,16 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   Result r = run_mirrorcal("record --seed 4 --images --duration 10 --out " + rec, d);
   ASSERT_EQ(r.code, 0) << r.output;
 
-  using Run = mc::calibration::CalibrationRun<0>;
+  using Run = mc::calibration::CalibrationRun<3, 0>;
   using State = Run::State;
   std::string err;
   mc::sim::Recording features, images;
-  ASSERT_TRUE(mc::sim::open_recording(rec, mc::calibration::kMarkers, features, err)) << err;
-  ASSERT_TRUE(mc::sim::open_recording(rec, mc::calibration::kMarkers, images, err, true)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::sim::kPaperMarkers, features, err)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::sim::kPaperMarkers, images, err, true)) << err;
   ASSERT_TRUE(images.from_images);
   Run from_features, from_images;
-  ASSERT_TRUE(mc::calibration::calibrate_recording<0>(features, from_features, err)) << err;
-  ASSERT_TRUE(mc::calibration::calibrate_recording<0>(images, from_images, err)) << err;
+  ASSERT_TRUE(mc::calibration::calibrate_recording<3, 0>(features, from_features, err)) << err;
+  ASSERT_TRUE(mc::calibration::calibrate_recording<3, 0>(images, from_images, err)) << err;
   const auto& a = from_features.history.back();
   const auto& b = from_images.history.back();
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
@@ -987,7 +987,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   // Detection against the pixels the spots were drawn at (features.csv, the truth of the images):
   // every blob near a listed marker lies within a small fraction of the 1 px spot noise of it.
   mc::sim::Recording listed_frames;
-  ASSERT_TRUE(mc::sim::read_recording(rec, mc::calibration::kMarkers, listed_frames, err)) << err;
+  ASSERT_TRUE(mc::sim::read_recording(rec, mc::sim::kPaperMarkers, listed_frames, err)) << err;
   auto source = images.streams->open_images();
   ASSERT_NE(source, nullptr);
   mc::detection::BlobDetector detector(mc::detection::BlobConfig{}, 640, 480);
@@ -1033,7 +1033,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   std::vector<mc::sim::ObservedFrame> found = listed_frames.frames;
   for (auto& f : found) f.markers.clear();
   ASSERT_TRUE(mc::sim::parse_features_csv(slurp(d + "/out/features.csv"), "features.csv",
-                                          mc::calibration::kMarkers, found, err))
+                                          mc::sim::kPaperMarkers, found, err))
       << err;
   std::size_t rows = 0, wrong = 0;
   double farthest = 0.0;
