@@ -965,8 +965,8 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   ASSERT_TRUE(mc::sim::open_recording(rec, mc::sim::kPaperMarkers, images, err, true)) << err;
   ASSERT_TRUE(images.from_images);
   Run from_features, from_images;
-  ASSERT_TRUE(mc::calibration::calibrate_recording<3, 0>(features, from_features, err)) << err;
-  ASSERT_TRUE(mc::calibration::calibrate_recording<3, 0>(images, from_images, err)) << err;
+  ASSERT_TRUE((mc::calibration::calibrate_recording<3, 0>(features, from_features, err))) << err;
+  ASSERT_TRUE((mc::calibration::calibrate_recording<3, 0>(images, from_images, err))) << err;
   const auto& a = from_features.history.back();
   const auto& b = from_images.history.back();
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;

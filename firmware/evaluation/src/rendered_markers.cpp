@@ -60,7 +60,7 @@ template <int M>
 RenderedMarkers<M>::RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
                                     std::uint64_t seed)
     : frames_(s, render, seed),
-      detect_(frames_, detection_config(render), s.truth.width, s.truth.height) {}
+      detect_(frames_, detection_config<M>(render), s.truth.width, s.truth.height) {}
 
 template <int M>
 void RenderedMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction,

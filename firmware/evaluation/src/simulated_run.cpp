@@ -36,10 +36,10 @@ CalibrationRun<M, 0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   using Run = CalibrationRun<M, 0>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
-  Run::State x0;
-  Run::Filter::Covariance p0;
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  const Run::State truth = truth_state<Run::State>(s);
+  const typename Run::State truth = truth_state<typename Run::State>(s);
   // With frames, every pass renders and detects them afresh (detection follows the prediction).
   std::optional<RenderedMarkers<M>> rendered;
   std::uint64_t wrong_labels_before = 0;
@@ -73,15 +73,15 @@ template <int M>
 std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed) {
   using Run = CalibrationRun<M, 0>;
   const sim::SimData noisy = sim::simulate(s, seed);
-  Run::State x0;
-  Run::Filter::Covariance p0;
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
   initialise(sim::simulation_prior<M>(s, noisy, seed), x0, p0);
   sim::Scenario clean = s;  // the same rig, motion and true biases; no noise, no bias walk
   clean.pixel_sigma = 0.0;
   clean.imu.gyro_noise_density = clean.imu.accel_noise_density = 0.0;
   clean.imu.gyro_random_walk = clean.imu.accel_random_walk = 0.0;
   const sim::SimData data = sim::simulate(clean, seed);
-  Run::State start = truth_state<Run::State>(s);
+  typename Run::State start = truth_state<typename Run::State>(s);
   const sim::Kinematics k = sim::kinematics(s.motion, 0.0);
   start.p = k.p;
   start.v = k.v;
