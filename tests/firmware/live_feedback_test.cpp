@@ -17,7 +17,7 @@
 
 namespace mc = mirrorcal;
 using mc::CalibrationGroup;
-using mc::app::LiveFeedback;
+using LiveFeedback = mc::app::LiveFeedback<mc::sim::kPaperMarkers>;
 using Filter = LiveFeedback::Filter;
 using State = Filter::State;
 
@@ -105,7 +105,8 @@ TEST(LiveFeedback, WorstDirectionOfEachGroupIsFoundInTheCameraFrame) {
     p.block<3, 3>(State::kPhi, State::kPhi) = block_c;
     p.block<3, 3>(State::kPi + 3, State::kPi + 3) = block_c;  // the second marker is the worst
     p(State::kTd, State::kTd) = 4e-6;
-    const mc::app::CalibrationUncertainty u = mc::app::calibration_uncertainty(p, p0, q_b_c);
+    const mc::app::CalibrationUncertainty u =
+        mc::app::calibration_uncertainty<mc::sim::kPaperMarkers>(p, p0, q_b_c);
     for (int g = 0; g < 3; ++g) {
       SCOPED_TRACE(mc::app::group_name(static_cast<CalibrationGroup>(g)));
       const auto& got = u[static_cast<std::size_t>(g)];
