@@ -114,7 +114,7 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
   std::uint64_t markers = sim::kPaperMarkers;
   if (!parse_count(o, "markers", sim::kPaperMarkers, 1, markers, error, 64)) return false;
   if (!marker_count_built(int(markers))) {
-    error = "--markers " + marker_count_not_built(int(markers));
+    error = "--markers: " + marker_count_not_built(int(markers));
     return false;
   }
   if (name == "paper" && markers != sim::kPaperMarkers) {

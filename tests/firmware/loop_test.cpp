@@ -6,9 +6,11 @@
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/sim_host/simulator.hpp"
@@ -229,6 +231,38 @@ TEST(Loop, SameInputsGiveBitIdenticalOutputs) {
   const auto c = mc::evaluation::run_simulation<3>(s, 12);
   EXPECT_NE(0, std::memcmp(a.history.back().state.markers.data(),
                            c.history.back().state.markers.data(), sizeof(double) * 9));
+}
+
+// Every built number of markers (MIRRORCAL_MARKERS) calibrates a rig of the random family with that
+// many, through the whole pipeline: no filter failure, every marker used, each marker's position
+// narrowed to a fraction of its prior, and the final estimate within the 99.9 % NEES bound of its
+// calibration states (several seeds: a property of the filter, not of one rig).
+template <int M>
+void expect_random_rigs_calibrated() {
+  for (const std::uint64_t seed : {21u, 22u}) {
+    mc::sim::Scenario s = mc::sim::random_scenario(seed, M);
+    s.duration_s = 30.0;
+    ASSERT_EQ(s.truth.markers.size(), std::size_t(M));
+    const auto run = mc::evaluation::run_simulation<M>(s, seed);
+    ASSERT_FALSE(run.history.empty()) << M << " markers, seed " << seed;
+    EXPECT_EQ(run.filter_counters.failures, 0u) << M << " markers, seed " << seed;
+    const auto& last = run.history.back();
+    const int states = mc::calibration_layout(M, 0).size();
+    EXPECT_LT(last.nees, mc::calibration::chi2_quantile(0.999, states))
+        << M << " markers, seed " << seed;
+    using State = typename std::decay_t<decltype(run)>::State;
+    for (int i = 0; i < 3 * M; ++i) {
+      const int k = State::kPi + i - State::kCalibrationBegin;
+      EXPECT_LT(last.sigma(k), 0.5 * run.prior_sigma[std::size_t(k)])
+          << M << " markers, seed " << seed << ", coordinate " << i;
+    }
+  }
+}
+
+TEST(Loop, EveryBuiltMarkerCountCalibratesRandomRigs) {
+  for (const int m : mc::kMarkerCounts)
+    mc::with_marker_count(
+        m, [](auto count) { expect_random_rigs_calibrated<decltype(count)::value>(); });
 }
 
 // What a stage 2 run must show: every intrinsic's sigma far below a pixel, and every calibration
