@@ -75,7 +75,7 @@ RecordEnd record_streams(const Devices& devices, hal::ImuSource& imu, sim::Recor
   RecordEnd end;
   StopOnSignal stop_on_signal;
   ImuSample sample;
-  MarkerFrame<M> frame;
+  MarkerFrame<M> frame{};
   while ((end.imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
     if (!writer.add_imu(sample)) break;
     // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
