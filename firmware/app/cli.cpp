@@ -161,6 +161,11 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
   return true;
 }
 
+std::string markers_note(const sim::Scenario& s) {
+  const int markers = int(s.truth.markers.size());
+  return markers == sim::kPaperMarkers ? "" : ", " + std::to_string(markers) + " markers";
+}
+
 bool create_out_dir(const std::string& dir, std::string& error) {
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);

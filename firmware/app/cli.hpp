@@ -61,6 +61,9 @@ bool parse_count(const Options& o, const std::string& key, std::uint64_t def, st
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
 constexpr double kMaxSimulatedReadoutS = 0.1;
 bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error);
+// ", N markers" for a rig with other than the paper's three markers, "" for three: what the
+// simulating commands add to their titles.
+std::string markers_note(const sim::Scenario& s);
 
 // Calls f(MarkerCount<M>{}) (marker_counts.hpp) for the built M equal to markers and returns its
 // exit code: every command reaches its instantiation for the rig's number of markers through here.

@@ -287,12 +287,8 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
 }
 
 void print_campaign_title(const Campaign& c) {
-  // The number of markers is said where it is not the paper's three.
-  const int markers = int(c.scenario.truth.markers.size());
-  const std::string markers_note =
-      markers == sim::kPaperMarkers ? "" : ", " + std::to_string(markers) + " markers";
   std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
-              c.scenario.name.c_str(), markers_note.c_str(),
+              c.scenario.name.c_str(), markers_note(c.scenario).c_str(),
               c.lens ? ", the lens's coefficients estimated in stage 2" : "",
               !c.intrinsics ? ""
               : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"

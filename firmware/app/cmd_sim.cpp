@@ -171,13 +171,10 @@ int cmd_sim(int argc, char** argv) {
                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz), profiler, error) ||
       !apply_realtime_options(o, error))
     fail(error);
-  // The number of markers is said where it is not the paper's three.
-  const std::string markers_note = int(s.truth.markers.size()) == sim::kPaperMarkers
-                                       ? ""
-                                       : ", " + std::to_string(s.truth.markers.size()) + " markers";
+  const std::string note = markers_note(s);  // the number of markers, where not three
   std::printf(
       "mirrorcal sim: scenario '%s'%s, seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
-      s.name.c_str(), markers_note.c_str(), static_cast<unsigned long long>(seed), s.duration_s,
+      s.name.c_str(), note.c_str(), static_cast<unsigned long long>(seed), s.duration_s,
       s.imu_rate_hz, s.camera_rate_hz);
   const SimReport report{
       s,
@@ -185,7 +182,7 @@ int cmd_sim(int argc, char** argv) {
       frames,
       !o.flag("no-plots"),
       dir,
-      "mirrorcal sim, scenario " + s.name + markers_note + ", seed " + std::to_string(seed) +
+      "mirrorcal sim, scenario " + s.name + note + ", seed " + std::to_string(seed) +
           (intrinsics
                ? one_stage ? ", intrinsics in one stage" : ", intrinsics in stage 2 (reported)"
                : ""),
