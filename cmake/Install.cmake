@@ -16,6 +16,8 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/estimator/include/ ${PROJECT_SOURCE_DIR}
                   ${PROJECT_SOURCE_DIR}/firmware/loop/include/
                   ${PROJECT_SOURCE_DIR}/firmware/detection/include/
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+install(FILES ${MIRRORCAL_GENERATED_INCLUDE}/mirrorcal/estimator/marker_counts.hpp
+        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/mirrorcal/estimator)
 install(EXPORT mirrorcalTargets NAMESPACE mirrorcal:: DESTINATION ${MIRRORCAL_CMAKE_DIR})
 
 configure_package_config_file(${CMAKE_CURRENT_LIST_DIR}/mirrorcalConfig.cmake.in

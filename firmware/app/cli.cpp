@@ -110,7 +110,19 @@ bool line_delay_option(const Options& o, const std::string& key, const sim::Scen
 bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error) {
   s = sim::Scenario{};
   const std::string name = o.get("scenario", "paper");
-  if (!sim::scenario_by_name(name, seed, s)) {
+  // --markers N: the random family's rig has N markers (a count this build has).
+  std::uint64_t markers = sim::kPaperMarkers;
+  if (!parse_count(o, "markers", sim::kPaperMarkers, 1, markers, error, 64)) return false;
+  if (!marker_count_built(int(markers))) {
+    error = "--markers: " + marker_count_not_built(int(markers));
+    return false;
+  }
+  if (name == "paper" && markers != sim::kPaperMarkers) {
+    error = "--markers: the paper scenario has " + std::to_string(sim::kPaperMarkers) +
+            " markers; other counts are for --scenario random";
+    return false;
+  }
+  if (!sim::scenario_by_name(name, seed, s, int(markers))) {
     error = "unknown scenario '" + name + "' (known: paper, random)";
     return false;
   }
@@ -147,6 +159,11 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
     sim::set_lens(s, d);
   }
   return true;
+}
+
+std::string markers_note(const sim::Scenario& s) {
+  const int markers = int(s.truth.markers.size());
+  return markers == sim::kPaperMarkers ? "" : ", " + std::to_string(markers) + " markers";
 }
 
 bool create_out_dir(const std::string& dir, std::string& error) {

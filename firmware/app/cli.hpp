@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "mirrorcal/estimator/marker_counts.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 
 namespace mirrorcal::app {
@@ -51,7 +52,8 @@ bool parse(int argc, char** argv, int first, const std::vector<std::string>& wit
 bool parse_count(const Options& o, const std::string& key, std::uint64_t def, std::uint64_t min,
                  std::uint64_t& value, std::string& error, std::uint64_t max = UINT64_MAX);
 
-// The scenario named by --scenario (default "paper"); the random family's draw for seed. With
+// The scenario named by --scenario (default "paper"); the random family's draw for seed, with
+// --markers N markers (a built count; the paper's rig has three). With
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
 // --distortion MODEL, the camera has that lens (sim::set_lens); with --line-delay S, a rolling
 // shutter reading each row S seconds after the one above (a whole frame within
@@ -59,6 +61,20 @@ bool parse_count(const Options& o, const std::string& key, std::uint64_t def, st
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
 constexpr double kMaxSimulatedReadoutS = 0.1;
 bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error);
+// ", N markers" for a rig with other than the paper's three markers, "" for three: what the
+// simulating commands add to their titles.
+std::string markers_note(const sim::Scenario& s);
+
+// Calls f(MarkerCount<M>{}) (marker_counts.hpp) for the built M equal to markers and returns its
+// exit code: every command reaches its instantiation for the rig's number of markers through here.
+// A count not built fails, saying which are and how to build another (exit code 2).
+template <class F>
+int with_markers(int markers, F&& f) {
+  int code = 0;
+  if (!with_marker_count(markers, [&](auto m) { code = f(m); }))
+    fail(marker_count_not_built(markers));
+  return code;
+}
 
 // Creates dir and locks it against a second mirrorcal writing into it (files::lock_folder) for as
 // long as this one runs; an error if it cannot.

@@ -17,7 +17,7 @@ using namespace calibration;
 
 namespace {
 
-template <int NK>
+template <int M, int NK>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
               const sim::CalibrationStart* from) {
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
@@ -35,9 +35,9 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
                  "the calibration will hardly have converged\n",
                  std::size_t(rec.stats.frames), static_cast<unsigned long long>(burn_in));
   std::string err;
-  CalibrationRun<NK> run;
+  CalibrationRun<M, NK> run;
   const auto t0 = std::chrono::steady_clock::now();
-  if (!calibrate_recording<NK>(
+  if (!calibrate_recording<M, NK>(
           rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -50,7 +50,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
   std::printf("\n%-17s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
               "final +-1sigma", rec.has_truth ? "  error/sig (truth.yaml)" : "");
-  constexpr CalibrationLayout kLayout = CalibrationRun<NK>::State::kCalibration;
+  constexpr CalibrationLayout kLayout = CalibrationRun<M, NK>::State::kCalibration;
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
     const int i = int(j) - kLayout[p.group].begin;  // within its group
@@ -136,58 +136,67 @@ int cmd_calibrate(int argc, char** argv) {
     fail(err);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
-  sim::Recording rec;
-  // The markers: features.csv, or found in the images where there is none (or when asked).
-  const bool from_images =
-      o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
-  // Streamed from its files in each pass: memory does not grow with the recording.
-  if (!sim::open_recording(in, kMarkers, rec, err, from_images)) fail(err, 1);
-  if (from_images)
-    std::printf(
-        "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
-        in.c_str(),
-        sim::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
-                                  : " (no features.csv)");
-  for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
-  for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
-  // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
-  // calibration (of another recording: the same data twice would count twice).
-  sim::CalibrationStart start;
-  const sim::CalibrationStart* from = nullptr;
-  if (o.flag("from")) {
-    if (!sim::read_calibration_start(o.get("from", ""), kMarkers, start, err)) fail(err, 1);
-    if (start.recording_fingerprint == rec.fingerprint && !o.flag("from-same-data"))
-      fail(o.get("from", "") + " was calibrated from this recording's data (" + in +
-               ", recording_fingerprint " + rec.fingerprint +
-               "): calibrating it again would count the data twice and shrink every sigma. "
-               "Calibrate another recording from it, or give --from-same-data if that is meant.",
-           1);
-    from = &start;
-    std::printf(
-        "mirrorcal calibrate: the camera pose and markers start from %s (estimate and "
-        "covariance), not from mirrorcal.yaml's guesses\n",
-        o.get("from", "").c_str());
-  }
-  std::string out;
-  if (!make_out_dir(o, "out/calibrate", out, err)) fail(err, 1);
-  const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
-  const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
-  if (o.flag("hold-skew") && !intrinsics)
-    fail(
-        "--hold-skew applies when the intrinsics are estimated (--intrinsics, or "
-        "estimate_intrinsics: true in " +
-        in + "/mirrorcal.yaml)");
-  if (rec.priors.hold_skew && !intrinsics)
-    std::fprintf(stderr,
-                 "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
-                 "not estimated\n",
-                 in.c_str());
-  // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
-  // the lens's coefficients too, skew held.
-  if (intrinsics && rec.priors.estimate_distortion) return calibrate<8>(rec, in, out, from);
-  if (intrinsics && hold_skew) return calibrate<4>(rec, in, out, from);
-  if (intrinsics) return calibrate<5>(rec, in, out, from);
-  return calibrate<0>(rec, in, out, from);
+  // The filter of the recording's number of markers (mirrorcal.yaml's features_c). Where the
+  // files cannot tell, open_recording says what is wrong with them, checking them in order.
+  int markers = sim::kPaperMarkers;
+  std::string unread;
+  sim::recording_marker_count(in, markers, unread);
+  return with_markers(markers, [&](auto m) {
+    constexpr int M = decltype(m)::value;
+    sim::Recording rec;
+    // The markers: features.csv, or found in the images where there is none (or when asked).
+    const bool from_images =
+        o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
+    // Streamed from its files in each pass: memory does not grow with the recording.
+    if (!sim::open_recording(in, M, rec, err, from_images)) fail(err, 1);
+    if (from_images)
+      std::printf(
+          "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
+          in.c_str(),
+          sim::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
+                                    : " (no features.csv)");
+    for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
+    for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+    // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
+    // calibration (of another recording: the same data twice would count twice).
+    sim::CalibrationStart start;
+    const sim::CalibrationStart* from = nullptr;
+    if (o.flag("from")) {
+      if (!sim::read_calibration_start(o.get("from", ""), M, start, err)) fail(err, 1);
+      if (start.recording_fingerprint == rec.fingerprint && !o.flag("from-same-data"))
+        fail(o.get("from", "") + " was calibrated from this recording's data (" + in +
+                 ", recording_fingerprint " + rec.fingerprint +
+                 "): calibrating it again would count the data twice and shrink every sigma. "
+                 "Calibrate another recording from it, or give --from-same-data if that is meant.",
+             1);
+      from = &start;
+      std::printf(
+          "mirrorcal calibrate: the camera pose and markers start from %s (estimate and "
+          "covariance), not from mirrorcal.yaml's guesses\n",
+          o.get("from", "").c_str());
+    }
+    std::string out;
+    if (!make_out_dir(o, "out/calibrate", out, err)) fail(err, 1);
+    const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
+    const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
+    if (o.flag("hold-skew") && !intrinsics)
+      fail(
+          "--hold-skew applies when the intrinsics are estimated (--intrinsics, or "
+          "estimate_intrinsics: true in " +
+          in + "/mirrorcal.yaml)");
+    if (rec.priors.hold_skew && !intrinsics)
+      std::fprintf(
+          stderr,
+          "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
+          "not estimated\n",
+          in.c_str());
+    // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
+    // the lens's coefficients too, skew held.
+    if (intrinsics && rec.priors.estimate_distortion) return calibrate<M, 8>(rec, in, out, from);
+    if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from);
+    if (intrinsics) return calibrate<M, 5>(rec, in, out, from);
+    return calibrate<M, 0>(rec, in, out, from);
+  });
 }
 
 }  // namespace mirrorcal::app

@@ -287,8 +287,8 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
 }
 
 void print_campaign_title(const Campaign& c) {
-  std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
-              c.scenario.name.c_str(),
+  std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
+              c.scenario.name.c_str(), markers_note(c.scenario).c_str(),
               c.lens ? ", the lens's coefficients estimated in stage 2" : "",
               !c.intrinsics ? ""
               : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"
@@ -327,7 +327,8 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
     oc.failures = r.filter_counters.failures;
     oc.series = error_series(r.history, r.result.params);
     if (c.family && !c.intrinsics) {  // stage 1's limit (stage 2's is not computed yet)
-      const std::vector<double> limit = data_limit_sigmas(rs, run_seed);
+      constexpr int M = std::decay_t<decltype(r)>::State::kMarkers;
+      const std::vector<double> limit = data_limit_sigmas<M>(rs, run_seed);
       for (std::size_t j = 0; j < limit.size(); ++j)
         oc.limit.push_back(limit[j] * r.result.params[j].scale);
     }
@@ -335,17 +336,22 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
     std::lock_guard<std::mutex> lock(mu);
     if (params.empty()) params = r.result.params;
   };
-  if (c.lens)
-    record(c.one_stage ? run_one_stage_simulation<8>(rs, run_seed)
-                       : run_two_stage_simulation<8>(rs, run_seed));
-  else if (c.intrinsics && c.hold_skew)
-    record(c.one_stage ? run_one_stage_simulation<4>(rs, run_seed)
-                       : run_two_stage_simulation<4>(rs, run_seed));
-  else if (c.intrinsics)
-    record(c.one_stage ? run_one_stage_simulation<5>(rs, run_seed)
-                       : run_two_stage_simulation<5>(rs, run_seed));
-  else
-    record(run_simulation(rs, run_seed, {}, c.frames, nullptr, c.passes));
+  // The rig's markers, checked when the options were read: each run reaches its M here.
+  with_markers(int(rs.truth.markers.size()), [&](auto markers) {
+    constexpr int M = decltype(markers)::value;
+    if (c.lens)
+      record(c.one_stage ? run_one_stage_simulation<M, 8>(rs, run_seed)
+                         : run_two_stage_simulation<M, 8>(rs, run_seed));
+    else if (c.intrinsics && c.hold_skew)
+      record(c.one_stage ? run_one_stage_simulation<M, 4>(rs, run_seed)
+                         : run_two_stage_simulation<M, 4>(rs, run_seed));
+    else if (c.intrinsics)
+      record(c.one_stage ? run_one_stage_simulation<M, 5>(rs, run_seed)
+                         : run_two_stage_simulation<M, 5>(rs, run_seed));
+    else
+      record(run_simulation<M>(rs, run_seed, {}, c.frames, nullptr, c.passes));
+    return 0;
+  });
 }
 
 // The campaign's runs on c.jobs threads, into out (one per run) and params. False, with the
@@ -434,7 +440,8 @@ void report_family_campaign(const Campaign& c, const std::vector<Outcome>& out, 
       np, (unsigned long long)c.runs, nees, lo99, hi99, median(each),
       nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
   const std::size_t groups_used = !c.intrinsics ? 4 : c.lens ? 6 : 5;
-  report_family(out, groups_used, calibration_layout(kMarkers, estimated_intrinsics(c)), lo99, hi99,
+  const int markers = int(c.scenario.truth.markers.size());
+  report_family(out, groups_used, calibration_layout(markers, estimated_intrinsics(c)), lo99, hi99,
                 summary);
 }
 
@@ -562,7 +569,7 @@ int cmd_montecarlo(int argc, char** argv) {
   std::string error;
   if (!parse(argc, argv, 2,
              {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
-              "passes", "timeshift", "distortion", "line-delay", "filter-line-delay"},
+              "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"},
              o, error) ||
       !campaign_options(o, c, error))

@@ -62,30 +62,35 @@ const sim::GrayImage* frame_image(const hal::FrameView& view, std::vector<std::u
 struct RecordEnd {
   hal::SourceStatus imu_status = hal::SourceStatus::kOk;
   hal::SourceStatus frame_status = hal::SourceStatus::kNotReady;
+  std::string camera_error;  // with frame_status kError
   std::uint64_t frames = 0;
 };
 
 // The IMU's samples into writer, each followed by the camera's frames that came meanwhile (with
 // their images when asked: luma is their buffer), until the IMU stream ends (its duration, a
 // signal) or fails, the writer refuses, or the camera fails.
+template <int M>
 RecordEnd record_streams(const Devices& devices, hal::ImuSource& imu, sim::RecordingWriter& writer,
                          bool images, std::vector<std::uint8_t>& luma) {
   RecordEnd end;
   StopOnSignal stop_on_signal;
   ImuSample sample;
-  MarkerFrame<kMarkers> frame;
+  MarkerFrame<M> frame{};
   while ((end.imu_status = imu.next(sample)) == hal::SourceStatus::kOk) {
     if (!writer.add_imu(sample)) break;
     // The frames that came meanwhile, in their order (the camera's clock is the IMU's).
-    while (devices.camera &&
-           (end.frame_status = devices.camera->markers->poll(frame)) == hal::SourceStatus::kOk) {
+    while (devices.camera && (end.frame_status = devices.camera->markers<M>().poll(frame)) ==
+                                 hal::SourceStatus::kOk) {
       const sim::GrayImage* image = nullptr;
       sim::GrayImage grey;
-      if (images) image = frame_image(devices.camera->markers->last_frame(), luma, grey);
+      if (images) image = frame_image(devices.camera->markers<M>().last_frame(), luma, grey);
       if (!writer.add_frame(frame, image)) break;
       ++end.frames;
     }
-    if (end.frame_status == hal::SourceStatus::kError) break;
+    if (end.frame_status == hal::SourceStatus::kError) {
+      end.camera_error = devices.camera->markers<M>().error();
+      break;
+    }
   }
   return end;
 }
@@ -113,10 +118,18 @@ int record_devices(const Options& o, const std::string& dir) {
       (!s.sensors.empty() && !read_sensors(s.sensors, sensors, error)))
     fail(error, 2);
   const double imu_rate_hz = s.sensors.empty() ? s.rate_hz : sensors.sensors.imu_rate_hz;
+  // The markers the camera's frames are searched for: as many as --sensors' mirrorcal.yaml lists,
+  // else --markers (three by default).
+  std::uint64_t markers = sensors.priors.features_c.size();
+  if (!s.sensors.empty() && o.flag("markers"))
+    fail("--markers applies without --sensors (its mirrorcal.yaml lists the markers)");
+  if (s.sensors.empty() && !parse_count(o, "markers", sim::kPaperMarkers, 1, markers, error, 64))
+    fail(error);
+  if (!marker_count_built(int(markers))) fail(marker_count_not_built(int(markers)));
   Devices devices;
   int exit_code = 1;
-  if (!open_devices(s, sensors.sensors.width, sensors.sensors.height, imu_rate_hz, devices, error,
-                    exit_code))
+  if (!open_devices(s, int(markers), sensors.sensors.width, sensors.sensors.height, imu_rate_hz,
+                    devices, error, exit_code))
     fail(error, exit_code);
   RecordingFolder folder(dir, o.flag("force"));
 
@@ -131,7 +144,11 @@ int record_devices(const Options& o, const std::string& dir) {
       images ? std::size_t(sensors.sensors.width) * std::size_t(sensors.sensors.height) : 0);
   print_record_start(s, devices, imu_rate_hz, dir);
   StoppingImu imu(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
-  const RecordEnd end = record_streams(devices, imu, writer, images, luma);
+  RecordEnd end;
+  with_markers(int(markers), [&](auto count) {
+    end = record_streams<decltype(count)::value>(devices, imu, writer, images, luma);
+    return 0;
+  });
   StopOnSignal::report("closing the recording");
   const bool written = writer.close(err);
   std::printf("record: %llu IMU samples over %.3f s, %llu frames\n",
@@ -140,8 +157,7 @@ int record_devices(const Options& o, const std::string& dir) {
   print_device_counters(devices);
   if (!written) folder.fail_with(err);
   if (end.imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
-  if (end.frame_status == hal::SourceStatus::kError)
-    folder.fail_with(devices.camera->markers->error());
+  if (end.frame_status == hal::SourceStatus::kError) folder.fail_with(end.camera_error);
   if (!s.sensors.empty()) {
     std::string text;
     for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
@@ -164,12 +180,13 @@ int record_devices(const Options& o, const std::string& dir) {
 // With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
 // guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
 // true ones. False, with the error, when a file cannot be written.
+template <int M>
 bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
                                bool hold_skew, bool lens, RecordingFolder& folder,
                                const std::string& sub, std::string& err, bool images = false) {
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
-  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
+  const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
 
   sim::RecordingWriter writer;
   if (!writer.open(dir, err)) return false;
@@ -226,8 +243,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
 }  // namespace
 
 int cmd_record(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario",  "seed",       "out",       "config",
-                                         "timeshift", "distortion", "line-delay"};
+  std::vector<std::string> with_value = {"scenario",  "seed",       "out",        "config",
+                                         "timeshift", "distortion", "line-delay", "markers"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   Options o;
@@ -266,31 +283,35 @@ int cmd_record(int argc, char** argv) {
       fail("--duration: '" + text + "' is not seconds of simulated data within 1..600");
     s.duration_s = seconds;
   }
-  RecordingFolder folder(dir, o.flag("force"));
-  const bool images = o.flag("images");
-  if (!two_stage) {
-    if (!write_simulated_recording(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
-                                   error, images))
+  return with_markers(int(s.truth.markers.size()), [&](auto markers) {
+    constexpr int M = decltype(markers)::value;
+    RecordingFolder folder(dir, o.flag("force"));
+    const bool images = o.flag("images");
+    if (!two_stage) {
+      if (!write_simulated_recording<M>(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
+                                        error, images))
+        folder.fail_with(error);
+      folder.commit();
+      return 0;
+    }
+    // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
+    // together.
+    const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
+    if (!write_simulated_recording<M>(s, seed, false, false, false, folder, "/stage1", error,
+                                      images) ||
+        !write_simulated_recording<M>(s, sim::derive_seed(seed, sim::kStage2SeedStream), true,
+                                      hold_skew, lens, folder, "/stage2", error, images))
       folder.fail_with(error);
     folder.commit();
+    std::printf(
+        "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
+        "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",
+        hold_skew ? " --hold-skew" : "", o.flag("distortion") ? " --distortion " : "",
+        o.flag("distortion") ? o.get("distortion", "").c_str() : "",
+        lens ? " --estimate-distortion" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
+        stage2.c_str());
     return 0;
-  }
-  // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
-  // together.
-  const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
-  if (!write_simulated_recording(s, seed, false, false, false, folder, "/stage1", error, images) ||
-      !write_simulated_recording(s, sim::derive_seed(seed, sim::kStage2SeedStream), true, hold_skew,
-                                 lens, folder, "/stage2", error, images))
-    folder.fail_with(error);
-  folder.commit();
-  std::printf(
-      "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
-      "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",
-      hold_skew ? " --hold-skew" : "", o.flag("distortion") ? " --distortion " : "",
-      o.flag("distortion") ? o.get("distortion", "").c_str() : "",
-      lens ? " --estimate-distortion" : "", static_cast<unsigned long long>(seed), stage1.c_str(),
-      stage2.c_str());
-  return 0;
+  });
 }
 
 }  // namespace mirrorcal::app

@@ -32,22 +32,22 @@ using namespace calibration;
 namespace {
 
 // No camera: the marker stream is empty from the start.
-class NoMarkers final : public hal::MarkerSource<kMarkers> {
+template <int M>
+class NoMarkers final : public hal::MarkerSource<M> {
  public:
-  hal::SourceStatus poll(MarkerFrame<kMarkers>&) override {
-    return hal::SourceStatus::kEndOfStream;
-  }
+  hal::SourceStatus poll(MarkerFrame<M>&) override { return hal::SourceStatus::kEndOfStream; }
 };
 
 // What the live loop consumed, kept for the calibration after it. The memory is reserved before
 // the loop starts (the loop does not allocate); what does not fit is counted and left out.
+template <int M>
 struct SessionLog {
   SessionLog(std::size_t imu_capacity, std::size_t frame_capacity) {
     imu.reserve(imu_capacity);
     frames.reserve(frame_capacity);
   }
   std::vector<ImuSample> imu;
-  std::vector<MarkerFrame<kMarkers>> frames;  // as labelled with the filter's prediction
+  std::vector<MarkerFrame<M>> frames;  // as labelled with the filter's prediction
   std::uint64_t left_out = 0;
 
   template <class T>
@@ -61,10 +61,10 @@ struct SessionLog {
   void to_recording(sim::Recording& r) const {
     r.imu = imu;
     r.frames.clear();
-    for (const MarkerFrame<kMarkers>& f : frames) {
+    for (const MarkerFrame<M>& f : frames) {
       sim::ObservedFrame o;
       o.t_ns = f.t_ns;
-      for (int i = 0; i < kMarkers; ++i) {
+      for (int i = 0; i < M; ++i) {
         const auto k = static_cast<std::size_t>(i);
         if (f.seen[k]) o.markers.push_back({i, f.uv[k].x(), f.uv[k].y()});
       }
@@ -73,9 +73,10 @@ struct SessionLog {
   }
 };
 
+template <int M>
 class LoggedImu final : public hal::ImuSource {
  public:
-  LoggedImu(hal::ImuSource& inner, SessionLog& log) : inner_(inner), log_(log) {}
+  LoggedImu(hal::ImuSource& inner, SessionLog<M>& log) : inner_(inner), log_(log) {}
   hal::SourceStatus next(ImuSample& s) override {
     const hal::SourceStatus st = inner_.next(s);
     if (st == hal::SourceStatus::kOk) log_.keep(log_.imu, s);
@@ -86,18 +87,17 @@ class LoggedImu final : public hal::ImuSource {
 
  private:
   hal::ImuSource& inner_;
-  SessionLog& log_;
+  SessionLog<M>& log_;
 };
 
 // The camera's markers; each frame is kept once the loop has labelled it with its prediction.
-class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
-                            public hal::MarkerRelabeler<kMarkers> {
+template <int M>
+class LoggedMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
-  LoggedMarkers(detection::DetectingMarkerSource<kMarkers>& inner, SessionLog& log)
+  LoggedMarkers(detection::DetectingMarkerSource<M>& inner, SessionLog<M>& log)
       : inner_(inner), log_(log) {}
-  hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override { return inner_.poll(frame); }
-  void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
-               MarkerFrame<kMarkers>& frame) override {
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override { return inner_.poll(frame); }
+  void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override {
     inner_.relabel(prediction, frame);
     log_.keep(log_.frames, frame);
   }
@@ -105,8 +105,8 @@ class LoggedMarkers final : public hal::MarkerSource<kMarkers>,
   std::int64_t detection_ns() const override { return inner_.detection_ns(); }
 
  private:
-  detection::DetectingMarkerSource<kMarkers>& inner_;
-  SessionLog& log_;
+  detection::DetectingMarkerSource<M>& inner_;
+  SessionLog<M>& log_;
 };
 
 // Seconds of data a run without --duration keeps for its calibration: about 7 MB of IMU samples
@@ -115,6 +115,7 @@ constexpr double kLoggedSecondsWithoutDuration = 600.0;
 
 // The devices' streams as the live loop reads them: the IMU ended by --duration or a signal, and
 // both streams kept in a SessionLog sized for the run (markers only with a camera).
+template <int M>
 class LiveStreams {
  public:
   LiveStreams(const Devices& devices, double duration_s, std::int64_t imu_period,
@@ -124,17 +125,16 @@ class LiveStreams {
              devices.camera ? capacity(duration_s, frame_period) : 0),
         imu_(stopping_, log_) {
     if (devices.camera)
-      logged_markers_ = std::make_unique<LoggedMarkers>(*devices.camera->markers, log_);
+      logged_markers_ = std::make_unique<LoggedMarkers<M>>(devices.camera->markers<M>(), log_);
   }
   hal::ImuSource& imu() { return imu_; }
-  hal::MarkerSource<kMarkers>& markers() {
-    return logged_markers_ ? static_cast<hal::MarkerSource<kMarkers>&>(*logged_markers_)
-                           : no_markers_;
+  hal::MarkerSource<M>& markers() {
+    return logged_markers_ ? static_cast<hal::MarkerSource<M>&>(*logged_markers_) : no_markers_;
   }
   // What labels the camera's markers with the filter's prediction (null without a camera).
-  hal::MarkerRelabeler<kMarkers>* identifier() { return logged_markers_.get(); }
+  hal::MarkerRelabeler<M>* identifier() { return logged_markers_.get(); }
   double seconds() const { return stopping_.seconds(); }
-  SessionLog& log() { return log_; }
+  SessionLog<M>& log() { return log_; }
 
  private:
   // Items of one period kept over the run (--duration, else kLoggedSecondsWithoutDuration).
@@ -144,10 +144,10 @@ class LiveStreams {
   }
 
   StoppingImu stopping_;
-  SessionLog log_;
-  LoggedImu imu_;
-  NoMarkers no_markers_;
-  std::unique_ptr<LoggedMarkers> logged_markers_;
+  SessionLog<M> log_;
+  LoggedImu<M> imu_;
+  NoMarkers<M> no_markers_;
+  std::unique_ptr<LoggedMarkers<M>> logged_markers_;
 };
 
 bool parse_run_options(int argc, char** argv, Options& o, std::string& error) {
@@ -159,12 +159,10 @@ bool parse_run_options(int argc, char** argv, Options& o, std::string& error) {
   return parse(argc, argv, 2, with_value, flags, o, error);
 }
 
-// What a run starts from: its settings (--config, then the command line), the sensor description
-// (--sensors) and the priors of its mirrorcal.yaml; an error names what is missing or wrong.
-bool run_inputs(const Options& o, RunSettings& s, sim::Recording& sensors, Prior<kMarkers>& prior,
-                std::string& error) {
-  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
-    return false;
+// The priors of a run's mirrorcal.yaml (--sensors); an error names the file.
+template <int M>
+bool run_prior(const RunSettings& s, const sim::Recording& sensors, Prior<M>& prior,
+               std::string& error) {
   if (sim::to_prior(sensors.priors, prior, error)) return true;
   error = s.sensors + "/mirrorcal.yaml: " + error;
   return false;
@@ -208,7 +206,8 @@ void print_loop_counters(const firmware::LoopCounters& lcount, double seconds) {
 // The calibration after the live pass: what it kept, as a recording with the sensor description
 // and priors, calibrated as `mirrorcal calibrate` calibrates one (from an earlier calibration with
 // from). The result and its report replace the live pass's; false with the error when it fails.
-bool calibrate_log(const SessionLog& log, sim::Recording& sensors,
+template <int M>
+bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
                    const sim::CalibrationStart* from, const std::string& title,
                    CalibrationResult& result, ReportData& report, std::string& error) {
   std::printf(
@@ -227,11 +226,11 @@ bool calibrate_log(const SessionLog& log, sim::Recording& sensors,
     return true;
   };
   if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
-    return refine(CalibrationRun<8>{});
+    return refine(CalibrationRun<M, 8>{});
   if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
-    return refine(CalibrationRun<4>{});
-  if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<5>{});
-  return refine(CalibrationRun<0>{});
+    return refine(CalibrationRun<M, 4>{});
+  if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<M, 5>{});
+  return refine(CalibrationRun<M, 0>{});
 }
 
 // The result's warnings on stderr, and its files in dir.
@@ -253,40 +252,38 @@ bool write_run_result(const std::string& dir, const CalibrationResult& result,
 
 }  // namespace
 
-int cmd_run(int argc, char** argv) {
-  Options o;
+// The live loop of M markers on the devices, then the calibration of what it kept.
+template <int M>
+int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& sensors) {
   std::string error;
-  if (!parse_run_options(argc, argv, o, error)) fail(error);
-  RunSettings s;
-  sim::Recording sensors;
-  Prior<kMarkers> prior;
-  if (!run_inputs(o, s, sensors, prior, error)) fail(error, 2);
+  Prior<M> prior;
+  if (!run_prior(s, sensors, prior, error)) fail(error, 2);
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
   // one (stage 2 after stage 1, as calibrate --from).
   sim::CalibrationStart start;
   const sim::CalibrationStart* from = nullptr;
   if (o.flag("from")) {
-    if (!sim::read_calibration_start(o.get("from", ""), kMarkers, start, error)) fail(error, 1);
+    if (!sim::read_calibration_start(o.get("from", ""), M, start, error)) fail(error, 1);
     from = &start;
   }
 
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
   Devices devices;
   int exit_code = 1;
-  if (!open_devices(s, sensors.sensors.width, sensors.sensors.height, sensors.sensors.imu_rate_hz,
-                    devices, error, exit_code))
+  if (!open_devices(s, M, sensors.sensors.width, sensors.sensors.height,
+                    sensors.sensors.imu_rate_hz, devices, error, exit_code))
     fail(error, exit_code);
   if (!create_out_dir(s.out, error)) fail(error, 1);
 
-  using Filter = CalibrationFilter<double, kMarkers, 0>;
+  using Filter = CalibrationFilter<double, M, 0>;
   Filter filter(recording_config(sensors));
-  Filter::State x0;
-  Filter::Covariance p0;
+  typename Filter::State x0;
+  typename Filter::Covariance p0;
   initialise(prior, x0, p0);
   filter.reset(x0, p0);
   const std::int64_t imu_period = imu_period_ns(sensors.sensors.imu_rate_hz);
   const std::int64_t frame_period = frame_period_ns(devices);
-  LiveStreams streams(devices, s.duration_s, imu_period, frame_period);
+  LiveStreams<M> streams(devices, s.duration_s, imu_period, frame_period);
   drivers::MonotonicClock clock;
   std::unique_ptr<firmware::LoopProfiler> profiler;
   if (!make_profiler(o, clock, imu_period, frame_period, profiler, error) ||
@@ -297,9 +294,9 @@ int cmd_run(int argc, char** argv) {
   lc.profiler = profiler.get();
   // While the user moves the rig: what is still uncertain, what motion helps, when it converged.
   // On a terminal a line every window; in a log only when the verdict changes.
-  LiveFeedback feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
-  firmware::CalibrationLoop<double, kMarkers, 0> loop(filter, streams.imu(), streams.markers(), lc,
-                                                      devices.camera ? &feedback : nullptr);
+  LiveFeedback<M> feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
+  firmware::CalibrationLoop<double, M, 0> loop(filter, streams.imu(), streams.markers(), lc,
+                                               devices.camera ? &feedback : nullptr);
   if (devices.camera) loop.set_identifier(streams.identifier());
   print_run_start(s, devices, sensors.sensors.imu_rate_hz);
   const firmware::LoopEnd end = run_until_signal(loop);
@@ -316,8 +313,7 @@ int cmd_run(int argc, char** argv) {
     fail(error, 1);
   // The camera's stamps against the IMU's clock (a V4L2 driver stamping the end of the frame, the
   // bus's latency): what the calibration found.
-  const auto t_row =
-      std::size_t(calibration_layout(kMarkers, 0)[CalibrationGroup::kTimeOffset].begin);
+  const auto t_row = std::size_t(calibration_layout(M, 0)[CalibrationGroup::kTimeOffset].begin);
   std::printf("time offset found: timeshift_cam_imu %.3f ms +- %.3f ms (t_imu = t_cam + it)\n",
               1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
@@ -326,6 +322,21 @@ int cmd_run(int argc, char** argv) {
   if (end == firmware::LoopEnd::kImuError) fail(streams.imu().error(), 1);
   if (end == firmware::LoopEnd::kMarkerError) fail(streams.markers().error(), 1);
   return 0;
+}
+
+int cmd_run(int argc, char** argv) {
+  Options o;
+  std::string error;
+  if (!parse_run_options(argc, argv, o, error)) fail(error);
+  // The settings (--config, then the command line) and the sensor description (--sensors), whose
+  // mirrorcal.yaml says how many markers the camera's frames hold.
+  RunSettings s;
+  sim::Recording sensors;
+  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
+    fail(error, 2);
+  return with_markers(int(sensors.priors.features_c.size()), [&](auto markers) {
+    return run_on_devices<decltype(markers)::value>(o, s, sensors);
+  });
 }
 
 }  // namespace mirrorcal::app

@@ -135,9 +135,9 @@ bool check_stage_options(const Options& o, const FrameMode& frames, std::string&
 
 int cmd_sim(int argc, char** argv) {
   std::vector<std::string>
-      with_value = {"scenario",         "seed",   "out",       "format",     "pixel-sigma",
-                    "spot-noise",       "passes", "timeshift", "distortion", "line-delay",
-                    "filter-line-delay"},
+      with_value = {"scenario",          "seed",   "out",       "format",     "pixel-sigma",
+                    "spot-noise",        "passes", "timeshift", "distortion", "line-delay",
+                    "filter-line-delay", "markers"},
       flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
@@ -171,42 +171,47 @@ int cmd_sim(int argc, char** argv) {
                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz), profiler, error) ||
       !apply_realtime_options(o, error))
     fail(error);
+  const std::string note = markers_note(s);  // the number of markers, where not three
   std::printf(
-      "mirrorcal sim: scenario '%s', seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
-      s.name.c_str(), static_cast<unsigned long long>(seed), s.duration_s, s.imu_rate_hz,
-      s.camera_rate_hz);
-  const SimReport report{s,
-                         seed,
-                         frames,
-                         !o.flag("no-plots"),
-                         dir,
-                         "mirrorcal sim, scenario " + s.name + ", seed " + std::to_string(seed) +
-                             (intrinsics ? one_stage ? ", intrinsics in one stage"
-                                                     : ", intrinsics in stage 2 (reported)"
-                                         : ""),
-                         intrinsics && !one_stage,
-                         profiler.get(),
-                         std::chrono::steady_clock::now()};
+      "mirrorcal sim: scenario '%s'%s, seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
+      s.name.c_str(), note.c_str(), static_cast<unsigned long long>(seed), s.duration_s,
+      s.imu_rate_hz, s.camera_rate_hz);
+  const SimReport report{
+      s,
+      seed,
+      frames,
+      !o.flag("no-plots"),
+      dir,
+      "mirrorcal sim, scenario " + s.name + note + ", seed " + std::to_string(seed) +
+          (intrinsics
+               ? one_stage ? ", intrinsics in one stage" : ", intrinsics in stage 2 (reported)"
+               : ""),
+      intrinsics && !one_stage,
+      profiler.get(),
+      std::chrono::steady_clock::now()};
   const auto progress = [](double f) { print_progress("calibrating", f); };
-  std::string err;
-  bool written = false;
-  if (lens)
-    written = report_run(one_stage ? run_one_stage_simulation<8>(s, seed, progress)
-                                   : run_two_stage_simulation<8>(s, seed, progress),
-                         report, err);
-  else if (intrinsics && o.flag("hold-skew"))
-    written = report_run(one_stage ? run_one_stage_simulation<4>(s, seed, progress)
-                                   : run_two_stage_simulation<4>(s, seed, progress),
-                         report, err);
-  else if (intrinsics)
-    written = report_run(one_stage ? run_one_stage_simulation<5>(s, seed, progress)
-                                   : run_two_stage_simulation<5>(s, seed, progress),
-                         report, err);
-  else
-    written =
-        report_run(run_simulation(s, seed, progress, frames, profiler.get(), passes), report, err);
-  if (!written) fail(err, 1);
-  return 0;
+  return with_markers(int(s.truth.markers.size()), [&](auto markers) {
+    constexpr int M = decltype(markers)::value;
+    std::string err;
+    bool written = false;
+    if (lens)
+      written = report_run(one_stage ? run_one_stage_simulation<M, 8>(s, seed, progress)
+                                     : run_two_stage_simulation<M, 8>(s, seed, progress),
+                           report, err);
+    else if (intrinsics && o.flag("hold-skew"))
+      written = report_run(one_stage ? run_one_stage_simulation<M, 4>(s, seed, progress)
+                                     : run_two_stage_simulation<M, 4>(s, seed, progress),
+                           report, err);
+    else if (intrinsics)
+      written = report_run(one_stage ? run_one_stage_simulation<M, 5>(s, seed, progress)
+                                     : run_two_stage_simulation<M, 5>(s, seed, progress),
+                           report, err);
+    else
+      written = report_run(run_simulation<M>(s, seed, progress, frames, profiler.get(), passes),
+                           report, err);
+    if (!written) fail(err, 1);
+    return 0;
+  });
 }
 
 }  // namespace mirrorcal::app

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <type_traits>
 
 #include "cli.hpp"
 #include "mirrorcal/drivers/can_imu.hpp"
@@ -23,7 +24,7 @@ namespace {
 // Frame buffers the camera gets: a few frames of slack while the loop is busy with an update.
 constexpr int kCameraBuffers = 8;
 
-std::unique_ptr<Camera> open_camera(const RunSettings& s, int width, int height) {
+std::unique_ptr<Camera> open_camera(const RunSettings& s, int markers, int width, int height) {
   if (s.camera.empty()) return nullptr;
   const drivers::CameraSpec spec = drivers::parse_camera_spec(s.camera);
   auto camera = std::make_unique<Camera>();
@@ -40,15 +41,26 @@ std::unique_ptr<Camera> open_camera(const RunSettings& s, int width, int height)
   camera->watchdog = std::make_unique<drivers::FrameWatchdog>(
       camera->capture, camera->clock, spec.device,
       drivers::FrameWatchdog::timeout_for(period > 0 ? period : 50'000'000));
-  camera->markers = std::make_unique<detection::DetectingMarkerSource<kMarkers>>(
-      *camera->watchdog, detection::DetectionConfig<kMarkers>{}, width, height);
+  with_marker_count(markers, [&](auto count) {
+    constexpr int M = decltype(count)::value;
+    camera->detection = std::make_unique<detection::DetectingMarkerSource<M>>(
+        *camera->watchdog, detection::DetectionConfig<M>{}, width, height);
+  });
   return camera;
 }
 
 void print_camera_counters(const Camera& camera) {
   const hal::FrameCounters f = camera.capture.counters();
-  const detection::DetectionCounters& d = camera.markers->counters();
-  const detection::IdentifierCounters id = camera.markers->identifier_counters();
+  detection::DetectionCounters d;
+  detection::IdentifierCounters id;
+  std::visit(
+      [&](const auto& markers) {
+        if constexpr (!std::is_same_v<std::decay_t<decltype(markers)>, std::monostate>) {
+          d = markers->counters();
+          id = markers->identifier_counters();
+        }
+      },
+      camera.detection);
   std::printf(
       "camera: %llu frames, %llu dropped, %llu corrupt (skipped), %llu restarts; timestamps %s, "
       "%s\n",
@@ -136,8 +148,8 @@ bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error)
          sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error);
 }
 
-bool open_devices(const RunSettings& s, int width, int height, double imu_rate_hz, Devices& d,
-                  std::string& error, int& exit_code) {
+bool open_devices(const RunSettings& s, int markers, int width, int height, double imu_rate_hz,
+                  Devices& d, std::string& error, int& exit_code) {
   if (!s.trigger.empty() && s.camera.empty()) {
     error = "--trigger " + s.trigger + ": a camera trigger needs a camera (--camera DEV)";
     exit_code = 2;
@@ -146,7 +158,7 @@ bool open_devices(const RunSettings& s, int width, int height, double imu_rate_h
   try {
     if (!s.trigger.empty())
       d.trigger = std::make_unique<drivers::GpioTrigger>(drivers::parse_line_spec(s.trigger));
-    d.camera = open_camera(s, width, height);
+    d.camera = open_camera(s, markers, width, height);
     const drivers::ImuSpec spec = drivers::parse_imu_spec(s.imu);
     if (!s.drdy.empty())
       d.drdy = std::make_unique<drivers::GpioDataReady>(drivers::parse_line_spec(s.drdy));

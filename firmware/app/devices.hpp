@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <variant>
 
 #include "cli.hpp"
 #include "mirrorcal/calibration/run.hpp"
@@ -23,17 +24,26 @@
 
 namespace mirrorcal::app {
 
-using calibration::kMarkers;
+// The camera's marker detection, for one of the numbers of markers this build has.
+#define MIRRORCAL_DETECTION_OF_(M) std::unique_ptr<detection::DetectingMarkerSource<M>>,
+using MarkerDetection =
+    std::variant<MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_DETECTION_OF_) std::monostate>;
+#undef MIRRORCAL_DETECTION_OF_
 
 // The camera: V4L2 capture, watched for silence (a camera that stops delivering frames ends the
 // run with a message, FrameWatchdog), and the markers detected in its frames (blobs, labelled by
-// brightness, 1 : 1.5 : 2.25 in id order, and by the filter's prediction once a loop relabels
-// them).
+// brightness, 1 : 1.5 : 2.25 ... in id order, and by the filter's prediction once a loop relabels
+// them), as many as open_devices was given.
 struct Camera {
   drivers::V4l2Capture capture;
   drivers::MonotonicClock clock;
   std::unique_ptr<drivers::FrameWatchdog> watchdog;
-  std::unique_ptr<detection::DetectingMarkerSource<kMarkers>> markers;
+  MarkerDetection detection;
+  // The detection of M markers: M must be the count given to open_devices.
+  template <int M>
+  detection::DetectingMarkerSource<M>& markers() const {
+    return *std::get<std::unique_ptr<detection::DetectingMarkerSource<M>>>(detection);
+  }
 };
 
 // The settings of a command on the devices into s: --config FILE, then the command line
@@ -59,13 +69,14 @@ struct Devices {
   }
 };
 
-// Opens the devices s names into d, the camera (streaming, width x height) first. A device that is
+// Opens the devices s names into d, the camera (streaming, width x height, detecting `markers`
+// markers: a built count) first. A device that is
 // missing, busy or of the wrong kind, or a malformed specification, is an error naming it with
 // exit_code 1; a trigger without a camera one with exit_code 2. imu_rate_hz sets how many IMU
 // samples a camera trigger pulse takes when --trigger-every does not (one frame interval's worth,
 // 20 Hz where none is reported).
-bool open_devices(const RunSettings& s, int width, int height, double imu_rate_hz, Devices& d,
-                  std::string& error, int& exit_code);
+bool open_devices(const RunSettings& s, int markers, int width, int height, double imu_rate_hz,
+                  Devices& d, std::string& error, int& exit_code);
 
 // ", camera trigger gpiochip0:18 every 4 IMU samples (50 Hz)", or "" without a trigger.
 std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz);

@@ -10,9 +10,6 @@ using namespace calibration;
 
 namespace {
 
-using State = LiveFeedback::Filter::State;
-using Covariance = LiveFeedback::Filter::Covariance;
-
 // The largest 1-sigma of a 3x3 block and its direction; with the prior's sigma along it.
 GroupUncertainty worst_direction(const Eigen::Matrix3d& p, const Eigen::Matrix3d& p0) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p);
@@ -24,7 +21,8 @@ GroupUncertainty worst_direction(const Eigen::Matrix3d& p, const Eigen::Matrix3d
 }
 
 // The markers the camera showed the filter: used, gated or not predictable.
-std::uint64_t markers_seen(const LiveFeedback::Filter& filter) {
+template <class Filter>
+std::uint64_t markers_seen(const Filter& filter) {
   const FilterCounters& c = filter.counters();
   return c.markers_used + c.markers_gated + c.markers_invalid;
 }
@@ -38,21 +36,27 @@ int most_perpendicular_axis(const Eigen::Vector3d& d) {
 
 }  // namespace
 
-CalibrationUncertainty calibration_uncertainty(const Covariance& p, const Covariance& p0,
-                                               const Eigen::Quaterniond& q_b_c) {
+template <int M>
+CalibrationUncertainty calibration_uncertainty(
+    const typename CalibrationFilter<double, M, 0>::Covariance& p,
+    const typename CalibrationFilter<double, M, 0>::Covariance& p0,
+    const Eigen::Quaterniond& q_b_c) {
+  using State = typename CalibrationFilter<double, M, 0>::State;
+  using Covariance = typename CalibrationFilter<double, M, 0>::Covariance;
   CalibrationUncertainty u;
   // p_b_c is in the IMU frame; the advice speaks of the camera's axes.
   const Eigen::Matrix3d r_c_b = q_b_c.toRotationMatrix().transpose();
   const auto in_camera = [&](const Covariance& c, int at) {
-    return Eigen::Matrix3d(r_c_b * c.block<3, 3>(at, at) * r_c_b.transpose());
+    return Eigen::Matrix3d(r_c_b * c.template block<3, 3>(at, at) * r_c_b.transpose());
   };
   u[0] = worst_direction(in_camera(p, State::kPbc), in_camera(p0, State::kPbc));
   // The rotation's error is R_b_c Exp(e): e is in the camera frame already.
-  u[1] = worst_direction(p.block<3, 3>(State::kPhi, State::kPhi),
-                         p0.block<3, 3>(State::kPhi, State::kPhi));
-  for (int m = 0; m < kMarkers; ++m) {
+  u[1] = worst_direction(p.template block<3, 3>(State::kPhi, State::kPhi),
+                         p0.template block<3, 3>(State::kPhi, State::kPhi));
+  for (int m = 0; m < M; ++m) {
     const int at = State::kPi + 3 * m;
-    const GroupUncertainty g = worst_direction(p.block<3, 3>(at, at), p0.block<3, 3>(at, at));
+    const GroupUncertainty g =
+        worst_direction(p.template block<3, 3>(at, at), p0.template block<3, 3>(at, at));
     if (m == 0 || g.sigma > u[2].sigma) u[2] = g;
   }
   u[3].sigma = std::sqrt(std::max(0.0, p(State::kTd, State::kTd)));
@@ -99,10 +103,13 @@ const char* group_name(CalibrationGroup group) {
   return "";
 }
 
-LiveFeedback::LiveFeedback(const Filter::Covariance& p0, std::FILE* out, bool every_window)
+template <int M>
+LiveFeedback<M>::LiveFeedback(const typename Filter::Covariance& p0, std::FILE* out,
+                              bool every_window)
     : p0_(p0), out_(out), every_window_(every_window) {}
 
-void LiveFeedback::publish(std::int64_t t_ns, const Filter& filter) {
+template <int M>
+void LiveFeedback<M>::publish(std::int64_t t_ns, const Filter& filter) {
   const Eigen::Quaterniond q = filter.state().q_n_b;
   if (!started_) {
     started_ = true;
@@ -124,9 +131,10 @@ void LiveFeedback::publish(std::int64_t t_ns, const Filter& filter) {
   depth_low_ = depth_high_ = filter.state().p.z();
 }
 
-void LiveFeedback::close_window(double t_s, const Filter& filter) {
+template <int M>
+void LiveFeedback<M>::close_window(double t_s, const Filter& filter) {
   const CalibrationUncertainty u =
-      calibration_uncertainty(filter.covariance(), p0_, filter.state().q_b_c);
+      calibration_uncertainty<M>(filter.covariance(), p0_, filter.state().q_b_c);
   std::array<bool, kFeedbackGroups> settled{};
   // Once converged, a group must fall by twice as much to unsettle it again: sigmas that fall as
   // 1/sqrt(t) cross the threshold slowly, and the verdict should not flicker as they do.
@@ -160,8 +168,10 @@ void LiveFeedback::close_window(double t_s, const Filter& filter) {
   have_previous_ = true;
 }
 
-void LiveFeedback::print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
-                         const std::array<bool, kFeedbackGroups>& settled) {
+template <int M>
+void LiveFeedback<M>::print(double t_s, Verdict verdict, int advised,
+                            const CalibrationUncertainty& u,
+                            const std::array<bool, kFeedbackGroups>& settled) {
   if (out_ == nullptr) return;
   std::fprintf(out_, "live %.0f s: ", t_s);
   // Each group's sigma in the unit a user reads it in, and its share of the prior's.
@@ -208,5 +218,13 @@ void LiveFeedback::print(double t_s, Verdict verdict, int advised, const Calibra
   }
   std::fflush(out_);
 }
+
+#define MIRRORCAL_LIVE_FEEDBACK_(M)                           \
+  template class LiveFeedback<M>;                             \
+  template CalibrationUncertainty calibration_uncertainty<M>( \
+      const CalibrationFilter<double, M, 0>::Covariance&,     \
+      const CalibrationFilter<double, M, 0>::Covariance&, const Eigen::Quaterniond&);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_LIVE_FEEDBACK_)
+#undef MIRRORCAL_LIVE_FEEDBACK_
 
 }  // namespace mirrorcal::app

@@ -10,13 +10,11 @@
 
 #include <Eigen/Core>
 
-#include "mirrorcal/calibration/run.hpp"  // kMarkers
+#include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/firmware/loop.hpp"
 
 namespace mirrorcal::app {
-
-using calibration::kMarkers;
 
 // The parts of the calibration a user's motion informs differently: the first kFeedbackGroups of
 // CalibrationGroup, those of run's filter (no intrinsics).
@@ -35,9 +33,11 @@ using CalibrationUncertainty = std::array<GroupUncertainty, kFeedbackGroups>;
 // The uncertainty of each group from a filter's covariance P and its prior's P0 (the calibration
 // block of the live filter's state, M markers, no intrinsics: run's filter). The markers' group is
 // the worst of the M markers.
+template <int M>
 CalibrationUncertainty calibration_uncertainty(
-    const CalibrationFilter<double, kMarkers, 0>::Covariance& p,
-    const CalibrationFilter<double, kMarkers, 0>::Covariance& p0, const Eigen::Quaterniond& q_b_c);
+    const typename CalibrationFilter<double, M, 0>::Covariance& p,
+    const typename CalibrationFilter<double, M, 0>::Covariance& p0,
+    const Eigen::Quaterniond& q_b_c);
 
 // The motion that informs a group's least-known direction, as a user would be told it. For the
 // camera's position and rotation: a rotation about the camera axis most nearly perpendicular to
@@ -55,9 +55,10 @@ const char* group_name(CalibrationGroup group);
 // than kSettledFall over a window in which the rig moved and the markers were seen; twice that to
 // leave the verdict again). Allocates nothing: it
 // runs inside the loop.
-class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, kMarkers, 0>> {
+template <int M>
+class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, M, 0>> {
  public:
-  using Filter = CalibrationFilter<double, kMarkers, 0>;
+  using Filter = CalibrationFilter<double, M, 0>;
   static constexpr double kWindowS = 5.0;
   static constexpr double kSettledFall = 0.05;
   // And its sigma below this share of the prior's: a direction the motion never excited stays
@@ -70,7 +71,7 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   // the mirror observes, unlike the position along it).
   static constexpr double kMovedM = 0.05;
 
-  LiveFeedback(const Filter::Covariance& p0, std::FILE* out, bool every_window);
+  LiveFeedback(const typename Filter::Covariance& p0, std::FILE* out, bool every_window);
   void publish(std::int64_t t_ns, const Filter& filter) override;
 
  private:
@@ -79,7 +80,7 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   void print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
              const std::array<bool, kFeedbackGroups>& settled);
 
-  Filter::Covariance p0_;
+  typename Filter::Covariance p0_;
   std::FILE* out_;
   bool every_window_;
   bool started_ = false;
@@ -93,5 +94,9 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   Verdict verdict_ = Verdict::kNone;
   int advised_ = -1;
 };
+// Compiled in live_feedback.cpp for every built M.
+#define MIRRORCAL_EXTERN_LIVE_FEEDBACK_(M) extern template class LiveFeedback<M>;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_LIVE_FEEDBACK_)
+#undef MIRRORCAL_EXTERN_LIVE_FEEDBACK_
 
 }  // namespace mirrorcal::app

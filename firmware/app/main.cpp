@@ -21,6 +21,8 @@ const std::vector<Command>& commands() {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
        "              [--scenario paper|random] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--markers M]  (the random rig's number of markers, a count this build\n"
+       "              has; default 3, the paper's rig has 3)\n"
        "              [--timeshift S]  (the camera's stamps S seconds before the IMU's clock:\n"
        "              t_imu = t_cam + S; default 0, the random family draws one in +-30 ms)\n"
        "              [--distortion radtan|equidistant]  (the camera's lens: EuRoC cam0's\n"
@@ -42,7 +44,8 @@ const std::vector<Command>& commands() {
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
        "              --runs N [--jobs J] [--seed S] [--scenario paper|random] [--out DIR]\n"
-       "              [--no-plots] [--timeshift S] [--distortion MODEL] [--line-delay S]\n"
+       "              [--no-plots] [--markers M] [--timeshift S] [--distortion MODEL]\n"
+       "              [--line-delay S]\n"
        "              (as sim) [--filter-line-delay S]  (the line delay the filter is told;\n"
        "              default the true one: what an unmodelled rolling shutter does)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n"
@@ -52,8 +55,8 @@ const std::vector<Command>& commands() {
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
-       "              --out DIR [--scenario paper|random] [--seed N] [--timeshift S]\n"
-       "              [--distortion MODEL] [--line-delay S]  (as sim)\n"
+       "              --out DIR [--scenario paper|random] [--seed N] [--markers M]\n"
+       "              [--timeshift S] [--distortion MODEL] [--line-delay S]  (as sim)\n"
        "              [--intrinsics [--hold-skew]]\n"
        "              [--two-stage [--hold-skew]]  (DIR/stage1 and DIR/stage2 of sim "
        "--intrinsics)\n"
@@ -63,7 +66,8 @@ const std::vector<Command>& commands() {
        "              markers of features.csv drawn as sim --frames draws them)\n"
        "              [--duration S]  (S seconds of the simulated motion; default 60)\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV [--images]]\n"
-       "              [--sensors DIR]\n"
+       "              [--sensors DIR | --markers M]  (the markers to detect: as many as the\n"
+       "              sensors' mirrorcal.yaml lists, else M, default 3)\n"
        "              [--duration S] [--drdy CHIP:LINE] [--trigger CHIP:LINE [--trigger-every N]]\n"
        "              [--config FILE]\n"
        "              written whole into DIR when complete; --force replaces a recording there\n",
@@ -86,7 +90,8 @@ const std::vector<Command>& commands() {
       {"run",
        "  run         calibrate on the board's devices\n"
        "              --imu spi:/dev/spidevB.C | i2c:/dev/i2c-N[:ADDR] | can:IFACE\n"
-       "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml) [--drdy CHIP:LINE]\n"
+       "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml: its features_c\n"
+       "              say how many markers) [--drdy CHIP:LINE]\n"
        "              [--camera /dev/videoN] [--trigger CHIP:LINE [--trigger-every N]]\n"
        "              (drive the camera's trigger input on every Nth IMU sample; by default\n"
        "              the fewest samples that span the camera's frame interval)\n"

@@ -449,6 +449,21 @@ class FileStreams final : public RecordingStreams {
 
 }  // namespace
 
+bool recording_marker_count(const std::string& dir, int& markers, std::string& error) {
+  const std::string cam_yaml = dir + "/camchain.yaml", priors_yaml = dir + "/mirrorcal.yaml";
+  std::string text;
+  SensorInfo sensors;
+  RecordingPriors priors;
+  std::vector<std::string> notes;
+  if (!files::read_file(cam_yaml, text, error) ||
+      !parse_camchain_yaml(text, cam_yaml, sensors, notes, error) ||
+      !files::read_file(priors_yaml, text, error) ||
+      !parse_priors_yaml(text, priors_yaml, sensors.intrinsics, priors, notes, error))
+    return false;
+  markers = static_cast<int>(priors.features_c.size());
+  return true;
+}
+
 bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error,
                     bool from_images) {
   if (!read_checked(dir, markers, out, {}, {}, error, from_images)) return false;

@@ -155,7 +155,7 @@ std::vector<Eigen::Vector3d> draw_markers(Draw& d, int count) {
 
 }  // namespace
 
-Scenario random_scenario(std::uint64_t seed) {
+Scenario random_scenario(std::uint64_t seed, int markers) {
   constexpr double deg = M_PI / 180.0;
   Draw d(seed);
   Scenario s;
@@ -164,7 +164,7 @@ Scenario random_scenario(std::uint64_t seed) {
   Rig& r = s.truth;
   r.q_b_c = d.rotation();
   r.p_b_c = Eigen::Vector3d(d.uniform(-0.08, 0.08), d.uniform(-0.08, 0.08), d.uniform(-0.08, 0.08));
-  r.markers = draw_markers(d, 3);
+  r.markers = draw_markers(d, markers);
   r.width = 640;
   r.height = 480;
   const double fu = d.uniform(450.0, 900.0);
@@ -244,13 +244,13 @@ void set_lens(Scenario& s, Distortion model) {
   }
 }
 
-bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out) {
+bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out, int markers) {
   if (name == "paper") {
     out = paper_scenario();
     return true;
   }
   if (name == "random") {
-    out = random_scenario(seed);
+    out = random_scenario(seed, markers);
     return true;
   }
   return false;

@@ -36,12 +36,12 @@ std::uint64_t calibrate(const Recording& r) {
 
 std::uint64_t calibrate_as_shipped(const Recording& r) {
   const auto prior = sim::draw_prior<3>(r.scenario, r.data, 1);
-  calibration::CalibrationRun<0>::State x0;
-  calibration::CalibrationRun<0>::Filter::Covariance p0;
+  calibration::CalibrationRun<3, 0>::State x0;
+  calibration::CalibrationRun<3, 0>::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  const calibration::CalibrationRun<0> run =
-      calibration::run_loop<0>(evaluation::scenario_config(r.scenario), x0, p0,
-                               evaluation::loop_data(r.scenario, r.data), nullptr);
+  const calibration::CalibrationRun<3, 0> run =
+      calibration::run_loop<3, 0>(evaluation::scenario_config(r.scenario), x0, p0,
+                                  evaluation::loop_data(r.scenario, r.data), nullptr);
   return run.filter_counters.markers_used;
 }
 

@@ -4,12 +4,14 @@
 // blob for a marker nor swaps two markers that cross.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <vector>
 
 #include "mirrorcal/detection/detecting_marker_source.hpp"
+#include "mirrorcal/estimator/marker_counts.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 
@@ -333,6 +335,51 @@ TEST(MarkerIdentifier, BrightnessNamesMarkersWithoutAPrediction) {
   mc::detection::MarkerIdentifier<M> blind(equal);
   blind.identify(b, n, nullptr, f);
   EXPECT_FALSE(f.seen[0] || f.seen[1] || f.seen[2]);
+}
+
+// Every built number of markers (MIRRORCAL_MARKERS): K spots of equal brightness on a ring, a
+// confident prediction near each, and each labelled as its own marker at its spot; without a
+// prediction (and no brightness to tell them apart) none is.
+template <int K>
+void expect_prediction_labels_every_marker() {
+  std::array<Eigen::Vector2d, K> truth;
+  std::array<Eigen::Vector2d, K> predicted;
+  Canvas c;
+  for (int i = 0; i < K; ++i) {
+    const double angle = 2.0 * M_PI * i / K;
+    truth[i] = Eigen::Vector2d(320.3 + 150.0 * std::cos(angle), 240.6 + 150.0 * std::sin(angle));
+    predicted[i] = truth[i] + Eigen::Vector2d(1.5, -1.0);  // a prediction a pixel or two off
+    c.renderer.add_spot(truth[i].x(), truth[i].y(), 120.0);
+  }
+  const mc::hal::FrameView v = c.finish();
+  BlobDetector det({}, 640, 480);
+  Blob b[16];
+  const int n = det.detect(v, b, 16);
+  ASSERT_EQ(n, K);
+  mc::detection::IdentifierConfig<K> config;
+  config.brightness.fill(1.0);  // the cue off: only the prediction tells them apart
+  mc::detection::MarkerIdentifier<K> id(config);
+  mc::hal::MarkerPrediction<K> p;
+  for (int i = 0; i < K; ++i) {
+    p.valid[i] = true;
+    p.uv[i] = predicted[i];
+    p.covariance[i] = Eigen::Matrix2d::Identity();
+  }
+  mc::MarkerFrame<K> f;
+  id.identify(b, n, &p, f);
+  for (int i = 0; i < K; ++i) {
+    ASSERT_TRUE(f.seen[i]) << K << " markers, marker " << i;
+    EXPECT_LT((f.uv[i] - truth[i]).norm(), 0.3) << K << " markers, marker " << i;
+  }
+  mc::detection::MarkerIdentifier<K> blind(config);
+  blind.identify(b, n, nullptr, f);
+  for (int i = 0; i < K; ++i) EXPECT_FALSE(f.seen[i]) << K << " markers, marker " << i;
+}
+
+TEST(MarkerIdentifier, APredictionLabelsEveryMarkerOfEveryBuiltCount) {
+  for (const int k : mc::kMarkerCounts)
+    mc::with_marker_count(
+        k, [](auto count) { expect_prediction_labels_every_marker<decltype(count)::value>(); });
 }
 
 TEST(DetectingMarkerSource, FramesTheDeviceFlaggedCorruptAreSkippedAndCounted) {

@@ -14,11 +14,11 @@ namespace mc = mirrorcal;
 TEST(FramesCalibration, MatchesTheListedMarkersRun) {
   const mc::sim::Scenario s = mc::sim::paper_scenario();
   for (const auto format : {mc::hal::PixelFormat::kGrey, mc::hal::PixelFormat::kYuyv}) {
-    const auto listed = mc::evaluation::run_simulation(s, 4);
+    const auto listed = mc::evaluation::run_simulation<3>(s, 4);
     mc::evaluation::FrameMode mode;
     mode.enabled = true;
     mode.format = format;
-    const auto framed = mc::evaluation::run_simulation(s, 4, {}, mode);
+    const auto framed = mc::evaluation::run_simulation<3>(s, 4, {}, mode);
     const mc::calibration::DetectionReport& d = framed.detection;
     std::printf("%s: %llu frames, %llu of %llu labelled, %llu wrong, %.3f px RMS, %.2f ms/frame\n",
                 mc::hal::to_string(format), (unsigned long long)d.frames,

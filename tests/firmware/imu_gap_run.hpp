@@ -12,7 +12,7 @@
 
 namespace mirrorcal::gaptest {
 
-using Run = calibration::CalibrationRun<0>;
+using Run = calibration::CalibrationRun<3, 0>;
 
 constexpr std::int64_t kMs = 1'000'000;
 
@@ -28,10 +28,10 @@ inline Run calibrate_with_gap(const sim::Scenario& s, std::uint64_t seed, std::i
               d.imu.end());
   Run::State x0;
   Run::Filter::Covariance p0;
-  initialise(sim::simulation_prior<calibration::kMarkers>(s, data, seed), x0, p0);
+  initialise(sim::simulation_prior<sim::kPaperMarkers>(s, data, seed), x0, p0);
   const Run::State truth = evaluation::truth_state<Run::State>(s);
-  return calibration::run_loop<0>(evaluation::scenario_config(s), x0, p0, d, &truth, {}, {},
-                                  passes);
+  return calibration::run_loop<3, 0>(evaluation::scenario_config(s), x0, p0, d, &truth, {}, {},
+                                     passes);
 }
 
 // The largest |error| / sigma over a run's calibration states.

@@ -17,7 +17,7 @@
 
 namespace mc = mirrorcal;
 using mc::CalibrationGroup;
-using mc::app::LiveFeedback;
+using LiveFeedback = mc::app::LiveFeedback<mc::sim::kPaperMarkers>;
 using Filter = LiveFeedback::Filter;
 using State = Filter::State;
 
@@ -66,17 +66,17 @@ std::string live_run(double motion, double seconds, long* allocations = nullptr,
   Filter f(mc::evaluation::scenario_config(s));
   Filter::State x;
   Filter::Covariance p0;
-  mc::initialise(mc::sim::draw_prior<mc::calibration::kMarkers>(s, d, 5), x, p0);
+  mc::initialise(mc::sim::draw_prior<mc::sim::kPaperMarkers>(s, d, 5), x, p0);
   f.reset(x, p0);
   std::FILE* out = std::tmpfile();
   EXPECT_NE(out, nullptr);
   LiveFeedback feedback(p0, out, true);
   mc::sim::VectorImuSource imu(d.imu);
-  mc::sim::VectorMarkerSource<mc::calibration::kMarkers> markers(d.frames);
+  mc::sim::VectorMarkerSource<mc::sim::kPaperMarkers> markers(d.frames);
   mc::firmware::LoopConfig lc;
   lc.imu_period_ns = 5'000'000;
-  mc::firmware::CalibrationLoop<double, mc::calibration::kMarkers, 0> loop(f, imu, markers, lc,
-                                                                           &feedback);
+  mc::firmware::CalibrationLoop<double, mc::sim::kPaperMarkers, 0> loop(f, imu, markers, lc,
+                                                                        &feedback);
   std::fputs("start\n", out);  // the stream's buffer is made before the loop, as run's stdout's
   mc::test::AllocCounter counting;
   loop.run();
@@ -105,7 +105,8 @@ TEST(LiveFeedback, WorstDirectionOfEachGroupIsFoundInTheCameraFrame) {
     p.block<3, 3>(State::kPhi, State::kPhi) = block_c;
     p.block<3, 3>(State::kPi + 3, State::kPi + 3) = block_c;  // the second marker is the worst
     p(State::kTd, State::kTd) = 4e-6;
-    const mc::app::CalibrationUncertainty u = mc::app::calibration_uncertainty(p, p0, q_b_c);
+    const mc::app::CalibrationUncertainty u =
+        mc::app::calibration_uncertainty<mc::sim::kPaperMarkers>(p, p0, q_b_c);
     for (int g = 0; g < 3; ++g) {
       SCOPED_TRACE(mc::app::group_name(static_cast<CalibrationGroup>(g)));
       const auto& got = u[static_cast<std::size_t>(g)];

@@ -379,30 +379,30 @@ int calibrate(mc::hal::PixelFormat format) {
   }
   std::printf("set up in %.1f s\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count());
-  mc::detection::DetectingMarkerSource<mc::calibration::kMarkers> camera(
-      frames, mc::evaluation::detection_config(rc), 640, 480);
-  using Run = mc::calibration::CalibrationRun<0>;
-  const mc::Prior<mc::calibration::kMarkers> prior =
-      mc::sim::simulation_prior<mc::calibration::kMarkers>(s, data, kSeed);
+  mc::detection::DetectingMarkerSource<mc::sim::kPaperMarkers> camera(
+      frames, mc::evaluation::detection_config<mc::sim::kPaperMarkers>(rc), 640, 480);
+  using Run = mc::calibration::CalibrationRun<3, 0>;
+  const mc::Prior<mc::sim::kPaperMarkers> prior =
+      mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, kSeed);
   Run::State x0, truth;
   Run::Filter::Covariance p0;
   mc::initialise(prior, x0, p0);
   truth.p_b_c = s.truth.p_b_c;
   truth.q_b_c = s.truth.q_b_c;
-  for (int i = 0; i < mc::calibration::kMarkers; ++i)
+  for (int i = 0; i < mc::sim::kPaperMarkers; ++i)
     truth.markers.segment<3>(3 * i) = s.truth.markers[static_cast<std::size_t>(i)];
 
   // One pass over the data: the frames cross the kernel once.
   const auto hooks = [&camera](int) {
-    mc::calibration::LoopHooks h;
+    mc::calibration::LoopHooks<mc::sim::kPaperMarkers> h;
     h.source = &camera;
     h.relabeler = &camera;
     return h;
   };
   const auto t0 = std::chrono::steady_clock::now();
-  const Run run = mc::calibration::run_loop<0>(mc::evaluation::scenario_config(s), x0, p0,
-                                               mc::evaluation::loop_data(s, data), &truth, {},
-                                               hooks, mc::calibration::Passes::once());
+  const Run run = mc::calibration::run_loop<3, 0>(mc::evaluation::scenario_config(s), x0, p0,
+                                                  mc::evaluation::loop_data(s, data), &truth, {},
+                                                  hooks, mc::calibration::Passes::once());
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   // The prior's error against the final estimate's, over the calibration block.

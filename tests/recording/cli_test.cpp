@@ -106,6 +106,48 @@ TEST(Cli, RecordThenCalibrateIsBitIdenticalToSim) {
   EXPECT_NE(slurp(d + "/sim6/estimates.csv"), slurp(d + "/cal/estimates.csv"));
 }
 
+// Another built number of markers than the paper's three (the second of MIRRORCAL_MARKERS): sim
+// and record draw the random family's rig with that many, calibrate takes the count from the
+// recording's mirrorcal.yaml, and both reach the same instantiation: the same bytes.
+TEST(Cli, AnotherMarkerCountIsSimulatedRecordedAndCalibratedAlike) {
+  if (mc::kMarkerCounts.size() < 2) GTEST_SKIP() << "this build has one marker count";
+  const std::string m = std::to_string(mc::kMarkerCounts[1]);
+  TempDir dir("cli-markers");
+  const std::string& d = dir.path;
+  Result r = run_mirrorcal(
+      "sim --scenario random --markers " + m + " --seed 3 --no-plots --out " + d + "/sim", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("scenario 'random', " + m + " markers"), std::string::npos) << r.output;
+  r = run_mirrorcal("record --scenario random --markers " + m + " --seed 3 --out " + d + "/rec", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string states = std::to_string(mc::calibration_layout(std::stoi(m), 0).size());
+  EXPECT_NE(r.output.find("NEES of the " + states + " calibration states"), std::string::npos)
+      << r.output;
+  for (const char* f : {"estimates.csv", "camchain-imucam.yaml", "mirrorcal-result.yaml"}) {
+    const std::string a = calibration_file(d + "/sim/" + f), b = calibration_file(d + "/cal/" + f);
+    EXPECT_FALSE(a.empty()) << f;
+    EXPECT_TRUE(a == b) << f << " differs between sim and record -> calibrate";
+  }
+}
+
+// A count the build does not have is refused naming the CMake option (exit code 2, as other bad
+// input); the paper's rig has three markers only.
+TEST(Cli, AMarkerCountNotBuiltIsRefusedNamingTheOption) {
+  TempDir dir("cli-markers-refused");
+  int missing = 1;
+  while (mc::marker_count_built(missing)) ++missing;
+  Result r = run_mirrorcal("sim --scenario random --markers " + std::to_string(missing) +
+                               " --no-plots --out " + dir.path + "/sim",
+                           dir.path);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("rebuild with -DMIRRORCAL_MARKERS="), std::string::npos) << r.output;
+  r = run_mirrorcal("sim --markers 4 --no-plots --out " + dir.path + "/paper", dir.path);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("the paper scenario has 3 markers"), std::string::npos) << r.output;
+}
+
 TEST(Cli, CamchainTCamImuIsTheInverseOfTheCameraPoseInTheImuFrame) {
   TempDir dir("cli-camchain");
   const std::string& d = dir.path;
@@ -982,16 +1024,16 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   Result r = run_mirrorcal("record --seed 4 --images --duration 10 --out " + rec, d);
   ASSERT_EQ(r.code, 0) << r.output;
 
-  using Run = mc::calibration::CalibrationRun<0>;
+  using Run = mc::calibration::CalibrationRun<3, 0>;
   using State = Run::State;
   std::string err;
   mc::sim::Recording features, images;
-  ASSERT_TRUE(mc::sim::open_recording(rec, mc::calibration::kMarkers, features, err)) << err;
-  ASSERT_TRUE(mc::sim::open_recording(rec, mc::calibration::kMarkers, images, err, true)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::sim::kPaperMarkers, features, err)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(rec, mc::sim::kPaperMarkers, images, err, true)) << err;
   ASSERT_TRUE(images.from_images);
   Run from_features, from_images;
-  ASSERT_TRUE(mc::calibration::calibrate_recording<0>(features, from_features, err)) << err;
-  ASSERT_TRUE(mc::calibration::calibrate_recording<0>(images, from_images, err)) << err;
+  ASSERT_TRUE((mc::calibration::calibrate_recording<3, 0>(features, from_features, err))) << err;
+  ASSERT_TRUE((mc::calibration::calibrate_recording<3, 0>(images, from_images, err))) << err;
   const auto& a = from_features.history.back();
   const auto& b = from_images.history.back();
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
@@ -1012,7 +1054,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   // Detection against the pixels the spots were drawn at (features.csv, the truth of the images):
   // every blob near a listed marker lies within a small fraction of the 1 px spot noise of it.
   mc::sim::Recording listed_frames;
-  ASSERT_TRUE(mc::sim::read_recording(rec, mc::calibration::kMarkers, listed_frames, err)) << err;
+  ASSERT_TRUE(mc::sim::read_recording(rec, mc::sim::kPaperMarkers, listed_frames, err)) << err;
   auto source = images.streams->open_images();
   ASSERT_NE(source, nullptr);
   mc::detection::BlobDetector detector(mc::detection::BlobConfig{}, 640, 480);
@@ -1058,7 +1100,7 @@ TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
   std::vector<mc::sim::ObservedFrame> found = listed_frames.frames;
   for (auto& f : found) f.markers.clear();
   ASSERT_TRUE(mc::sim::parse_features_csv(slurp(d + "/out/features.csv"), "features.csv",
-                                          mc::calibration::kMarkers, found, err))
+                                          mc::sim::kPaperMarkers, found, err))
       << err;
   std::size_t rows = 0, wrong = 0;
   double farthest = 0.0;

@@ -299,7 +299,7 @@ TEST(Images, UnreadableImagesOfARecordingAreNamedAndSkipped) {
   write_recording(tmp.path, s, data, 5);
   mc::sim::Recording rec;
   std::string err;
-  EXPECT_FALSE(mc::sim::open_recording(tmp.path, mc::calibration::kMarkers, rec, err, true));
+  EXPECT_FALSE(mc::sim::open_recording(tmp.path, mc::sim::kPaperMarkers, rec, err, true));
   EXPECT_EQ(err.rfind(tmp.path + "/mav0/cam0/data: no such folder", 0), 0u) << err;
 
   // Every frame's image: grey PNG, but frame 3 a 4-bit one, frame 5 of 320x240, frame 7 missing.
@@ -326,7 +326,7 @@ TEST(Images, UnreadableImagesOfARecordingAreNamedAndSkipped) {
     ASSERT_NE(png, nullptr);
     spit(path, std::string(reinterpret_cast<const char*>(png), n));
   }
-  ASSERT_TRUE(mc::sim::open_recording(tmp.path, mc::calibration::kMarkers, rec, err, true)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(tmp.path, mc::sim::kPaperMarkers, rec, err, true)) << err;
   {
     const auto source = rec.streams->open_images();
     ASSERT_NE(source, nullptr);

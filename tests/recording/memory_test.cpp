@@ -122,13 +122,13 @@ std::vector<double> values(const State& x) {
 // file (a page of one record) or none does (a page that holds a whole store: the in-memory
 // reference).
 TEST(FrameStores, TheCalibrationIsTheSameThroughTheFileAsInMemory) {
-  using Run = mc::calibration::CalibrationRun<0>;
+  using Run = mc::calibration::CalibrationRun<3, 0>;
   TempDir tmp("frame-stores");
   const auto s = short_scenario(4.0);
   constexpr std::size_t kWholeStore = 4 << 20;
   const auto run_with_page = [&](std::size_t bytes) {
     mc::files::RecordFile::set_default_buffer_bytes(bytes);
-    Run run = mc::evaluation::run_simulation(s, 7);
+    Run run = mc::evaluation::run_simulation<3>(s, 7);
     mc::files::RecordFile::set_default_buffer_bytes(0);
     return run;
   };

@@ -69,7 +69,7 @@ TEST(Recording, StreamsReadBackBitIdentical) {
 TEST(Recording, PriorsRoundTripThroughTheFilePriorExactly) {
   const auto s = short_scenario();
   const auto data = mc::sim::simulate(s, 4);
-  const auto prior = mc::sim::simulation_prior<mc::calibration::kMarkers>(s, data, 4);
+  const auto prior = mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, 4);
   const TempDir tmp("priors");
   const std::string& dir = tmp.path;
   std::string err;

@@ -79,7 +79,7 @@ inline void write_recording(const std::string& dir, const mc::sim::Scenario& s,
   for (const auto& smp : data.imu) w.add_imu(smp);
   for (const auto& f : data.frames) w.add_frame(f);
   if (!w.close(err)) throw std::runtime_error(err);
-  const auto prior = mc::sim::simulation_prior<mc::calibration::kMarkers>(s, data, seed);
+  const auto prior = mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, seed);
   if (!mc::sim::write_sensor_yaml(dir, sensors_of(s), err) ||
       !mc::sim::write_priors_yaml(
           dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))

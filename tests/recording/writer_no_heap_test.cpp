@@ -120,16 +120,15 @@ TEST(ImageReader, APassOverImagesDoesNotAllocatePerFrame) {
   }
   mc::sim::Recording rec;
   std::string err;
-  ASSERT_TRUE(mc::sim::open_recording(tmp.path, mc::calibration::kMarkers, rec, err, true)) << err;
+  ASSERT_TRUE(mc::sim::open_recording(tmp.path, mc::sim::kPaperMarkers, rec, err, true)) << err;
   const mc::calibration::LoopData loop_data = mc::calibration::recording_loop_data(rec);
-  const auto source = loop_data.open_markers();
-  auto* relabeler =
-      dynamic_cast<mc::hal::MarkerRelabeler<mc::calibration::kMarkers>*>(source.get());
+  const auto source = loop_data.open_markers<mc::sim::kPaperMarkers>();
+  auto* relabeler = dynamic_cast<mc::hal::MarkerRelabeler<mc::sim::kPaperMarkers>*>(source.get());
   ASSERT_NE(relabeler, nullptr);
-  mc::MarkerFrame<mc::calibration::kMarkers> frame;
+  mc::MarkerFrame<mc::sim::kPaperMarkers> frame;
   ASSERT_EQ(source->poll(frame), mc::hal::SourceStatus::kOk);  // the first: start-up
   // The loop's prediction, here the pixels the spots were drawn at, 2 px sigma.
-  std::vector<mc::hal::MarkerPrediction<mc::calibration::kMarkers>> predictions(data.frames.size());
+  std::vector<mc::hal::MarkerPrediction<mc::sim::kPaperMarkers>> predictions(data.frames.size());
   std::size_t listed = 0;
   for (std::size_t k = 0; k < data.frames.size(); ++k)
     for (const auto& m : data.frames[k].markers) {

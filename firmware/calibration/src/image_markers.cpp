@@ -4,13 +4,15 @@
 
 namespace mirrorcal::calibration {
 
-ImageMarkers::ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
-                           DetectionReport* report)
+template <int M>
+ImageMarkers<M>::ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
+                              DetectionReport* report)
     : frames_(std::move(frames)),
-      detect_(*frames_, detection::DetectionConfig<kMarkers>{}, width, height),
+      detect_(*frames_, detection::DetectionConfig<M>{}, width, height),
       report_(report) {}
 
-ImageMarkers::~ImageMarkers() {
+template <int M>
+ImageMarkers<M>::~ImageMarkers() {
   if (report_ == nullptr || frames_seen_ < report_->frames) return;
   DetectionReport r;
   r.frames = frames_seen_;
@@ -25,7 +27,8 @@ ImageMarkers::~ImageMarkers() {
   *report_ = r;
 }
 
-hal::SourceStatus ImageMarkers::poll(MarkerFrame<kMarkers>& frame) {
+template <int M>
+hal::SourceStatus ImageMarkers<M>::poll(MarkerFrame<M>& frame) {
   const double detecting = detect_.counters().detect_seconds;
   const auto t0 = std::chrono::steady_clock::now();
   const hal::SourceStatus st = detect_.poll(frame);
@@ -36,10 +39,14 @@ hal::SourceStatus ImageMarkers::poll(MarkerFrame<kMarkers>& frame) {
   return st;
 }
 
-void ImageMarkers::relabel(const hal::MarkerPrediction<kMarkers>& prediction,
-                           MarkerFrame<kMarkers>& frame) {
+template <int M>
+void ImageMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) {
   detect_.relabel(prediction, frame);
   for (const bool seen : frame.seen) labelled_ += seen ? 1 : 0;
 }
+
+#define MIRRORCAL_IMAGE_MARKERS_(M) template class ImageMarkers<M>;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_IMAGE_MARKERS_)
+#undef MIRRORCAL_IMAGE_MARKERS_
 
 }  // namespace mirrorcal::calibration

@@ -24,27 +24,27 @@ LoopData recording_loop_data(const sim::Recording& r) {
   return d;
 }
 
-template <int NK>
-bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::string& error,
+template <int M, int NK>
+bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, std::string& error,
                          const std::function<void(double)>& progress,
                          const sim::CalibrationStart* from) {
-  Prior<kMarkers> prior;
+  Prior<M> prior;
   if (!sim::to_prior(r.priors, prior, error)) return false;
-  typename CalibrationRun<NK>::State x0;
-  typename CalibrationRun<NK>::Filter::Covariance p0;
+  typename CalibrationRun<M, NK>::State x0;
+  typename CalibrationRun<M, NK>::Filter::Covariance p0;
   initialise(prior, x0, p0);
   if (from != nullptr) start_from(*from, x0, p0);  // read_calibration_start checked its M
   // A simulated recording's truth: each history row gets the error and NEES against it.
-  typename CalibrationRun<NK>::State truth;
+  typename CalibrationRun<M, NK>::State truth;
   if (r.has_truth) {
-    if (r.truth.features_c.size() != static_cast<std::size_t>(kMarkers)) {
+    if (r.truth.features_c.size() != static_cast<std::size_t>(M)) {
       error = "truth.yaml lists " + std::to_string(r.truth.features_c.size()) +
-              " markers; this build calibrates M = " + std::to_string(kMarkers);
+              " markers and mirrorcal.yaml " + std::to_string(M);
       return false;
     }
     truth.p_b_c = r.truth.p_b_c;
     truth.q_b_c = r.truth.q_b_c;
-    for (int i = 0; i < kMarkers; ++i)
+    for (int i = 0; i < M; ++i)
       truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
     truth.t_d = r.truth.t_d;
     if constexpr (NK > 0) {
@@ -57,7 +57,8 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::
     }
   }
   const LoopData data = recording_loop_data(r);
-  run = run_loop<NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
+  run =
+      run_loop<M, NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
   run.result.from_untrusted = from != nullptr && !from->trusted;
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();
@@ -73,17 +74,12 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::
   return true;
 }
 
-template bool calibrate_recording<0>(const sim::Recording&, CalibrationRun<0>&, std::string&,
-                                     const std::function<void(double)>&,
-                                     const sim::CalibrationStart*);
-template bool calibrate_recording<4>(const sim::Recording&, CalibrationRun<4>&, std::string&,
-                                     const std::function<void(double)>&,
-                                     const sim::CalibrationStart*);
-template bool calibrate_recording<5>(const sim::Recording&, CalibrationRun<5>&, std::string&,
-                                     const std::function<void(double)>&,
-                                     const sim::CalibrationStart*);
-template bool calibrate_recording<8>(const sim::Recording&, CalibrationRun<8>&, std::string&,
-                                     const std::function<void(double)>&,
-                                     const sim::CalibrationStart*);
+#define MIRRORCAL_CALIBRATE_RECORDING_(M)       \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 0); \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 4); \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 5); \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 8);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_CALIBRATE_RECORDING_)
+#undef MIRRORCAL_CALIBRATE_RECORDING_
 
 }  // namespace mirrorcal::calibration

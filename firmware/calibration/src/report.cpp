@@ -54,9 +54,9 @@ double euclidean_value(const State& x, int j) {
 
 }  // namespace
 
-template <int NK>
-ReportData report_data(const CalibrationRun<NK>& run, const std::string& title) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+ReportData report_data(const CalibrationRun<M, NK>& run, const std::string& title) {
+  using State = typename CalibrationRun<M, NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   ReportData d = report_data_without_history(run.result, title);
   d.pixel_sigma = run.pixel_sigma;
@@ -78,7 +78,7 @@ ReportData report_data(const CalibrationRun<NK>& run, const std::string& title) 
   const State last = run.history.back().state;
   const Eigen::Quaterniond q0 = run.history.front().state.q_n_b;
   for (std::size_t k = 0; k < run.history.size(); ++k) {
-    const HistoryRow<typename CalibrationRun<NK>::Filter> row = run.history[k];
+    const HistoryRow<typename CalibrationRun<M, NK>::Filter> row = run.history[k];
     ReportRow out;
     out.t_s = double(row.t_ns) * 1e-9;
     const Eigen::Matrix<double, L, 1> from_last = row.state.template boxminus_block<B, L>(last);
@@ -106,10 +106,13 @@ ReportData report_data(const CalibrationRun<NK>& run, const std::string& title) 
   return d;
 }
 
-template ReportData report_data<0>(const CalibrationRun<0>&, const std::string&);
-template ReportData report_data<4>(const CalibrationRun<4>&, const std::string&);
-template ReportData report_data<5>(const CalibrationRun<5>&, const std::string&);
-template ReportData report_data<8>(const CalibrationRun<8>&, const std::string&);
+#define MIRRORCAL_REPORT_DATA_(M)                                                         \
+  template ReportData report_data<M, 0>(const CalibrationRun<M, 0>&, const std::string&); \
+  template ReportData report_data<M, 4>(const CalibrationRun<M, 4>&, const std::string&); \
+  template ReportData report_data<M, 5>(const CalibrationRun<M, 5>&, const std::string&); \
+  template ReportData report_data<M, 8>(const CalibrationRun<M, 8>&, const std::string&);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_REPORT_DATA_)
+#undef MIRRORCAL_REPORT_DATA_
 
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title) {
   ReportData d;

@@ -564,30 +564,19 @@ bool write_features_csv(files::OutputSet& out, const std::string& path,
   return true;
 }
 
-template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
-                                 std::string&);
-template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
-                                 std::string&);
-template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
-                                 std::string&);
-template bool write_features_csv(files::OutputSet&, const std::string&,
-                                 const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
-                                 std::string&);
-
-template bool write_estimates_csv(files::OutputSet&, const std::string&,
-                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 0>>>&,
-                                  Distortion, std::string&);
-template bool write_estimates_csv(files::OutputSet&, const std::string&,
-                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 4>>>&,
-                                  Distortion, std::string&);
-template bool write_estimates_csv(files::OutputSet&, const std::string&,
-                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 5>>>&,
-                                  Distortion, std::string&);
-template bool write_estimates_csv(files::OutputSet&, const std::string&,
-                                  const RecordStore<HistoryRow<CalibrationFilter<double, 3, 8>>>&,
-                                  Distortion, std::string&);
+// For every filter the product instantiates (run.hpp).
+#define MIRRORCAL_RESULT_CSV_(M, NK)                                                   \
+  template bool write_features_csv(                                                    \
+      files::OutputSet&, const std::string&,                                           \
+      const RecordStore<HistoryRow<CalibrationFilter<double, M, NK>>>&, std::string&); \
+  template bool write_estimates_csv(                                                   \
+      files::OutputSet&, const std::string&,                                           \
+      const RecordStore<HistoryRow<CalibrationFilter<double, M, NK>>>&, Distortion, std::string&);
+#define MIRRORCAL_RESULT_CSVS_(M) \
+  MIRRORCAL_RESULT_CSV_(M, 0)     \
+  MIRRORCAL_RESULT_CSV_(M, 4) MIRRORCAL_RESULT_CSV_(M, 5) MIRRORCAL_RESULT_CSV_(M, 8)
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_RESULT_CSVS_)
+#undef MIRRORCAL_RESULT_CSVS_
+#undef MIRRORCAL_RESULT_CSV_
 
 }  // namespace mirrorcal::calibration

@@ -13,27 +13,32 @@ std::unique_ptr<hal::ImuSource> LoopData::open_imu() const {
   return std::make_unique<sim::VectorImuSource>(imu);
 }
 
-std::unique_ptr<hal::MarkerSource<kMarkers>> LoopData::open_markers() const {
+template <int M>
+std::unique_ptr<hal::MarkerSource<M>> LoopData::open_markers() const {
   if (streams && image_detection)
-    return std::make_unique<ImageMarkers>(streams->open_images(), width, height,
-                                          image_detection.get());
-  if (streams) return std::make_unique<sim::StreamedMarkerSource<kMarkers>>(streams->open_frames());
-  return std::make_unique<sim::VectorMarkerSource<kMarkers>>(frames);
+    return std::make_unique<ImageMarkers<M>>(streams->open_images(), width, height,
+                                             image_detection.get());
+  if (streams) return std::make_unique<sim::StreamedMarkerSource<M>>(streams->open_frames());
+  return std::make_unique<sim::VectorMarkerSource<M>>(frames);
 }
+#define MIRRORCAL_OPEN_MARKERS_(M) \
+  template std::unique_ptr<hal::MarkerSource<M>> LoopData::open_markers<M>() const;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_OPEN_MARKERS_)
+#undef MIRRORCAL_OPEN_MARKERS_
 
 namespace {
 
 // The estimates a pass published at its frames, to linearise another pass along: in a temporary
 // file, read by the filter as its frames come.
-template <int NK>
+template <int M, int NK>
 struct TrajectoryPoint {
-  typename CalibrationRun<NK>::State state;
+  typename CalibrationRun<M, NK>::State state;
   std::int64_t t_ns = 0;
 };
-template <int NK>
-class Trajectory final : public CalibrationRun<NK>::Filter::LinearisationPoints {
+template <int M, int NK>
+class Trajectory final : public CalibrationRun<M, NK>::Filter::LinearisationPoints {
  public:
-  using State = typename CalibrationRun<NK>::State;
+  using State = typename CalibrationRun<M, NK>::State;
   std::size_t count() const override { return points_.size(); }
   std::int64_t stamp(std::size_t k) override { return at(k).t_ns; }
   const State& state(std::size_t k) override { return at(k).state; }
@@ -44,34 +49,33 @@ class Trajectory final : public CalibrationRun<NK>::Filter::LinearisationPoints 
 
  private:
   static constexpr std::size_t kNone = ~std::size_t{0};
-  const TrajectoryPoint<NK>& at(std::size_t k) {
+  const TrajectoryPoint<M, NK>& at(std::size_t k) {
     if (k != read_) {
       point_ = points_[k];
       read_ = k;
     }
     return point_;
   }
-  RecordStore<TrajectoryPoint<NK>> points_{"the smoothed trajectory"};
-  TrajectoryPoint<NK> point_{};
+  RecordStore<TrajectoryPoint<M, NK>> points_{"the smoothed trajectory"};
+  TrajectoryPoint<M, NK> point_{};
   std::size_t read_ = kNone;
 };
 
 // Every frame a pass's loop met, used or not: the same in every replay of the same data.
-template <int NK>
-std::uint64_t frames_met(const CalibrationRun<NK>& run) {
+template <int M, int NK>
+std::uint64_t frames_met(const CalibrationRun<M, NK>& run) {
   const firmware::LoopCounters& c = run.loop_counters;
   return c.frames + c.frames_before_filter + c.frames_after_imu;
 }
 
 // One pass of the loop over the data from (x0, p0).
-template <int NK>
-CalibrationRun<NK> run_pass(const CalibrationConfig& config,
-                            const typename CalibrationRun<NK>::State& x0,
-                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
-                            const std::function<void(double)>& progress, const LoopHooks& input,
-                            Trajectory<NK>* along = nullptr, bool keep_motion = false) {
-  using Run = CalibrationRun<NK>;
+template <int M, int NK>
+CalibrationRun<M, NK> run_pass(
+    const CalibrationConfig& config, const typename CalibrationRun<M, NK>::State& x0,
+    const typename CalibrationRun<M, NK>::Filter::Covariance& p0, const LoopData& data,
+    const typename CalibrationRun<M, NK>::State* truth, const std::function<void(double)>& progress,
+    const LoopHooks<M>& input, Trajectory<M, NK>* along = nullptr, bool keep_motion = false) {
+  using Run = CalibrationRun<M, NK>;
   using Filter = typename Run::Filter;
   Run run;
   if (truth != nullptr) run.truth = *truth;
@@ -81,13 +85,13 @@ CalibrationRun<NK> run_pass(const CalibrationConfig& config,
   if (along != nullptr) filter.linearise_along(along);
 
   const std::unique_ptr<hal::ImuSource> imu = data.open_imu();
-  const std::unique_ptr<hal::MarkerSource<kMarkers>> listed = data.open_markers();
+  const std::unique_ptr<hal::MarkerSource<M>> listed = data.open_markers<M>();
   // Markers found in images (calibrate from images) are labelled with the filter's prediction, as
   // those of rendered frames (sim --frames) and of the board's camera are.
-  hal::MarkerRelabeler<kMarkers>* relabeler = input.relabeler;
+  hal::MarkerRelabeler<M>* relabeler = input.relabeler;
   if (input.source == nullptr && relabeler == nullptr)
-    relabeler = dynamic_cast<hal::MarkerRelabeler<kMarkers>*>(listed.get());
-  FrameTap<kMarkers> markers(input.source != nullptr ? *input.source : *listed, relabeler);
+    relabeler = dynamic_cast<hal::MarkerRelabeler<M>*>(listed.get());
+  FrameTap<M> markers(input.source != nullptr ? *input.source : *listed, relabeler);
   HistorySink<Filter> sink(data.frame_count() + 1, truth != nullptr ? &run.truth : nullptr,
                            &markers);
   if (keep_motion) {
@@ -97,7 +101,7 @@ CalibrationRun<NK> run_pass(const CalibrationConfig& config,
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
-  firmware::CalibrationLoop<double, kMarkers, NK> loop(filter, *imu, markers, lc, &sink);
+  firmware::CalibrationLoop<double, M, NK> loop(filter, *imu, markers, lc, &sink);
   if (relabeler != nullptr) loop.set_identifier(&markers);
 
   const std::size_t report_every = data.imu_samples() / 100 + 1;
@@ -123,13 +127,13 @@ CalibrationRun<NK> run_pass(const CalibrationConfig& config,
 // its frames, the calibration held at the pass's final estimate, as the pass held it): each
 // frame's linearisation point then rests on every frame, not on those before it, and holds its
 // own frame's noise no more than any other's.
-template <int NK>
-void smoothed_trajectory(const CalibrationRun<NK>& track, Trajectory<NK>& out) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& out) {
+  using State = typename CalibrationRun<M, NK>::State;
   using Mat15 = Eigen::Matrix<double, 15, 15>;
   const std::size_t n = track.motion ? std::min(track.history.size(), track.motion->size()) : 0;
   if (n == 0) return;
-  const RecordStore<MotionRow<typename CalibrationRun<NK>::Filter>>& motion = *track.motion;
+  const RecordStore<MotionRow<typename CalibrationRun<M, NK>::Filter>>& motion = *track.motion;
   // Backwards over the frames, reading each row and motion step once: what step k needs of k + 1
   // is carried over from the step before.
   const State final_estimate = track.history[n - 1].state;
@@ -142,12 +146,12 @@ void smoothed_trajectory(const CalibrationRun<NK>& track, Trajectory<NK>& out) {
     s.intrinsics = final_estimate.intrinsics;
     return s;
   };
-  HistoryRow<typename CalibrationRun<NK>::Filter> next_row = track.history[n - 1];
-  MotionRow<typename CalibrationRun<NK>::Filter> next = motion[n - 1], row_motion;
+  HistoryRow<typename CalibrationRun<M, NK>::Filter> next_row = track.history[n - 1];
+  MotionRow<typename CalibrationRun<M, NK>::Filter> next = motion[n - 1], row_motion;
   State next_smoothed = final_estimate;
   out.set(n - 1, held(final_estimate), next_row.t_ns);
   for (std::size_t k = n - 1; k-- > 0;) {
-    const HistoryRow<typename CalibrationRun<NK>::Filter> row = track.history[k];
+    const HistoryRow<typename CalibrationRun<M, NK>::Filter> row = track.history[k];
     row_motion = motion[k];
     State smoothed = row.state;
     // A row that followed no update (the final one) says nothing new about the one before it.
@@ -169,20 +173,21 @@ void smoothed_trajectory(const CalibrationRun<NK>& track, Trajectory<NK>& out) {
 // The first stretch of the data, for imu_start_from(): from the first IMU sample to the one after
 // the kImuStartFrames-th frame with markers, at most kImuStartMaxS long. Empty if it holds fewer
 // than two such frames.
+template <int M>
 LoopData first_stretch(const LoopData& data) {
   LoopData out;
   const std::unique_ptr<hal::ImuSource> imu = data.open_imu();
-  const std::unique_ptr<hal::MarkerSource<kMarkers>> markers = data.open_markers();
+  const std::unique_ptr<hal::MarkerSource<M>> markers = data.open_markers<M>();
   ImuSample s;
   if (imu->next(s) != hal::SourceStatus::kOk) return out;
   const std::int64_t latest = s.t_ns + static_cast<std::int64_t>(kImuStartMaxS * 1e9);
   int with_markers = 0;
   std::int64_t end = latest;
-  MarkerFrame<kMarkers> f;
+  MarkerFrame<M> f;
   while (markers->poll(f) == hal::SourceStatus::kOk) {
     if (f.t_ns > latest) break;
     sim::ObservedFrame& kept = out.frames.emplace_back(sim::ObservedFrame{f.t_ns, {}});
-    for (int i = 0; i < kMarkers; ++i)
+    for (int i = 0; i < M; ++i)
       if (f.seen[std::size_t(i)])
         kept.markers.push_back({i, f.uv[std::size_t(i)].x(), f.uv[std::size_t(i)].y()});
     if (!kept.markers.empty() && ++with_markers == kImuStartFrames) {
@@ -202,12 +207,13 @@ LoopData first_stretch(const LoopData& data) {
 
 // The prior's covariance with the calibration block replaced by a pass's (and no correlation
 // between the two blocks): a pass from it holds the calibration near that pass's estimate.
-template <int NK>
-typename CalibrationRun<NK>::Filter::Covariance calibration_held(
-    const typename CalibrationRun<NK>::Filter::Covariance& p0, const CalibrationRun<NK>& pass) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+typename CalibrationRun<M, NK>::Filter::Covariance calibration_held(
+    const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+    const CalibrationRun<M, NK>& pass) {
+  using State = typename CalibrationRun<M, NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
-  typename CalibrationRun<NK>::Filter::Covariance p = p0;
+  typename CalibrationRun<M, NK>::Filter::Covariance p = p0;
   p.template block<L, State::kDim>(B, 0).setZero();
   p.template block<State::kDim, L>(0, B).setZero();
   p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
@@ -218,12 +224,12 @@ typename CalibrationRun<NK>::Filter::Covariance calibration_held(
 // calibration (estimate and covariance) and the prior's IMU guess, which pins the rig's distance
 // from the mirror, its tilt and their rates within a fraction of a second, then integrated back to
 // the first IMU sample. False (x unchanged) if the stretch has too few frames or the run fails.
-template <int NK>
-bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<NK>& pass,
-                    const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    typename CalibrationRun<NK>::State& x) {
-  using State = typename CalibrationRun<NK>::State;
-  const LoopData stretch = first_stretch(data);
+template <int M, int NK>
+bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK>& pass,
+                    const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                    const LoopData& data, typename CalibrationRun<M, NK>::State& x) {
+  using State = typename CalibrationRun<M, NK>::State;
+  const LoopData stretch = first_stretch<M>(data);
   if (stretch.imu.size() < 2) return false;
   State start = pass.history.back().state;
   start.p = x.p;
@@ -231,8 +237,8 @@ bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<NK>& p
   start.q_n_b = x.q_n_b;
   start.b_a = x.b_a;
   start.b_g = x.b_g;
-  const CalibrationRun<NK> fit = run_pass<NK>(config, start, calibration_held<NK>(p0, pass),
-                                              stretch, nullptr, {}, LoopHooks{});
+  const CalibrationRun<M, NK> fit = run_pass<M, NK>(
+      config, start, calibration_held<M, NK>(p0, pass), stretch, nullptr, {}, LoopHooks<M>{});
   if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
   State back = fit.history.back().state;
   for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
@@ -253,11 +259,11 @@ std::uint64_t markers_in(const LoopData& data) {
 
 // For the self-check: the calibration state the final estimate lies furthest from its prior guess,
 // in the prior's sigmas (rotations as the error vector, R = R_guess Exp(e)).
-template <int NK>
-void record_prior_offset(const typename CalibrationRun<NK>::State& x0,
-                         const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                         CalibrationRun<NK>& run) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+void record_prior_offset(const typename CalibrationRun<M, NK>::State& x0,
+                         const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                         CalibrationRun<M, NK>& run) {
+  using State = typename CalibrationRun<M, NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const auto d = run.history.back().state.template boxminus_block<B, L>(x0);
   CalibrationResult& r = run.result;
@@ -272,9 +278,9 @@ void record_prior_offset(const typename CalibrationRun<NK>::State& x0,
 
 // How far a refinement step moved the calibration from the estimate it started at, in the step's
 // own sigmas (Mahalanobis distance under its covariance): the self-check's convergence test.
-template <int NK>
-double step_sigmas(const CalibrationRun<NK>& after, const CalibrationRun<NK>& before) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+double step_sigmas(const CalibrationRun<M, NK>& after, const CalibrationRun<M, NK>& before) {
+  using State = typename CalibrationRun<M, NK>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const Eigen::Matrix<double, L, 1> d =
       after.history.back().state.template boxminus_block<B, L>(before.history.back().state);
@@ -285,11 +291,12 @@ double step_sigmas(const CalibrationRun<NK>& after, const CalibrationRun<NK>& be
 // The start of the pass after run: the calibration parameters at its estimate, and the IMU's start.
 // noise_scale: the pixel noise of run's pass over the true one (kAnnealedPixelNoise after a
 // restart), whose square its covariance is larger than what the data hold.
-template <int NK>
-void carry_estimate(const CalibrationConfig& config, const CalibrationRun<NK>& run,
-                    const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
-                    typename CalibrationRun<NK>::State& start, double noise_scale = 1.0) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+void carry_estimate(const CalibrationConfig& config, const CalibrationRun<M, NK>& run,
+                    const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                    const LoopData& data, typename CalibrationRun<M, NK>::State& start,
+                    double noise_scale = 1.0) {
+  using State = typename CalibrationRun<M, NK>::State;
   // The next pass starts the calibration parameters at this pass's estimate, with the prior's
   // covariance: the data are linearised about a far better guess (see run.hpp). Only where
   // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result
@@ -304,29 +311,29 @@ void carry_estimate(const CalibrationConfig& config, const CalibrationRun<NK>& r
   if (prior_negligible(State::kPbc, 3)) start.p_b_c = est.p_b_c;
   if (prior_negligible(State::kTd, 1)) start.t_d = est.t_d;
   if (prior_negligible(State::kPhi, 3)) start.q_b_c = est.q_b_c;
-  for (int m = 0; m < kMarkers; ++m)
+  for (int m = 0; m < M; ++m)
     if (prior_negligible(State::kPi + 3 * m, 3))
       start.markers.template segment<3>(3 * m) = est.markers.template segment<3>(3 * m);
   if (NK > 0 && prior_negligible(State::kK, NK)) start.intrinsics = est.intrinsics;
   // And the IMU's start, which every pass otherwise begins from the prior's guess (10 cm and
   // 5 deg off for a user's hand-held start): the frames of the first seconds would pull the
   // calibration towards that guess again.
-  imu_start_from<NK>(config, run, p0, data, start);
+  imu_start_from<M, NK>(config, run, p0, data, start);
 }
 
 // The free passes: passes.min of them, and more while the last gated too many (Passes); each
 // after the first starts where the one before ended (carry_estimate), and so would the next.
-template <int NK>
-CalibrationRun<NK> free_passes(const CalibrationConfig& config,
-                               const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                               const LoopData& data,
-                               const typename CalibrationRun<NK>::State* truth,
-                               const std::function<void(double)>& progress,
-                               const std::function<LoopHooks(int pass)>& hooks, Passes passes,
-                               typename CalibrationRun<NK>::State& start) {
-  const typename CalibrationRun<NK>::State guess = start;
-  CalibrationRun<NK> run;
-  HistoryRow<typename CalibrationRun<NK>::Filter> first_frame;
+template <int M, int NK>
+CalibrationRun<M, NK> free_passes(const CalibrationConfig& config,
+                                  const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                                  const LoopData& data,
+                                  const typename CalibrationRun<M, NK>::State* truth,
+                                  const std::function<void(double)>& progress,
+                                  const std::function<LoopHooks<M>(int pass)>& hooks, Passes passes,
+                                  typename CalibrationRun<M, NK>::State& start) {
+  const typename CalibrationRun<M, NK>::State guess = start;
+  CalibrationRun<M, NK> run;
+  HistoryRow<typename CalibrationRun<M, NK>::Filter> first_frame;
   int restarted = 0;
   for (int pass = 0; pass < passes.max; ++pass) {
     const bool after_restart = restarted > 0 && restarted == pass;  // wants the true noise next
@@ -343,14 +350,14 @@ CalibrationRun<NK> free_passes(const CalibrationConfig& config,
       pass_config.pixel_sigma *= kAnnealedPixelNoise;
       restarted = pass + 1;
     }
-    run = run_pass<NK>(pass_config, start, p0, data, truth, pass_progress,
-                       hooks ? hooks(pass) : LoopHooks{});
+    run = run_pass<M, NK>(pass_config, start, p0, data, truth, pass_progress,
+                          hooks ? hooks(pass) : LoopHooks<M>{});
     run.result.passes = pass + 1;
     run.result.restarted_pass = restarted;
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
     run.first_frame = first_frame;
     if (run.history.empty()) break;
-    carry_estimate<NK>(config, run, p0, data, start, restart ? kAnnealedPixelNoise : 1.0);
+    carry_estimate<M, NK>(config, run, p0, data, start, restart ? kAnnealedPixelNoise : 1.0);
   }
   return run;
 }
@@ -365,27 +372,28 @@ CalibrationRun<NK> free_passes(const CalibrationConfig& config,
 // covariance holds information the data do not (random family: sigmas down to a third of the
 // linearised one's) and their estimate lies further from the truth than the data allow. How
 // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
-template <int NK>
-void refine(const CalibrationConfig& config, const typename CalibrationRun<NK>::State& x0,
-            const typename CalibrationRun<NK>::Filter::Covariance& p0, const LoopData& data,
-            const typename CalibrationRun<NK>::State* truth,
-            const std::function<LoopHooks(int pass)>& hooks,
-            typename CalibrationRun<NK>::State& start, CalibrationRun<NK>& run) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK>::State& x0,
+            const typename CalibrationRun<M, NK>::Filter::Covariance& p0, const LoopData& data,
+            const typename CalibrationRun<M, NK>::State* truth,
+            const std::function<LoopHooks<M>(int pass)>& hooks,
+            typename CalibrationRun<M, NK>::State& start, CalibrationRun<M, NK>& run) {
+  using State = typename CalibrationRun<M, NK>::State;
   constexpr int B = State::kCalibrationBegin;
-  const typename CalibrationRun<NK>::Filter::Covariance own = run.covariance;
+  const typename CalibrationRun<M, NK>::Filter::Covariance own = run.covariance;
   const int free_passes = run.result.passes;
   // Their markers come from where the passes' did (rendered frames through detection with
   // sim --frames): hooks numbered on from the passes'.
   int hook = free_passes;
-  const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks{}; };
+  const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks<M>{}; };
   for (int it = 0; it < kMaxRefinements; ++it) {
     State from = run.history.back().state;
     from.p = start.p;
     from.v = start.v;
     from.q_n_b = start.q_n_b;
-    const CalibrationRun<NK> track = run_pass<NK>(config, from, calibration_held<NK>(p0, run), data,
-                                                  nullptr, {}, next_hooks(), nullptr, true);
+    const CalibrationRun<M, NK> track =
+        run_pass<M, NK>(config, from, calibration_held<M, NK>(p0, run), data, nullptr, {},
+                        next_hooks(), nullptr, true);
     // Each frame is linearised at the track smoothed over the whole pass, never at the track's
     // estimate after that frame's update: an estimate that holds the frame's own noise moves
     // the linearisation with that noise, and where the rig's motion leaves a direction weak
@@ -396,16 +404,16 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<NK>::
     // rigs, runs beyond 4 sigma and the consistent runs' marker RMS over the data's limit:
     // linearised after each update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05;
     // smoothed 3 and 0.96 (along the true motion, a diagnostic: 3 and 0.97).
-    Trajectory<NK> trajectory;
-    smoothed_trajectory<NK>(track, trajectory);
+    Trajectory<M, NK> trajectory;
+    smoothed_trajectory<M, NK>(track, trajectory);
     // From the prior's guesses of the calibration (the data count once), and the IMU start the
     // trajectory has.
     State prior = x0;
     prior.p = from.p;
     prior.v = from.v;
     prior.q_n_b = from.q_n_b;
-    CalibrationRun<NK> refined =
-        run_pass<NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
+    CalibrationRun<M, NK> refined =
+        run_pass<M, NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
     // A replay that did not meet the same frames (a source that ran dry) refines nothing.
     if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
         refined.filter_counters.failures > 0)
@@ -413,12 +421,12 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<NK>::
     // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
     // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
     if (suspect(refined.result) && !suspect(run.result)) break;
-    refined.result.refinement_step_sigmas = step_sigmas<NK>(refined, run);
+    refined.result.refinement_step_sigmas = step_sigmas<M, NK>(refined, run);
     refined.first_frame = run.first_frame;
     refined.result.passes = free_passes;
     refined.result.restarted_pass = run.result.restarted_pass;
     run = std::move(refined);
-    imu_start_from<NK>(config, run, p0, data, start);
+    imu_start_from<M, NK>(config, run, p0, data, start);
     if (run.result.refinement_step_sigmas < kConvergedStepSigmas) break;
   }
   double lowest = INFINITY;
@@ -429,20 +437,22 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<NK>::
 
 }  // namespace
 
-template <int NK>
-CalibrationRun<NK> run_loop(const CalibrationConfig& config,
-                            const typename CalibrationRun<NK>::State& x0,
-                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
-                            const std::function<void(double)>& progress,
-                            const std::function<LoopHooks(int pass)>& hooks, Passes passes) {
-  using State = typename CalibrationRun<NK>::State;
+template <int M, int NK>
+CalibrationRun<M, NK> run_loop(const CalibrationConfig& config,
+                               const typename CalibrationRun<M, NK>::State& x0,
+                               const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                               const LoopData& data,
+                               const typename CalibrationRun<M, NK>::State* truth,
+                               const std::function<void(double)>& progress,
+                               const std::function<LoopHooks<M>(int pass)>& hooks, Passes passes) {
+  using State = typename CalibrationRun<M, NK>::State;
   State start = x0;
-  CalibrationRun<NK> run = free_passes<NK>(config, p0, data, truth, progress, hooks, passes, start);
+  CalibrationRun<M, NK> run =
+      free_passes<M, NK>(config, p0, data, truth, progress, hooks, passes, start);
   if (passes.refine && !run.history.empty())
-    refine<NK>(config, x0, p0, data, truth, hooks, start, run);
+    refine<M, NK>(config, x0, p0, data, truth, hooks, start, run);
   run.result.markers_observed = markers_in(data);
-  if (!run.history.empty()) record_prior_offset<NK>(x0, p0, run);
+  if (!run.history.empty()) record_prior_offset<M, NK>(x0, p0, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
     run.prior_sigma.push_back(std::sqrt(p0(i, i)));
   run.pixel_sigma = config.pixel_sigma;
@@ -450,23 +460,22 @@ CalibrationRun<NK> run_loop(const CalibrationConfig& config,
   return run;
 }
 
-template MIRRORCAL_RUN_LOOP(0);
-template MIRRORCAL_RUN_LOOP(4);
-template MIRRORCAL_RUN_LOOP(5);
-template MIRRORCAL_RUN_LOOP(8);
-
-template <int NK>
-CalibrationRun<NK> run_single_pass(const CalibrationConfig& config,
-                                   const typename CalibrationRun<NK>::State& x0,
-                                   const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                                   const LoopData& data,
-                                   const typename CalibrationRun<NK>::State* truth) {
-  return run_pass<NK>(config, x0, p0, data, truth, {}, LoopHooks{});
+template <int M, int NK>
+CalibrationRun<M, NK> run_single_pass(const CalibrationConfig& config,
+                                      const typename CalibrationRun<M, NK>::State& x0,
+                                      const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                                      const LoopData& data,
+                                      const typename CalibrationRun<M, NK>::State* truth) {
+  return run_pass<M, NK>(config, x0, p0, data, truth, {}, LoopHooks<M>{});
 }
-template CalibrationRun<0> run_single_pass<0>(const CalibrationConfig&,
-                                              const CalibrationRun<0>::State&,
-                                              const CalibrationRun<0>::Filter::Covariance&,
-                                              const LoopData&, const CalibrationRun<0>::State*);
+#define MIRRORCAL_INSTANTIATE_RUN_LOOP_(M) \
+  template MIRRORCAL_RUN_LOOP(M, 0);       \
+  template MIRRORCAL_RUN_LOOP(M, 4);       \
+  template MIRRORCAL_RUN_LOOP(M, 5);       \
+  template MIRRORCAL_RUN_LOOP(M, 8);       \
+  template MIRRORCAL_RUN_SINGLE_PASS(M);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_INSTANTIATE_RUN_LOOP_)
+#undef MIRRORCAL_INSTANTIATE_RUN_LOOP_
 
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   sim::CalibrationStart s;

@@ -47,26 +47,29 @@ void print_detection(const DetectionReport& d, hal::PixelFormat format) {
       d.centroid_mean_px[0], d.centroid_mean_px[1], d.ms_per_frame);
 }
 
-detection::DetectionConfig<kMarkers> detection_config(const sim::RenderConfig& render) {
-  detection::DetectionConfig<kMarkers> c;
-  for (int i = 0; i < kMarkers; ++i)
+template <int M>
+detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render) {
+  detection::DetectionConfig<M> c;
+  for (int i = 0; i < M; ++i)
     c.identify.brightness[static_cast<std::size_t>(i)] =
         render.brightness[static_cast<std::size_t>(i) % render.brightness.size()];
   return c;
 }
 
-RenderedMarkers::RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
-                                 std::uint64_t seed)
+template <int M>
+RenderedMarkers<M>::RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
+                                    std::uint64_t seed)
     : frames_(s, render, seed),
-      detect_(frames_, detection_config(render), s.truth.width, s.truth.height) {}
+      detect_(frames_, detection_config<M>(render), s.truth.width, s.truth.height) {}
 
-void RenderedMarkers::relabel(const hal::MarkerPrediction<kMarkers>& prediction,
-                              MarkerFrame<kMarkers>& frame) {
+template <int M>
+void RenderedMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction,
+                                 MarkerFrame<M>& frame) {
   detect_.relabel(prediction, frame);
   // The loop holds one frame at a time, so the renderer's last frame is this one.
   const sim::RenderedTruth& truth = frames_.truth();
   ++report_.frames;
-  for (int i = 0; i < kMarkers; ++i) {
+  for (int i = 0; i < M; ++i) {
     const auto ii = static_cast<std::size_t>(i);
     if (truth.visible[ii]) ++report_.markers_drawn;
     if (!frame.seen[ii]) continue;
@@ -74,7 +77,7 @@ void RenderedMarkers::relabel(const hal::MarkerPrediction<kMarkers>& prediction,
     // The spot drawn nearest to the reported position says which marker it really is.
     int nearest = -1;
     double best = INFINITY;
-    for (int k = 0; k < kMarkers; ++k) {
+    for (int k = 0; k < M; ++k) {
       const auto kk = static_cast<std::size_t>(k);
       if (!truth.visible[kk]) continue;
       const double d = (frame.uv[ii] - truth.uv[kk]).norm();
@@ -94,7 +97,8 @@ void RenderedMarkers::relabel(const hal::MarkerPrediction<kMarkers>& prediction,
   }
 }
 
-DetectionReport RenderedMarkers::report() const {
+template <int M>
+DetectionReport RenderedMarkers<M>::report() const {
   DetectionReport r = report_;
   const std::uint64_t good = r.markers_labelled - r.wrong_labels;
   r.centroid_rms_px = good > 0 ? std::sqrt(sum_sq_ / static_cast<double>(good)) : 0.0;
@@ -107,5 +111,11 @@ DetectionReport RenderedMarkers::report() const {
   r.unlabelled_blobs = id.unassigned;
   return r;
 }
+
+#define MIRRORCAL_RENDERED_MARKERS_(M) \
+  template class RenderedMarkers<M>;   \
+  template detection::DetectionConfig<M> detection_config<M>(const sim::RenderConfig&);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_RENDERED_MARKERS_)
+#undef MIRRORCAL_RENDERED_MARKERS_
 
 }  // namespace mirrorcal::evaluation

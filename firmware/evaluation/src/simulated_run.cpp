@@ -28,22 +28,23 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
-CalibrationRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                 const std::function<void(double)>& progress,
-                                 const FrameMode& frames, firmware::LoopProfiler* profiler,
-                                 Passes passes) {
-  using Run = CalibrationRun<0>;
+template <int M>
+CalibrationRun<M, 0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress,
+                                    const FrameMode& frames, firmware::LoopProfiler* profiler,
+                                    Passes passes) {
+  using Run = CalibrationRun<M, 0>;
   const sim::SimData data = sim::simulate(s, seed);
-  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed);
-  Run::State x0;
-  Run::Filter::Covariance p0;
+  const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  const Run::State truth = truth_state<Run::State>(s);
+  const typename Run::State truth = truth_state<typename Run::State>(s);
   // With frames, every pass renders and detects them afresh (detection follows the prediction).
-  std::optional<RenderedMarkers> rendered;
+  std::optional<RenderedMarkers<M>> rendered;
   std::uint64_t wrong_labels_before = 0;
   const auto hooks = [&](int pass) {
-    LoopHooks h;
+    LoopHooks<M> h;
     // The timing of one pass: the last of those always made.
     if (pass == passes.min - 1) h.profiler = profiler;
     if (frames.enabled) {
@@ -59,7 +60,7 @@ CalibrationRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   };
   CalibrationConfig config = scenario_config(s);
   if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
-  Run run = run_loop<0>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
+  Run run = run_loop<M, 0>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) {
     run.detection = rendered->report();
@@ -68,46 +69,47 @@ CalibrationRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   return run;
 }
 
+template <int M>
 std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed) {
-  using Run = CalibrationRun<0>;
+  using Run = CalibrationRun<M, 0>;
   const sim::SimData noisy = sim::simulate(s, seed);
-  Run::State x0;
-  Run::Filter::Covariance p0;
-  initialise(sim::simulation_prior<kMarkers>(s, noisy, seed), x0, p0);
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
+  initialise(sim::simulation_prior<M>(s, noisy, seed), x0, p0);
   sim::Scenario clean = s;  // the same rig, motion and true biases; no noise, no bias walk
   clean.pixel_sigma = 0.0;
   clean.imu.gyro_noise_density = clean.imu.accel_noise_density = 0.0;
   clean.imu.gyro_random_walk = clean.imu.accel_random_walk = 0.0;
   const sim::SimData data = sim::simulate(clean, seed);
-  Run::State start = truth_state<Run::State>(s);
+  typename Run::State start = truth_state<typename Run::State>(s);
   const sim::Kinematics k = sim::kinematics(s.motion, 0.0);
   start.p = k.p;
   start.v = k.v;
   start.q_n_b = k.q_n_b;
   start.b_a = data.b_a0;
   start.b_g = data.b_g0;
-  const Run run = run_single_pass<0>(scenario_config(s), start, p0, loop_data(s, data), nullptr);
+  const Run run = run_single_pass<M, 0>(scenario_config(s), start, p0, loop_data(s, data), nullptr);
   std::vector<double> sigma;
   for (int i = Run::State::kCalibrationBegin; i < Run::State::kDim; ++i)
     sigma.push_back(std::sqrt(run.covariance(i, i)));
   return sigma;
 }
 
-template <int NK>
-CalibrationRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                            const std::function<void(double)>& progress) {
+template <int M, int NK>
+CalibrationRun<M, NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                               const std::function<void(double)>& progress) {
   const auto half = [&](double offset) {
     return [&progress, offset](double f) {
       if (progress) progress(offset + 0.5 * f);
     };
   };
-  const CalibrationRun<0> stage1 = run_simulation(s, seed, half(0.0));
+  const CalibrationRun<M, 0> stage1 = run_simulation<M>(s, seed, half(0.0));
 
-  using Run = CalibrationRun<NK>;
+  using Run = CalibrationRun<M, NK>;
   using State = typename Run::State;
   const std::uint64_t seed2 = sim::derive_seed(seed, sim::kStage2SeedStream);
   const sim::SimData data = sim::simulate(s, seed2);
-  const Prior<kMarkers> prior = sim::simulation_prior<kMarkers>(s, data, seed2);
+  const Prior<M> prior = sim::simulation_prior<M>(s, data, seed2);
   State x0;
   typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
@@ -115,38 +117,36 @@ CalibrationRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_
   const sim::CalibrationStart start = calibration_start(stage1.result);
   start_from(start, x0, p0);
   const State truth = truth_state<State>(s);
-  Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  Run run = run_loop<M, NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
   run.result.from_untrusted = !start.trusted;
   run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
 }
 
-template CalibrationRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                                       const std::function<void(double)>&);
-template CalibrationRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                                       const std::function<void(double)>&);
-template CalibrationRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                                       const std::function<void(double)>&);
-
-template <int NK>
-CalibrationRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                            const std::function<void(double)>& progress) {
-  using Run = CalibrationRun<NK>;
+template <int M, int NK>
+CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                               const std::function<void(double)>& progress) {
+  using Run = CalibrationRun<M, NK>;
   const sim::SimData data = sim::simulate(s, seed);
   typename Run::State x0;
   typename Run::Filter::Covariance p0;
-  initialise(sim::simulation_prior<kMarkers>(s, data, seed), x0, p0);
+  initialise(sim::simulation_prior<M>(s, data, seed), x0, p0);
   const typename Run::State truth = truth_state<typename Run::State>(s);
-  Run run = run_loop<NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
+  Run run = run_loop<M, NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
   run.markers_out_of_image = data.markers_out_of_image;
   return run;
 }
 
-template CalibrationRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                                       const std::function<void(double)>&);
-template CalibrationRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                                       const std::function<void(double)>&);
-template CalibrationRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                                       const std::function<void(double)>&);
+#define MIRRORCAL_SIMULATED_RUNS_(M)                                                      \
+  template MIRRORCAL_RUN_SIMULATION(M);                                                   \
+  template std::vector<double> data_limit_sigmas<M>(const sim::Scenario&, std::uint64_t); \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                   \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                   \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);                   \
+  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);                   \
+  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);                   \
+  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_SIMULATED_RUNS_)
+#undef MIRRORCAL_SIMULATED_RUNS_
 
 }  // namespace mirrorcal::evaluation

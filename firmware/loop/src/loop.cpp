@@ -12,9 +12,13 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
   return s;
 }
 
-template class CalibrationLoop<double, 3, 0>;
-template class CalibrationLoop<double, 3, 4>;  // stage 2 holding skew
-template class CalibrationLoop<double, 3, 5>;
-template class CalibrationLoop<double, 3, 8>;  // stage 2 with the lens
+// For every built M (marker_counts.hpp): stage 1, stage 2 holding skew, stage 2, with the lens.
+#define MIRRORCAL_LOOPS_(M)                     \
+  template class CalibrationLoop<double, M, 0>; \
+  template class CalibrationLoop<double, M, 4>; \
+  template class CalibrationLoop<double, M, 5>; \
+  template class CalibrationLoop<double, M, 8>;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_LOOPS_)
+#undef MIRRORCAL_LOOPS_
 
 }  // namespace mirrorcal::firmware

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "mirrorcal/estimator/imu_transition.hpp"
+#include "mirrorcal/estimator/marker_counts.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
 #include "mirrorcal/estimator/sigma_point_filter.hpp"
 
@@ -337,11 +338,15 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
   return res;
 }
 
-// The configurations the product uses are compiled once, in estimator/src/filter_*.cpp.
-extern template class CalibrationFilter<double, 3, 0>;
-extern template class CalibrationFilter<double, 3, 4>;
-extern template class CalibrationFilter<double, 3, 5>;
-extern template class CalibrationFilter<double, 3, 8>;
+// The configurations the product uses are compiled once, in units estimator/CMakeLists.txt
+// generates for every built marker count (NK = 0, 4, 5, 8), and filter_stage1_float.cpp.
+#define MIRRORCAL_EXTERN_FILTERS_(M)                     \
+  extern template class CalibrationFilter<double, M, 0>; \
+  extern template class CalibrationFilter<double, M, 4>; \
+  extern template class CalibrationFilter<double, M, 5>; \
+  extern template class CalibrationFilter<double, M, 8>;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_FILTERS_)
+#undef MIRRORCAL_EXTERN_FILTERS_
 extern template class CalibrationFilter<float, 3, 0>;
 
 }  // namespace mirrorcal

@@ -209,6 +209,10 @@ bool read_recording(const std::string& dir, int markers, Recording& out, std::st
 // features.csv is not read, and the streams open the images too (RecordingStreams::open_images).
 bool open_recording(const std::string& dir, int markers, Recording& out, std::string& error,
                     bool from_images = false);
+// The number of markers DIR's mirrorcal.yaml lists (its features_c): the M a calibration of the
+// recording needs. False, with a message naming the file, if camchain.yaml or mirrorcal.yaml is
+// bad.
+bool recording_marker_count(const std::string& dir, int& markers, std::string& error);
 // Whether DIR's recording has features.csv, and whether it has images (cam0/data/ is a folder).
 bool has_features_csv(const std::string& dir);
 bool has_images(const std::string& dir);

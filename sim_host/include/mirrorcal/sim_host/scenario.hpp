@@ -97,15 +97,19 @@ Scenario paper_scenario();
 
 // A rig a user could build, in front of a wall or floor mirror, moved by hand or at the paper's
 // pace, with the priors such a user has: every draw of the family docs/scenarios.md's "The `random`
-// family" describes. Deterministic in seed.
-Scenario random_scenario(std::uint64_t seed);
+// family" describes, with `markers` markers (the draws after the markers' differ with their
+// number). Deterministic in seed and markers.
+constexpr int kPaperMarkers = 3;  // the paper's rig, and the random family's by default
+Scenario random_scenario(std::uint64_t seed, int markers = kPaperMarkers);
 
 // Gives the scenario's camera a lens: radtan with EuRoC cam0's coefficients (k1 = -0.283, barrel),
 // equidistant with a fisheye's (the issue tracker's), or none.
 void set_lens(Scenario& s, Distortion model);
 
-// Scenario by name: "paper" (seed ignored) or "random" (drawn from seed); false if unknown.
-bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out);
+// Scenario by name: "paper" (seed and markers ignored: three markers) or "random" (drawn from seed,
+// with `markers` markers); false if unknown.
+bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out,
+                      int markers = kPaperMarkers);
 
 // The true IMU state at time t, with its derivatives, from the analytic motion.
 struct Kinematics {

@@ -15,27 +15,26 @@ CalibrationConfig recording_config(const sim::Recording& r);
 // The data of a recording as the loop consumes it.
 LoopData recording_loop_data(const sim::Recording& r);
 
-// Runs the NK filter (0: stage 1; 5: intrinsics too; 4: intrinsics, skew held at camchain.yaml's;
-// 8: fu fv cu cv and the lens's coefficients, skew held: estimate_distortion)
-// on a recording from its priors. False, with a message, if the priors do not fit this build (e.g.
-// another number of markers).
-// With from, the camera pose and markers start from that earlier calibration (start_from).
-template <int NK>
-bool calibrate_recording(const sim::Recording& r, CalibrationRun<NK>& run, std::string& error,
+// Runs the filter of M markers and NK intrinsics (0: stage 1; 5: intrinsics too; 4: intrinsics,
+// skew held at camchain.yaml's; 8: fu fv cu cv and the lens's coefficients, skew held:
+// estimate_distortion) on a recording from its priors. False, with a message, if the priors do not
+// fit this build (e.g. another number of markers). With from, the camera pose and markers start
+// from that earlier calibration (start_from).
+template <int M, int NK>
+bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, std::string& error,
                          const std::function<void(double)>& progress = {},
                          const sim::CalibrationStart* from = nullptr);
 
-extern template bool calibrate_recording<0>(const sim::Recording&, CalibrationRun<0>&, std::string&,
-                                            const std::function<void(double)>&,
-                                            const sim::CalibrationStart*);
-extern template bool calibrate_recording<4>(const sim::Recording&, CalibrationRun<4>&, std::string&,
-                                            const std::function<void(double)>&,
-                                            const sim::CalibrationStart*);
-extern template bool calibrate_recording<5>(const sim::Recording&, CalibrationRun<5>&, std::string&,
-                                            const std::function<void(double)>&,
-                                            const sim::CalibrationStart*);
-extern template bool calibrate_recording<8>(const sim::Recording&, CalibrationRun<8>&, std::string&,
-                                            const std::function<void(double)>&,
-                                            const sim::CalibrationStart*);
+#define MIRRORCAL_CALIBRATE_RECORDING(M, NK)                                                   \
+  bool calibrate_recording<M, NK>(const sim::Recording&, CalibrationRun<M, NK>&, std::string&, \
+                                  const std::function<void(double)>&,                          \
+                                  const sim::CalibrationStart*)
+#define MIRRORCAL_EXTERN_CALIBRATE_RECORDING_(M)       \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0); \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 4); \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 5); \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 8);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_CALIBRATE_RECORDING_)
+#undef MIRRORCAL_EXTERN_CALIBRATE_RECORDING_
 
 }  // namespace mirrorcal::calibration

@@ -40,8 +40,8 @@ struct ResidualSample {
 };
 
 // The most calibration states a report shows: stage 2 with the lens's coefficients (p_b_c, the
-// rotation, M markers, the time offset, fu fv cu cv and four coefficients).
-constexpr int kMaxReportStates = calibration_layout(kMarkers, 8).size();
+// rotation, the most markers this build has, the time offset, fu fv cu cv and four coefficients).
+constexpr int kMaxReportStates = calibration_layout(kMaxMarkerCount, 8).size();
 
 // One history row as the report plots it: the estimate after one frame (or the final estimate).
 struct ReportRow {
@@ -81,8 +81,8 @@ struct ReportData {
   std::vector<std::string> input_warnings;
 };
 
-template <int NK>
-ReportData report_data(const CalibrationRun<NK>& run, const std::string& title);
+template <int M, int NK>
+ReportData report_data(const CalibrationRun<M, NK>& run, const std::string& title);
 
 // A sample visited value by value: sample(f) calls f with each of its values (not NaN), in the
 // same order each time it is called (one pass over a file-backed store, or over a vector).
@@ -138,8 +138,8 @@ ReportData report_data_without_history(const CalibrationResult& r, const std::st
 
 // camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
 // a run, in dir, written as one set; input_warnings: ReportData's.
-template <int NK>
-bool write_run_outputs_and_report(const std::string& dir, const CalibrationRun<NK>& run,
+template <int M, int NK>
+bool write_run_outputs_and_report(const std::string& dir, const CalibrationRun<M, NK>& run,
                                   const std::string& title, bool from_earlier,
                                   const ReportPlots& plots, std::string& error,
                                   const std::vector<std::string>& input_warnings = {}) {

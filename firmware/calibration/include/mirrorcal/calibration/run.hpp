@@ -20,8 +20,6 @@
 
 namespace mirrorcal::calibration {
 
-constexpr int kMarkers = 3;  // M of the product build: the paper's three markers
-
 // How detection did against the rendered truth (--frames only).
 struct DetectionReport {
   std::uint64_t frames = 0;
@@ -39,11 +37,11 @@ struct DetectionReport {
   double read_ms_per_frame = 0.0;           // reading the image first (calibrate from images)
 };
 
-// One calibration: its final estimate and result, the estimate after every frame (history), and
-// what the loop, the filter and detection met on the way.
-template <int NK>
+// One calibration of M markers: its final estimate and result, the estimate after every frame
+// (history), and what the loop, the filter and detection met on the way.
+template <int M, int NK>
 struct CalibrationRun {
-  using Filter = CalibrationFilter<double, kMarkers, NK>;
+  using Filter = CalibrationFilter<double, M, NK>;
   using State = typename Filter::State;
   State truth{};
   // One row per frame, and the final one (last pass); in a temporary file (record_store.hpp).
@@ -86,7 +84,8 @@ struct LoopData {
   std::size_t frame_count() const { return streams ? stats.frames : frames.size(); }
   // A pass's sources, from the start of the streams.
   std::unique_ptr<hal::ImuSource> open_imu() const;
-  std::unique_ptr<hal::MarkerSource<kMarkers>> open_markers() const;
+  template <int M>
+  std::unique_ptr<hal::MarkerSource<M>> open_markers() const;
 };
 
 // The nominal period of an IMU sampled at rate_hz.
@@ -97,9 +96,10 @@ inline std::int64_t imu_period_ns(double rate_hz) {
 // What a run may add to the loop: marker frames from elsewhere than LoopData::frames (sim --frames:
 // rendered frames through the board's detection, relabelled with the filter's prediction), and a
 // profiler timing its stages.
+template <int M>
 struct LoopHooks {
-  hal::MarkerSource<kMarkers>* source = nullptr;
-  hal::MarkerRelabeler<kMarkers>* relabeler = nullptr;
+  hal::MarkerSource<M>* source = nullptr;
+  hal::MarkerRelabeler<M>* relabeler = nullptr;
   firmware::LoopProfiler* profiler = nullptr;
 };
 
@@ -162,42 +162,47 @@ struct Passes {
 // history row carries the error and NEES against it. progress(f) is called with the fraction done
 // now and then (an extra pass starts it again from the fraction the passes before it make);
 // hooks(pass), if given, adds a marker source or profiler to a pass.
-template <int NK>
-CalibrationRun<NK> run_loop(const CalibrationConfig& config,
-                            const typename CalibrationRun<NK>::State& x0,
-                            const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                            const LoopData& data, const typename CalibrationRun<NK>::State* truth,
-                            const std::function<void(double)>& progress = {},
-                            const std::function<LoopHooks(int pass)>& hooks = {},
-                            Passes passes = {});
-
-// The filters the product instantiates: stage 1 (NK = 0), stage 2 (NK = 5), stage 2 with the
-// skew held at the configured value (NK = 4: Kalibr and OpenVINS have no slot for skew), and
-// stage 2 with the lens's distortion coefficients too, skew held (NK = 8, estimate_distortion).
-#define MIRRORCAL_RUN_LOOP(NK)                                                                    \
-  CalibrationRun<NK> run_loop<NK>(const CalibrationConfig&, const CalibrationRun<NK>::State&,     \
-                                  const CalibrationRun<NK>::Filter::Covariance&, const LoopData&, \
-                                  const CalibrationRun<NK>::State*,                               \
-                                  const std::function<void(double)>&,                             \
-                                  const std::function<LoopHooks(int)>&, Passes)
-extern template MIRRORCAL_RUN_LOOP(0);
-extern template MIRRORCAL_RUN_LOOP(4);
-extern template MIRRORCAL_RUN_LOOP(5);
-extern template MIRRORCAL_RUN_LOOP(8);
+template <int M, int NK>
+CalibrationRun<M, NK> run_loop(const CalibrationConfig& config,
+                               const typename CalibrationRun<M, NK>::State& x0,
+                               const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                               const LoopData& data,
+                               const typename CalibrationRun<M, NK>::State* truth,
+                               const std::function<void(double)>& progress = {},
+                               const std::function<LoopHooks<M>(int pass)>& hooks = {},
+                               Passes passes = {});
 
 // One pass of the loop over the data from (x0, p0), nothing more: no further pass, no refinement
 // (what a filter linearised at the truth ends with: evaluation's data_limit_sigmas).
-template <int NK>
-CalibrationRun<NK> run_single_pass(const CalibrationConfig& config,
-                                   const typename CalibrationRun<NK>::State& x0,
-                                   const typename CalibrationRun<NK>::Filter::Covariance& p0,
-                                   const LoopData& data,
-                                   const typename CalibrationRun<NK>::State* truth);
-extern template CalibrationRun<0> run_single_pass<0>(const CalibrationConfig&,
-                                                     const CalibrationRun<0>::State&,
-                                                     const CalibrationRun<0>::Filter::Covariance&,
-                                                     const LoopData&,
-                                                     const CalibrationRun<0>::State*);
+template <int M, int NK>
+CalibrationRun<M, NK> run_single_pass(const CalibrationConfig& config,
+                                      const typename CalibrationRun<M, NK>::State& x0,
+                                      const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
+                                      const LoopData& data,
+                                      const typename CalibrationRun<M, NK>::State* truth);
+// The filters the product instantiates for each built M (MIRRORCAL_FOR_EACH_MARKER_COUNT): stage 1
+// (NK = 0), stage 2 (NK = 5), stage 2 with the skew held at the configured value (NK = 4: Kalibr
+// and OpenVINS have no slot for skew), and stage 2 with the lens's coefficients too, skew held
+// (NK = 8, estimate_distortion).
+#define MIRRORCAL_RUN_LOOP(M, NK)                                              \
+  CalibrationRun<M, NK> run_loop<M, NK>(                                       \
+      const CalibrationConfig&, const CalibrationRun<M, NK>::State&,           \
+      const CalibrationRun<M, NK>::Filter::Covariance&, const LoopData&,       \
+      const CalibrationRun<M, NK>::State*, const std::function<void(double)>&, \
+      const std::function<LoopHooks<M>(int)>&, Passes)
+#define MIRRORCAL_RUN_SINGLE_PASS(M)                                                          \
+  CalibrationRun<M, 0> run_single_pass<M, 0>(const CalibrationConfig&,                        \
+                                             const CalibrationRun<M, 0>::State&,              \
+                                             const CalibrationRun<M, 0>::Filter::Covariance&, \
+                                             const LoopData&, const CalibrationRun<M, 0>::State*)
+#define MIRRORCAL_EXTERN_RUN_LOOP_(M)       \
+  extern template MIRRORCAL_RUN_LOOP(M, 0); \
+  extern template MIRRORCAL_RUN_LOOP(M, 4); \
+  extern template MIRRORCAL_RUN_LOOP(M, 5); \
+  extern template MIRRORCAL_RUN_LOOP(M, 8); \
+  extern template MIRRORCAL_RUN_SINGLE_PASS(M);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_RUN_LOOP_)
+#undef MIRRORCAL_EXTERN_RUN_LOOP_
 
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
@@ -224,9 +229,9 @@ void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0)
 
 // camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir: added to out, or
 // written.
-template <int NK>
-bool add_run_outputs(files::OutputSet& out, const std::string& dir, const CalibrationRun<NK>& run,
-                     std::string& error) {
+template <int M, int NK>
+bool add_run_outputs(files::OutputSet& out, const std::string& dir,
+                     const CalibrationRun<M, NK>& run, std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
          write_estimates_csv(out, dir + "/estimates.csv", run.history,
@@ -234,8 +239,9 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir, const Calibr
          (!run.features_found ||
           write_features_csv(out, dir + "/features.csv", run.history, error));
 }
-template <int NK>
-bool write_run_outputs(const std::string& dir, const CalibrationRun<NK>& run, std::string& error) {
+template <int M, int NK>
+bool write_run_outputs(const std::string& dir, const CalibrationRun<M, NK>& run,
+                       std::string& error) {
   files::OutputSet out;
   return add_run_outputs(out, dir, run, error) && out.commit(error);
 }

@@ -14,7 +14,6 @@
 namespace mirrorcal::evaluation {
 
 using calibration::DetectionReport;
-using calibration::kMarkers;
 
 // The detection of several runs as one: counts summed, the centroid RMS over all labelled markers,
 // the maximum of the maxima, time per frame over all frames.
@@ -25,26 +24,30 @@ void print_detection(const DetectionReport& d, hal::PixelFormat format);
 
 // The detection settings for frames drawn with the given renderer settings: its brightness
 // ratios are the identification's second cue.
-detection::DetectionConfig<kMarkers> detection_config(const sim::RenderConfig& render);
+template <int M>
+detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render);
 
 // The marker source of a run with frames: renders frame after frame and detects the markers in
 // them; the loop relabels each with its prediction (give it this object with set_identifier),
 // and every frame so labelled is scored against the truth it was drawn from.
-class RenderedMarkers final : public hal::MarkerSource<kMarkers>,
-                              public hal::MarkerRelabeler<kMarkers> {
+template <int M>
+class RenderedMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
   RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render, std::uint64_t seed);
-  hal::SourceStatus poll(MarkerFrame<kMarkers>& frame) override { return detect_.poll(frame); }
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override { return detect_.poll(frame); }
   std::int64_t detection_ns() const override { return detect_.detection_ns(); }
-  void relabel(const hal::MarkerPrediction<kMarkers>& prediction,
-               MarkerFrame<kMarkers>& frame) override;
+  void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override;
   DetectionReport report() const;
 
  private:
   sim::RenderedFrameSource frames_;
-  detection::DetectingMarkerSource<kMarkers> detect_;
+  detection::DetectingMarkerSource<M> detect_;
   DetectionReport report_{};
   double sum_sq_ = 0.0, sum_u_ = 0.0, sum_v_ = 0.0;
 };
+// Compiled in rendered_markers.cpp for every built M.
+#define MIRRORCAL_EXTERN_RENDERED_MARKERS_(M) extern template class RenderedMarkers<M>;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_RENDERED_MARKERS_)
+#undef MIRRORCAL_EXTERN_RENDERED_MARKERS_
 
 }  // namespace mirrorcal::evaluation

@@ -36,16 +36,19 @@ CalibrationConfig scenario_config(const sim::Scenario& s);
 LoopData loop_data(const sim::Scenario& s, const sim::SimData& data);
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
-CalibrationRun<0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                 const std::function<void(double)>& progress = {},
-                                 const FrameMode& frames = {},
-                                 firmware::LoopProfiler* profiler = nullptr, Passes passes = {});
+// M is the scenario's number of markers (s.truth.markers).
+template <int M>
+CalibrationRun<M, 0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                    const std::function<void(double)>& progress = {},
+                                    const FrameMode& frames = {},
+                                    firmware::LoopProfiler* profiler = nullptr, Passes passes = {});
 
 // What the data of a simulated run can hold: the 1-sigma of each calibration state (SI, in
 // calibration_params() order) that a filter linearised at the truth ends with, on the same rig,
 // motion and sensors with noise-free data, started at the truth from the prior's covariance (one
 // pass; the curvature the transform sees over the prior still widens its first frames a little).
 // The campaigns judge errors against it: a run's estimate can be no better than this.
+template <int M>
 std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed);
 
 // The paper's section III and Table III: stage 1 as run_simulation (the camera's intrinsics known),
@@ -54,27 +57,35 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
 // intrinsics from guesses drawn with the scenario's intrinsics sigma (100 px), the IMU state from
 // its prior. Stage 2's state is what the run reports. NK = 5 estimates the skew; NK = 4 holds it at
 // the scenario camera's (simulate a camera without skew to hold it at zero: sim::without_skew()).
-template <int NK>
-CalibrationRun<NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                            const std::function<void(double)>& progress = {});
-extern template CalibrationRun<4> run_two_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                                              const std::function<void(double)>&);
-extern template CalibrationRun<5> run_two_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                                              const std::function<void(double)>&);
-extern template CalibrationRun<8> run_two_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                                              const std::function<void(double)>&);
+template <int M, int NK>
+CalibrationRun<M, NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                               const std::function<void(double)>& progress = {});
 
 // The paper's "everything at once" mode: one minute of data, the intrinsics estimated with the
 // rest from the prior's guesses (100 px off), the same as `record --intrinsics` then `calibrate`.
-template <int NK>
-CalibrationRun<NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                            const std::function<void(double)>& progress = {});
-extern template CalibrationRun<4> run_one_stage_simulation<4>(const sim::Scenario&, std::uint64_t,
-                                                              const std::function<void(double)>&);
-extern template CalibrationRun<5> run_one_stage_simulation<5>(const sim::Scenario&, std::uint64_t,
-                                                              const std::function<void(double)>&);
-extern template CalibrationRun<8> run_one_stage_simulation<8>(const sim::Scenario&, std::uint64_t,
-                                                              const std::function<void(double)>&);
+template <int M, int NK>
+CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                               const std::function<void(double)>& progress = {});
+
+// Compiled in simulated_run.cpp for every built M (NK = 4, 5, 8 for the staged ones).
+#define MIRRORCAL_RUN_SIMULATION(M)                                                            \
+  CalibrationRun<M, 0> run_simulation<M>(const sim::Scenario&, std::uint64_t,                  \
+                                         const std::function<void(double)>&, const FrameMode&, \
+                                         firmware::LoopProfiler*, Passes)
+#define MIRRORCAL_STAGED_SIMULATION(name, M, NK)                         \
+  CalibrationRun<M, NK> name<M, NK>(const sim::Scenario&, std::uint64_t, \
+                                    const std::function<void(double)>&)
+#define MIRRORCAL_EXTERN_SIMULATED_RUNS_(M)                                                      \
+  extern template MIRRORCAL_RUN_SIMULATION(M);                                                   \
+  extern template std::vector<double> data_limit_sigmas<M>(const sim::Scenario&, std::uint64_t); \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                   \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                   \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);                   \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);                   \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);                   \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_SIMULATED_RUNS_)
+#undef MIRRORCAL_EXTERN_SIMULATED_RUNS_
 
 // The calibration state a scenario's truth is (the IMU's motion block left at zero).
 template <class State>

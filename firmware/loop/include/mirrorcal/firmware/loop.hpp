@@ -124,9 +124,13 @@ class CalibrationLoop {
 // The sample at time t on the straight line between a and b (a.t_ns <= t <= b.t_ns).
 ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns);
 
-extern template class CalibrationLoop<double, 3, 0>;
-extern template class CalibrationLoop<double, 3, 4>;
-extern template class CalibrationLoop<double, 3, 5>;
-extern template class CalibrationLoop<double, 3, 8>;
+// Compiled in loop.cpp for every built M.
+#define MIRRORCAL_EXTERN_LOOPS_(M)                     \
+  extern template class CalibrationLoop<double, M, 0>; \
+  extern template class CalibrationLoop<double, M, 4>; \
+  extern template class CalibrationLoop<double, M, 5>; \
+  extern template class CalibrationLoop<double, M, 8>;
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_LOOPS_)
+#undef MIRRORCAL_EXTERN_LOOPS_
 
 }  // namespace mirrorcal::firmware
