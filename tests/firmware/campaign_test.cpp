@@ -301,32 +301,33 @@ TEST(Campaign, OneStageRunsThatLockedOnComeBackFromARestart) {
     EXPECT_NE(yaml.str().find("restarted from the guesses"), std::string::npos) << seed;
     std::filesystem::remove_all(dir);
   }
+}
 
-  // The random family with another number of markers than three (the second count of
-  // MIRRORCAL_MARKERS: each rig draws that many within the family's rules): ten rigs consistent
-  // over their calibration states (the average NEES within its 99.9 % interval), and at most one
-  // run beyond 4 sigma that did not say so.
-  TEST(Campaign, TenRandomRigsWithAnotherMarkerCountAreConsistent) {
-    if (mirrorcal::kMarkerCounts.size() < 2) GTEST_SKIP() << "this build has one marker count";
-    const int m = mirrorcal::kMarkerCounts[1];
-    const RandomSummary summary = random_campaign("random-m" + std::to_string(m),
-                                                  "--markers " + std::to_string(m) + " --runs 10");
-    const std::vector<std::string>& cell = summary.cell;
-    ASSERT_GE(cell.size(), 8u);
-    ASSERT_EQ(cell[0], "all");
-    const int runs = std::stoi(cell[2]), missed = std::stoi(cell[7]);
-    const double mean = std::stod(cell[3]);
-    const double states = mirrorcal::calibration_layout(m, 0).size();
-    const double lo = mirrorcal::calibration::chi2_quantile(0.0005, states * runs) / runs;
-    const double hi = mirrorcal::calibration::chi2_quantile(0.9995, states * runs) / runs;
-    std::printf(
-        "random, %d markers: NEES average %.2f of %.0f states (99.9 %% interval %.2f..%.2f), "
-        "%d unflagged beyond 4 sigma\n",
-        m, mean, states, lo, hi, missed);
-    EXPECT_EQ(runs, 10);
-    EXPECT_GT(mean, lo);
-    EXPECT_LT(mean, hi);
-    EXPECT_LE(missed, 1);  // as the three markers' family (TwentyRandomRigsHoldTheirFigures)
-  }
+// The random family with another number of markers than three (the second count of
+// MIRRORCAL_MARKERS: each rig draws that many within the family's rules): ten rigs consistent
+// over their calibration states (the average NEES within its 99.9 % interval), and at most one
+// run beyond 4 sigma that did not say so.
+TEST(Campaign, TenRandomRigsWithAnotherMarkerCountAreConsistent) {
+  if (mirrorcal::kMarkerCounts.size() < 2) GTEST_SKIP() << "this build has one marker count";
+  const int m = mirrorcal::kMarkerCounts[1];
+  const RandomSummary summary = random_campaign("random-m" + std::to_string(m),
+                                                "--markers " + std::to_string(m) + " --runs 10");
+  const std::vector<std::string>& cell = summary.cell;
+  ASSERT_GE(cell.size(), 8u);
+  ASSERT_EQ(cell[0], "all");
+  const int runs = std::stoi(cell[2]), missed = std::stoi(cell[7]);
+  const double mean = std::stod(cell[3]);
+  const double states = mirrorcal::calibration_layout(m, 0).size();
+  const double lo = mirrorcal::calibration::chi2_quantile(0.0005, states * runs) / runs;
+  const double hi = mirrorcal::calibration::chi2_quantile(0.9995, states * runs) / runs;
+  std::printf(
+      "random, %d markers: NEES average %.2f of %.0f states (99.9 %% interval %.2f..%.2f), "
+      "%d unflagged beyond 4 sigma\n",
+      m, mean, states, lo, hi, missed);
+  EXPECT_EQ(runs, 10);
+  EXPECT_GT(mean, lo);
+  EXPECT_LT(mean, hi);
+  EXPECT_LE(missed, 1);  // as the three markers' family (TwentyRandomRigsHoldTheirFigures)
+}
 
 }  // namespace
