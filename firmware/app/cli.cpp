@@ -87,6 +87,17 @@ bool parse_count(const Options& o, const std::string& key, std::uint64_t def, st
   return true;
 }
 
+std::string marker_count_not_built(int m) {
+  if (m < 1) return std::to_string(m) + " markers: a calibration needs at least one";
+  std::string counts, option;
+  for (const int built : kMarkerCounts) {
+    counts += (counts.empty() ? "" : ", ") + std::to_string(built);
+    option += std::to_string(built) + ";";
+  }
+  return std::to_string(m) + " markers: this build has marker counts " + counts +
+         "; rebuild with -DMIRRORCAL_MARKERS=\"" + option + std::to_string(m) + "\"";
+}
+
 namespace {
 
 // A rolling shutter's line delay: seconds per row, the whole frame read within

@@ -64,6 +64,8 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
 // ", N markers" for a rig with other than the paper's three markers, "" for three: what the
 // simulating commands add to their titles.
 std::string markers_note(const sim::Scenario& s);
+// What a count this build does not have gets told: the counts it has and how to add one.
+std::string marker_count_not_built(int m);
 
 // Calls f(MarkerCount<M>{}) (marker_counts.hpp) for the built M equal to markers and returns its
 // exit code: every command reaches its instantiation for the rig's number of markers through here.
