@@ -500,6 +500,50 @@ TEST(SigmaPointUpdate, LinearisedAtAnyReferenceIsTheKalmanUpdateForALinearModel)
   EXPECT_NEAR(res.nis, p.kf.nis, 1e-9 * (1.0 + p.kf.nis));
 }
 
+// Linearised at a reference with the points drawn close (linearised_alpha_scale, the refinement's
+// last step), the update is the extended Kalman filter's at that reference: the measurement's
+// Jacobian there, the same slope for the mean and the covariance. With the points over the whole
+// spread of a wide prior, the regression's slopes differ from the Jacobian (here by 0.5 %). (The
+// second-order cross terms, which widen the innovation covariance of a frame whose prediction
+// spreads far wider than its noise whatever the points' spread, are left out of both.)
+TEST(SigmaPointUpdate, LinearisedWithPointsDrawnCloseIsTheJacobianUpdateAtTheReference) {
+  using S2 = EuclideanState<double, 2>;
+  const double f = 833.0, r = 1.0, z = 40.0;
+  S2 mean, ref;
+  mean.x << 0.05, 0.7;
+  ref.x << 0.04, 0.65;
+  Eigen::Matrix2d p0;
+  p0 << 0.01, 0.002, 0.002, 0.01;  // 10 cm on a depth of 70 cm
+  const auto h = [&](const S2& st, Eigen::Matrix<double, 1, 1>& zp, std::array<bool, 1>&) {
+    zp(0) = f * st.x(0) / st.x(1);
+  };
+  const auto update = [&](double alpha_scale) {
+    SigmaPointParams params;
+    params.linearised_alpha_scale = alpha_scale;
+    params.cross_terms_above = INFINITY;
+    SigmaPointFilter<S2> filter(params);
+    filter.reset(mean, p0);
+    const UpdateResult res = filter.template update<0, 2, 1, 1>(
+        h, Eigen::Matrix<double, 1, 1>(z), std::array<bool, 1>{true},
+        Eigen::Matrix<double, 1, 1>(r), 1e12, &ref);
+    EXPECT_EQ(res.status, FilterStatus::kOk);
+    return filter;
+  };
+  // The extended Kalman filter linearised at ref, by hand.
+  const Eigen::RowVector2d jac(f / ref.x(1), -f * ref.x(0) / (ref.x(1) * ref.x(1)));
+  const double s = jac * p0 * jac.transpose() + r;
+  const Eigen::Vector2d gain = p0 * jac.transpose() / s;
+  const double nu = z - f * ref.x(0) / ref.x(1) - jac * (mean.x - ref.x);
+  const Eigen::Vector2d ekf_mean = mean.x + gain * nu;
+  const Eigen::Matrix2d ekf_cov = p0 - gain * s * gain.transpose();
+
+  const SigmaPointFilter<S2> close = update(1.0 / 64.0);
+  EXPECT_LT((close.mean().x - ekf_mean).norm(), 1e-4 * (ekf_mean - mean.x).norm());
+  EXPECT_LT((close.covariance() - ekf_cov).norm(), 1e-4 * ekf_cov.norm());
+  const SigmaPointFilter<S2> spread = update(1.0);
+  EXPECT_GT((spread.covariance() - ekf_cov).norm(), 1e-3 * ekf_cov.norm());
+}
+
 TEST(SigmaPointUpdate, NoActiveBlockIsNoMeasurement) {
   Pair p = make_filter_pair(500);
   const State before = p.ukf.mean();

@@ -135,6 +135,12 @@ struct SigmaPointParams {
   // An update whose predicted measurement spreads more than this many times its noise also takes
   // the second-order cross terms of the measurement (see add_cross_terms()).
   double cross_terms_above = 1.0;
+  // An update linearised at a reference (linearise_at) draws its points with alpha times this:
+  // 1 regresses the measurement over the filter's whole spread, a statistical linearisation that
+  // pulls a Gauss-Newton iteration in from far off; a small value takes the measurement's local
+  // slopes at the reference, its Jacobian, which the iteration's last step needs (calibration's
+  // run.hpp, kTangentAlphaScale).
+  double linearised_alpha_scale = 1.0;
 };
 
 enum class FilterStatus : std::uint8_t {
@@ -345,7 +351,8 @@ class SigmaPointFilter {
     for (int shrink = 0;; ++shrink) {
       ok = active;
       std::array<bool, kBlocks> centre_ok;
-      ws.w = SigmaWeights<Scalar, L>::make(params_.unscented, std::ldexp(1.0, -shrink));
+      const double alpha_scale = linearise_at != nullptr ? params_.linearised_alpha_scale : 1.0;
+      ws.w = SigmaWeights<Scalar, L>::make(params_.unscented, std::ldexp(alpha_scale, -shrink));
       sampled = sample_measurement<B, L, kRows, kBlocks>(h, ok, ws, &centre_ok);
       if (!sampled || ok == centre_ok || shrink >= params_.max_shrinks) break;
     }
