@@ -243,10 +243,10 @@ bool decode_png(const std::string& png, Image& image, std::string& why) {
 TEST(ReportFiles, OpensWithTheVerdictAndTheCalibrationOfTheResultFile) {
   TempDir dir("report-verdict");
   const std::string& d = dir.path;
-  // A run locked onto a wrong solution (see cli_test), and a good run; each command's
-  // output in its own folder.
+  // A run locked onto a wrong solution (two passes, no restart: see cli_test), and a good run;
+  // each command's output in its own folder.
   const std::vector<std::pair<std::string, std::string>> runs = {
-      {"bad", "sim --scenario random --seed 14543870473635789003 --no-plots"},
+      {"bad", "sim --passes 2 --scenario random --seed 14543870473635789003 --no-plots"},
       {"good", "sim --seed 3 --no-plots"}};
   for (const auto& [run, args] : runs) {
     const std::string out = d + "/" + run, log = d + "/" + run + "-log";

@@ -368,10 +368,10 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                r.nis_per_dof, r.sigma_ratio, r.refinement_step_sigmas);
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
-               "above 1, sigma_ratio below 0.5, refinement_step above 8, under half the markers "
+               "above 1, sigma_ratio below %g, refinement_step above %g, under half the markers "
                "used, a prior contradicted by 5 sigma or a start (--from) that said false: do "
                "not trust it\n",
-               consistent(r) ? "true" : "false");
+               consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit);
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);

@@ -386,14 +386,14 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
   // sim --frames): hooks numbered on from the passes'.
   int hook = free_passes;
   const auto next_hooks = [&] { return hooks ? hooks(hook++) : LoopHooks<M>{}; };
-  for (int it = 0; it < kMaxRefinements; ++it) {
+  // One Gauss-Newton step from run's estimate, linearised as c says; false if not taken.
+  const auto step = [&](const CalibrationConfig& c) {
     State from = run.history.back().state;
     from.p = start.p;
     from.v = start.v;
     from.q_n_b = start.q_n_b;
-    const CalibrationRun<M, NK> track =
-        run_pass<M, NK>(config, from, calibration_held<M, NK>(p0, run), data, nullptr, {},
-                        next_hooks(), nullptr, true);
+    const CalibrationRun<M, NK> track = run_pass<M, NK>(
+        c, from, calibration_held<M, NK>(p0, run), data, nullptr, {}, next_hooks(), nullptr, true);
     // Each frame is linearised at the track smoothed over the whole pass, never at the track's
     // estimate after that frame's update: an estimate that holds the frame's own noise moves
     // the linearisation with that noise, and where the rig's motion leaves a direction weak
@@ -413,22 +413,32 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     prior.v = from.v;
     prior.q_n_b = from.q_n_b;
     CalibrationRun<M, NK> refined =
-        run_pass<M, NK>(config, prior, p0, data, truth, {}, next_hooks(), &trajectory);
+        run_pass<M, NK>(c, prior, p0, data, truth, {}, next_hooks(), &trajectory);
     // A replay that did not meet the same frames (a source that ran dry) refines nothing.
     if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
         refined.filter_counters.failures > 0)
-      break;
+      return false;
     // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
     // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
-    if (suspect(refined.result) && !suspect(run.result)) break;
+    if (suspect(refined.result) && !suspect(run.result)) return false;
     refined.result.refinement_step_sigmas = step_sigmas<M, NK>(refined, run);
     refined.first_frame = run.first_frame;
     refined.result.passes = free_passes;
     refined.result.restarted_pass = run.result.restarted_pass;
     run = std::move(refined);
     imu_start_from<M, NK>(config, run, p0, data, start);
+    return true;
+  };
+  bool taken = true;
+  for (int it = 0; it < kMaxRefinements && taken; ++it) {
+    taken = step(config);
     if (run.result.refinement_step_sigmas < kConvergedStepSigmas) break;
   }
+  // The last step at the measurement's Jacobian (kTangentAlphaScale): its length is the
+  // self-check's refinement_step.
+  CalibrationConfig tangent = config;
+  tangent.sigma_points.linearised_alpha_scale = kTangentAlphaScale;
+  if (taken) step(tangent);
   double lowest = INFINITY;
   for (int i = B; i < State::kDim; ++i)
     lowest = std::min(lowest, std::sqrt(own(i, i) / run.covariance(i, i)));
