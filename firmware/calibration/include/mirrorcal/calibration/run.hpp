@@ -155,8 +155,8 @@ constexpr double kConvergedStepSigmas = 1.0;
 // Laplace approximation at the solution; that ratio 1.00). Random family, seeds 1, 2, 3 (200
 // rigs each) and 7 (300): average NEES 17.68, 16.81, 79.5, 17.04 -> 17.53, 16.27, 18.24, 16.10,
 // runs beyond 4 sigma 1, 0, 2, 3 -> 1, 0, 1, 0. Tangent slopes in every step converge worse
-// (3 runs ended 4.3-6.8 sigma off, unflagged). That last step's length is the self-check's
-// refinement_step (result.hpp, kRefinementStepLimit).
+// (3 of 600 runs ended 4.3-6.8 sigma off, 2 of them unflagged). That last step's length is the
+// self-check's refinement_step (result.hpp, kRefinementStepLimit).
 constexpr double kTangentAlphaScale = 1.0 / 64.0;
 constexpr int kImuStartFrames = 10;
 constexpr double kImuStartMaxS = 2.0;
