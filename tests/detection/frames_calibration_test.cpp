@@ -13,8 +13,8 @@ namespace mc = mirrorcal;
 
 TEST(FramesCalibration, MatchesTheListedMarkersRun) {
   const mc::sim::Scenario s = mc::sim::paper_scenario();
+  const auto listed = mc::evaluation::run_simulation<3>(s, 4);
   for (const auto format : {mc::hal::PixelFormat::kGrey, mc::hal::PixelFormat::kYuyv}) {
-    const auto listed = mc::evaluation::run_simulation<3>(s, 4);
     mc::evaluation::FrameMode mode;
     mode.enabled = true;
     mode.format = format;

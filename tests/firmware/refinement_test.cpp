@@ -21,11 +21,12 @@ using State = Calibration::State;
 // calibration, P0 the prior's). The refinement's steps that regress over the filter's spread keep
 // 1.24 times that in mean square on p_b_c (random family, 100 rigs); its last step, at the
 // measurement's Jacobian, keeps what it says (run.hpp, kTangentAlphaScale). Compared here in the
-// reported covariance's metric, summed over rigs.
+// reported covariance's metric, summed over four rigs: 1.02 with that step, 1.56 without it (eight
+// rigs: 1.02 and 1.33, at twice the time under the sanitizers).
 TEST(Refinement, KeepsOfTheGuessesErrorWhatItsCovarianceSays) {
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   double kept = 0.0, said = 0.0;
-  for (std::uint64_t seed = 1; seed <= 8; ++seed) {
+  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
     mc::sim::Scenario s = mc::sim::random_scenario(seed);
     s.pixel_sigma = 0.0;
     s.imu.gyro_noise_density = s.imu.accel_noise_density = 0.0;
