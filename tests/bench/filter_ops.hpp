@@ -23,6 +23,9 @@ class FilterOps {
   virtual void restore() = 0;                       // back to the prepared filter
   virtual bool predict() = 0;                       // one IMU step (5 ms); true if it succeeded
   virtual bool update() = 0;                        // one frame, every marker seen
+  // Reads the covariance, which first applies the predicts' deferred cross-covariance (what an
+  // update or any reader does once per frame); returns an entry of it.
+  virtual double settle() = 0;
 };
 
 // The configuration, or nullptr if it is not built.

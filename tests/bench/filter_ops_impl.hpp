@@ -71,6 +71,7 @@ class FilterOpsOf final : public FilterOps {
   void restore() override { filter_ = prepared_; }
   bool predict() override { return filter_.predict(s0_, s1_) == FilterStatus::kOk; }
   bool update() override { return filter_.update(frame_).status == FilterStatus::kOk; }
+  double settle() override { return filter_.covariance()(Filter::kDim - 1, 0); }
 
  private:
   static CalibrationConfig config() {

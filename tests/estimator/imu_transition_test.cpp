@@ -109,6 +109,22 @@ TEST(ImuTransition, BlockProductEqualsTheDenseOne) {
   EXPECT_EQ(f.dense(), dense);
 }
 
+// A run of steps composes into one transition of the same block form: the product of the dense
+// ones, in order.
+TEST(ImuTransition, StepsComposeIntoTheProductOfTheirTransitions) {
+  EXPECT_EQ(ImuTransition<double>::identity().dense(), (Eigen::Matrix<double, 15, 15>::Identity()));
+  ImuTransition<double> composed = ImuTransition<double>::identity();
+  Eigen::Matrix<double, 15, 15> product = Eigen::Matrix<double, 15, 15>::Identity();
+  for (unsigned seed = 1; seed <= 6; ++seed) {
+    const Step st = lively_step(seed, seed * 3'000'000LL);
+    const ImuTransition<double> f = imu_transition(st.x, st.s0, st.s1);
+    composed = composed.followed_by(f);
+    product = f.dense() * product;
+    EXPECT_LT((composed.dense() - product).cwiseAbs().maxCoeff(), 1e-13 * product.norm())
+        << "after " << seed << " steps";
+  }
+}
+
 // A covariance with the paper's priors on the calibration and correlations everywhere.
 FilterD::Covariance correlated_covariance(unsigned seed) {
   std::mt19937 rng(seed);
@@ -173,6 +189,40 @@ TEST(ImuTransition, AnalyticPropagationAgreesWithTheSigmaPointTransformToFirstOr
     EXPECT_NEAR(tenth / at_prior, 0.01, 0.001)
         << "seed " << seed << ": " << at_prior << " -> " << tenth;
   }
+}
+
+// The filter's predict defers the cross-covariance of the IMU block with the calibration to when
+// the covariance is read: after ten steps it is the step-by-step propagation's (analytic_predict,
+// a product by F's rows rather than the filter's by its columns), and a read between the steps
+// changes nothing but the rounding.
+TEST(ImuTransition, FilterCovarianceAfterStepsIsTheStepByStepOne) {
+  CalibrationConfig cfg;
+  cfg.gravity_n = kGravity;
+  FilterD deferred(cfg), read_every_step(cfg);
+  const Step first = lively_step(11, 5'000'000);
+  const FilterD::Covariance p0 = correlated_covariance(11);
+  deferred.reset(first.x, p0);
+  read_every_step.reset(first.x, p0);
+  FilterD::Covariance reference = p0;
+  ImuSample s0 = first.s0;
+  for (unsigned k = 0; k < 10; ++k) {
+    ImuSample s1 = lively_step(20 + k, 5'000'000).s1;
+    s1.t_ns = s0.t_ns + 5'000'000;
+    reference = analytic_predict(deferred.state(), reference, s0, s1,
+                                 imu_process_noise<double>(cfg.imu, 0.005));
+    ASSERT_EQ(deferred.predict(s0, s1), FilterStatus::kOk);
+    ASSERT_EQ(read_every_step.predict(s0, s1), FilterStatus::kOk);
+    const double read = read_every_step.covariance()(0, 0);  // settles this step
+    EXPECT_GT(read, 0.0);
+    s0 = s1;
+  }
+  EXPECT_EQ(deferred.state().p, read_every_step.state().p);
+  const double scale = reference.norm();
+  EXPECT_LT((deferred.covariance() - reference).norm(), 1e-13 * scale);
+  EXPECT_LT((deferred.covariance() - read_every_step.covariance()).norm(), 1e-14 * scale);
+  constexpr int C = FilterD::kDim - 15;
+  const double moved = (deferred.covariance() - p0).bottomLeftCorner<C, 15>().norm();
+  EXPECT_GT(moved, 1e-3 * scale);  // the steps did move the cross-covariance
 }
 
 }  // namespace

@@ -64,6 +64,8 @@ class CalibrationFilter {
   // A new estimate for the filter's present time (which reset leaves as it is).
   void reset(const State& x, const Covariance& p) {
     filter_.reset(x, p);
+    unsettled_ = ImuTransition<S>::identity();
+    has_unsettled_ = false;
     imu_block_checked_ = false;
   }
   // The IMU signal at the time the estimate holds for: the loop's first sample, then every
@@ -133,12 +135,18 @@ class CalibrationFilter {
   };
   void keep_motion_steps(bool on) {
     keep_steps_ = on;
-    since_update_.setIdentity();
+    since_update_ = ImuTransition<S>::identity();
+    restarted_since_update_ = false;
   }
   const MotionStep& motion_step() const { return step_; }
   // A frame stamped t_cam_ns against the filter's time and the IMU signal there.
   Exposure<S> exposure(std::int64_t t_cam_ns) const;
-  const Covariance& covariance() const { return filter_.covariance(); }
+  // The covariance, the predicts' cross-covariance of the IMU block with the calibration brought
+  // up to date first (settle).
+  const Covariance& covariance() const {
+    settle();
+    return filter_.covariance();
+  }
   const CalibrationConfig& config() const { return config_; }
   const FilterCounters& counters() const { return counters_; }
   Pinhole<S> intrinsics() const { return intrinsics_of(filter_.mean(), fixed_); }
@@ -157,7 +165,9 @@ class CalibrationFilter {
   };
 
   CalibrationConfig config_;
-  Filter filter_;
+  // Mutable for settle: covariance() brings the deferred cross-covariance up to date when it is
+  // read (the filter is used by one thread at a time).
+  mutable Filter filter_;
   Vec3<S> gravity_;
   Pinhole<S> fixed_;
   FilterCounters counters_{};
@@ -183,8 +193,21 @@ class CalibrationFilter {
   bool along_arrays_ = false;
   std::size_t along_next_ = 0;
   State predicted_{};
+  // Predict moves the IMU block's own covariance at every step, but its cross-covariance with the
+  // calibration P_cd only when it is needed (an update, a restart, covariance()): the steps'
+  // transitions since then compose (ImuTransition::followed_by, six 3x3 products) and P_cd F^T is
+  // applied once, per frame instead of per IMU sample: a predict's cost then does not grow with M.
+  mutable ImuTransition<S> unsettled_ = ImuTransition<S>::identity();
+  mutable bool has_unsettled_ = false;
+  void settle() const {
+    if (!has_unsettled_) return;
+    filter_.template move_leading_cross<State::kDynamicDim>(unsettled_);
+    unsettled_ = ImuTransition<S>::identity();
+    has_unsettled_ = false;
+  }
   bool keep_steps_ = false;
-  Eigen::Matrix<S, 15, 15> since_update_ = Eigen::Matrix<S, 15, 15>::Identity();
+  ImuTransition<S> since_update_ = ImuTransition<S>::identity();
+  bool restarted_since_update_ = false;  // the motion before a restart says nothing of after it
   MotionStep step_{};
   ImuSample now_{};  // the IMU signal at the filter's time, if timed_
   // The gyro signal's derivative there: over the last predict's interval, whose end the signal's
@@ -228,14 +251,15 @@ Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
 // Only the IMU block [0, 15) moves: the 6 + 3M (+ NK) calibration states are constants. The mean
 // moves by propagate_imu (Runge-Kutta on the parabola through three samples when `before` is
 // given); the covariance propagates with the Jacobian F of the integration at the estimate
-// (imu_transition.hpp): P_dd <- F P_dd F^T + Q, P_dc <- F P_dc, P_cc unchanged. To first order
+// (imu_transition.hpp): P_dd <- F P_dd F^T + Q, P_dc <- F P_dc (deferred: settle), P_cc
+// unchanged. To first order
 // this is what the sigma-point transform of the block computes (tests/estimator show both agree,
 // the difference falling as the square of the spread), at a fraction of its 31 integrations; the
 // paper campaigns (docs/campaign) are as consistent with it.
 template <typename S, int M, int NK>
 FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1,
                                                   const ImuSample* before, double gap_s) {
-  constexpr int D = State::kDynamicDim, C = kDim - D;
+  constexpr int D = State::kDynamicDim;
   static_assert(State::kDynamicBegin == 0, "the IMU block leads the error state");
   ++counters_.predicts;
   const Covariance& p = filter_.covariance();
@@ -251,28 +275,24 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   const ImuTransition<S> f = imu_transition(filter_.mean(), s0, s1);
   State x = filter_.mean();
   propagate_imu(x, s0, s1, gravity_, before);
-  // P's IMU columns times F^T, (F P)^T: its rows below the IMU block are the new P_cd. Then
-  // P_dd' = F (P_dd F^T).
-  Eigen::Matrix<S, kDim, D> pf_t;
-  f.right_multiply_transposed(p.template leftCols<D>(), pf_t);
-  Eigen::Matrix<S, D, D> p_dd;
-  f.left_multiply(pf_t.template topRows<D>(), p_dd);
+  // P_dd' = F (P_dd F^T); P_cd' = P_cd F^T waits in unsettled_.
+  Eigen::Matrix<S, D, D> pf_t, p_dd;
+  f.right_multiply_transposed(p.template topLeftCorner<D, D>(), pf_t);
+  f.left_multiply(pf_t, p_dd);
   const ImuNoise noise =
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
   add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum
   // P is finite, so a non-finite entry of F shows on the diagonal of F P F^T: every entry of F's
-  // row i enters P_dd'(i, i), and P_cd's column i comes from the same row.
+  // row i enters P_dd'(i, i); the transition P_cd waits for is then finite too.
   if (!p_dd.diagonal().allFinite() || !x.v.allFinite() || !x.p.allFinite() ||
       !x.q_n_b.coeffs().allFinite()) {
     ++counters_.failures;
     return FilterStatus::kNonFinite;
   }
-  filter_.template reset_leading<D>(x, p_dd, pf_t.template bottomRows<C>());
-  if (keep_steps_) {
-    Eigen::Matrix<S, D, D> moved;
-    f.left_multiply(since_update_, moved);
-    since_update_ = moved;
-  }
+  filter_.template reset_leading<D>(x, p_dd);
+  unsettled_ = unsettled_.followed_by(f);
+  has_unsettled_ = true;
+  if (keep_steps_) since_update_ = since_update_.followed_by(f);
   now_ = s1;
   timed_ = true;
   if (dt > 0.0) gyro_rate_ = ((s1.gyro - s0.gyro) / dt).template cast<S>();
@@ -284,7 +304,7 @@ void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
   State x = filter_.mean();
   x.v.setZero();
   Covariance& p = thread_workspace<RestartWorkspace>().next;
-  p = filter_.covariance();
+  p = covariance();
   const MotionRange& r = config_.restart;
   const auto restart = [&p](int begin, double sigma) {
     p.template middleRows<3>(begin).setZero();
@@ -295,18 +315,21 @@ void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
   restart(State::kV, r.velocity);
   restart(State::kTheta, r.attitude);
   reset(x, p);
-  since_update_.setZero();  // the motion before the gap says nothing of the motion after it
+  restarted_since_update_ = true;
   start_at(s);
 }
 
 template <typename S, int M, int NK>
 UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
   predicted_ = filter_.mean();
+  settle();
   if (keep_steps_) {
-    step_.transition = since_update_;
+    step_.transition =
+        restarted_since_update_ ? Eigen::Matrix<S, 15, 15>::Zero().eval() : since_update_.dense();
     step_.predicted_covariance = filter_.covariance().template topLeftCorner<15, 15>();
     ++step_.update;
-    since_update_.setIdentity();
+    since_update_ = ImuTransition<S>::identity();
+    restarted_since_update_ = false;
   }
   Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
   for (int i = 0; i < M; ++i)

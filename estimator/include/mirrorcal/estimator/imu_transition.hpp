@@ -86,6 +86,35 @@ struct ImuTransition {
     out.template middleCols<6>(3) = x.template middleCols<6>(3);
   }
 
+  // No motion: F = I.
+  static ImuTransition identity() {
+    ImuTransition f;
+    f.dt = S(0);
+    for (Mat3<S>* b : {&f.v_ba, &f.v_bg, &f.v_theta, &f.p_ba, &f.p_bg, &f.p_theta, &f.theta_bg})
+      b->setZero();
+    f.theta_theta.setIdentity();
+    return f;
+  }
+
+  // This step followed by next: next's F times this F. The product has F's block structure again
+  // (the velocity reaches the position by the steps' summed dt), so a run of steps composes at the
+  // cost of six 3x3 products per step instead of a 15x15 one.
+  ImuTransition followed_by(const ImuTransition& next) const {
+    const ImuTransition& a = *this;
+    const ImuTransition& b = next;
+    ImuTransition c;
+    c.dt = a.dt + b.dt;
+    c.v_ba = a.v_ba + b.v_ba;
+    c.v_bg = a.v_bg + b.v_bg + b.v_theta.lazyProduct(a.theta_bg);
+    c.v_theta = a.v_theta + b.v_theta.lazyProduct(a.theta_theta);
+    c.p_ba = b.dt * a.v_ba + b.p_ba + a.p_ba;
+    c.p_bg = b.dt * a.v_bg + b.p_bg + a.p_bg + b.p_theta.lazyProduct(a.theta_bg);
+    c.p_theta = b.dt * a.v_theta + a.p_theta + b.p_theta.lazyProduct(a.theta_theta);
+    c.theta_bg = b.theta_bg + b.theta_theta.lazyProduct(a.theta_bg);
+    c.theta_theta = b.theta_theta.lazyProduct(a.theta_theta);
+    return c;
+  }
+
   Eigen::Matrix<S, 15, 15> dense() const {
     Eigen::Matrix<S, 15, 15> f;
     left_multiply(Eigen::Matrix<S, 15, 15>::Identity(), f);

@@ -216,19 +216,23 @@ class SigmaPointFilter {
     if (&cov != &cov_) cov_ = cov;  // reset(x, covariance()) keeps the covariance
     symmetrise(cov_);
   }
-  // A new mean, and new rows and columns [0, D) of the covariance: the block's own covariance
-  // (symmetrised) and the cross-covariance p_cd of the states after it with it, whose covariance
-  // stays. What a predict that moves only the leading block needs, in place: reset() with the
-  // same covariance gives the same bits, from two copies of the N x N matrix and a pass over it.
-  template <int D, class Cross>
-  void reset_leading(const State& mean, const Eigen::Matrix<Scalar, D, D>& p_dd,
-                     const Eigen::MatrixBase<Cross>& p_cd) {
-    static_assert(Cross::RowsAtCompileTime == N - D && Cross::ColsAtCompileTime == D, "P_cd");
+  // A new mean, and a new covariance of the leading block [0, D) (symmetrised), in place: what a
+  // predict that moves only the leading block needs, without two copies of the N x N matrix and
+  // a pass over it. Its cross-covariance with the states after it is move_leading_cross's.
+  template <int D>
+  void reset_leading(const State& mean, const Eigen::Matrix<Scalar, D, D>& p_dd) {
     mean_ = mean;
     for (int j = 0; j < D; ++j)
       for (int i = j; i < D; ++i) cov_(i, j) = cov_(j, i) = Scalar(0.5) * (p_dd(i, j) + p_dd(j, i));
-    cov_.template bottomLeftCorner<N - D, D>() = p_cd;
-    cov_.template topRightCorner<D, N - D>() = p_cd.transpose();
+  }
+  // The cross-covariance of the leading D states with the rest after those states moved by a
+  // linear map F: P_cd <- P_cd F^T, where f.right_multiply_transposed(x, out) sets out = x F^T.
+  template <int D, class Transition>
+  void move_leading_cross(const Transition& f) {
+    Eigen::Matrix<Scalar, N - D, D> moved;
+    f.right_multiply_transposed(cov_.template bottomLeftCorner<N - D, D>(), moved);
+    cov_.template bottomLeftCorner<N - D, D>() = moved;
+    cov_.template topRightCorner<D, N - D>() = moved.transpose();
   }
   const State& mean() const { return mean_; }
   const Covariance& covariance() const { return cov_; }
