@@ -12,7 +12,10 @@
 namespace mc = mirrorcal;
 
 TEST(FramesCalibration, MatchesTheListedMarkersRun) {
-  const mc::sim::Scenario s = mc::sim::paper_scenario();
+  // Half the paper's minute: every frame is rendered and detected again in each of the
+  // calibration's passes (about 8), and the bars below scale with the sigmas.
+  mc::sim::Scenario s = mc::sim::paper_scenario();
+  s.duration_s = 30.0;
   const auto listed = mc::evaluation::run_simulation<3>(s, 4);
   for (const auto format : {mc::hal::PixelFormat::kGrey, mc::hal::PixelFormat::kYuyv}) {
     mc::evaluation::FrameMode mode;
