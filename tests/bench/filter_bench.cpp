@@ -1,6 +1,9 @@
 // Google Benchmark of the filter's operations and of the whole loop:
 //   predict/<float|double>/M, update/<float|double>/M  one operation, timed alone (manual time:
 //                                                       the filter is restored between them)
+//   textbook_predict/double/M, textbook_update/double/M the same operations of the textbook
+//                                                       full-state UKF of the same model
+//                                                       (textbook_ukf.hpp), on the same inputs
 //   recording_60s                                       the whole loop over the 60 s recording
 // The counters report the error-state dimension and sizeof the filter.
 #include <benchmark/benchmark.h>
@@ -54,6 +57,16 @@ int main(int argc, char** argv) {
       benchmark::RegisterBenchmark(("update/" + suffix).c_str(), time_operation<true>, ops)
           ->UseManualTime();
     }
+  }
+  for (const int m : mb::built_marker_counts()) {
+    keep.push_back(mb::make_textbook_ops(m));
+    mb::FilterOps* ops = keep.back().get();
+    if (ops == nullptr) continue;
+    const std::string suffix = "double/" + std::to_string(m);
+    benchmark::RegisterBenchmark(("textbook_predict/" + suffix).c_str(), time_operation<false>, ops)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("textbook_update/" + suffix).c_str(), time_operation<true>, ops)
+        ->UseManualTime();
   }
   const mb::Recording rec = mb::paper_recording();
   benchmark::RegisterBenchmark("recording_60s", recording<false>, &rec)

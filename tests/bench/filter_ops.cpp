@@ -4,6 +4,8 @@ namespace mirrorcal::bench {
 
 std::unique_ptr<FilterOps> make_filter_ops_m3(bool single_precision);
 std::unique_ptr<FilterOps> make_filter_ops_m6(bool single_precision);
+std::unique_ptr<FilterOps> make_textbook_ops_m3();
+std::unique_ptr<FilterOps> make_textbook_ops_m6();
 #ifdef MIRRORCAL_BENCH_LARGE_M
 std::unique_ptr<FilterOps> make_filter_ops_m12(bool single_precision);
 std::unique_ptr<FilterOps> make_filter_ops_m24(bool single_precision);
@@ -24,6 +26,12 @@ std::unique_ptr<FilterOps> make_filter_ops(int markers, bool single_precision) {
     default:
       return nullptr;
   }
+}
+
+std::unique_ptr<FilterOps> make_textbook_ops(int markers) {
+  if (markers == 3) return make_textbook_ops_m3();
+  if (markers == 6) return make_textbook_ops_m6();
+  return nullptr;
 }
 
 std::vector<int> built_marker_counts() {

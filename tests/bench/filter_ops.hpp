@@ -26,10 +26,16 @@ class FilterOps {
   // Reads the covariance, which first applies the predicts' deferred cross-covariance (what an
   // update or any reader does once per frame); returns an entry of it.
   virtual double settle() = 0;
+  // The estimate as an offset from the prepared one (error state), then the covariance, column by
+  // column: for comparing two filters' results on the same inputs.
+  virtual std::vector<double> estimate() = 0;
 };
 
 // The configuration, or nullptr if it is not built.
 std::unique_ptr<FilterOps> make_filter_ops(int markers, bool single_precision);
+// The textbook full-state UKF of the same model on the same inputs (textbook_ukf.hpp), double,
+// or nullptr if that marker count is not built.
+std::unique_ptr<FilterOps> make_textbook_ops(int markers);
 
 // Stage 2 at M = 3, double, through a radtan lens: intrinsics 4 (fu fv cu cv, the lens known) or
 // 8 (and the lens's four coefficients), or nullptr.

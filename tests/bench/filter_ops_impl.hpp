@@ -6,12 +6,14 @@
 #include "filter_ops.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/estimator/prior.hpp"
+#include "textbook_ukf.hpp"
 
 namespace mirrorcal::bench {
 
 // NK > 0: stage 2 (double, M = 3: the configurations the product builds) through EuRoC cam0's
-// radtan lens, NK = 4 with the lens known, NK = 8 with its coefficients estimated.
-template <typename S, int M, int NK = 0>
+// radtan lens, NK = 4 with the lens known, NK = 8 with its coefficients estimated. kTextbook: the
+// operations are the textbook UKF's (textbook_ukf.hpp) on the same inputs.
+template <typename S, int M, int NK = 0, bool kTextbook = false>
 class FilterOpsOf final : public FilterOps {
  public:
   using Filter = CalibrationFilter<S, M, NK>;
@@ -61,6 +63,9 @@ class FilterOpsOf final : public FilterOps {
     s1_.gyro = Eigen::Vector3d(0.12, -0.19, 0.28);
     s0_.accel = Eigen::Vector3d(0.2, 9.81, -0.1);
     s1_.accel = Eigen::Vector3d(0.25, 9.79, -0.12);
+    exposed_ = prepared_.exposure(frame_.t_ns);
+    q_.setZero();
+    q_.template topLeftCorner<15, 15>() = imu_process_noise<S>(config().imu, 0.005);
     restore();
   }
 
@@ -68,10 +73,45 @@ class FilterOpsOf final : public FilterOps {
   int dim() const override { return Filter::kDim; }
   std::size_t filter_bytes() const override { return sizeof(Filter); }
   std::size_t workspace_bytes() const override { return Filter::workspace_bytes(); }
-  void restore() override { filter_ = prepared_; }
-  bool predict() override { return filter_.predict(s0_, s1_) == FilterStatus::kOk; }
-  bool update() override { return filter_.update(frame_).status == FilterStatus::kOk; }
-  double settle() override { return filter_.covariance()(Filter::kDim - 1, 0); }
+  void restore() override {
+    if constexpr (kTextbook)
+      textbook_.reset(prepared_.state(), prepared_.covariance());
+    else
+      filter_ = prepared_;
+  }
+  bool predict() override {
+    if constexpr (kTextbook) {
+      const Vec3<S> gravity = config().gravity_n.template cast<S>();
+      return textbook_.predict([&](State& x) { propagate_imu(x, s0_, s1_, gravity); }, q_);
+    } else {
+      return filter_.predict(s0_, s1_) == FilterStatus::kOk;
+    }
+  }
+  bool update() override {
+    if constexpr (kTextbook) {
+      Eigen::Matrix<S, 2 * M, 1> z;
+      for (int i = 0; i < M; ++i) z.template segment<2>(2 * i) = frame_.uv[i].template cast<S>();
+      const Pinhole<S> intrinsics = config().intrinsics.template cast<S>();
+      const auto measure = [&](const State& x, Eigen::Matrix<S, 2 * M, 1>& zp, bool& ok) {
+        std::array<bool, M> seen;
+        seen.fill(true);
+        predict_markers(x, intrinsics, exposed_, std::array<S, M>{}, zp, seen);
+        for (const bool b : seen) ok = ok && b;
+      };
+      return textbook_.template update<2 * M>(measure, z,
+                                              S(config().pixel_sigma * config().pixel_sigma));
+    } else {
+      return filter_.update(frame_).status == FilterStatus::kOk;
+    }
+  }
+  double settle() override { return covariance()(Filter::kDim - 1, 0); }
+  std::vector<double> estimate() override {
+    const auto offset = state().template boxminus_block<0, Filter::kDim>(prepared_.state());
+    std::vector<double> out(offset.data(), offset.data() + offset.size());
+    const auto& p = covariance();
+    out.insert(out.end(), p.data(), p.data() + p.size());
+    return out;
+  }
 
  private:
   static CalibrationConfig config() {
@@ -83,9 +123,21 @@ class FilterOpsOf final : public FilterOps {
     }
     return c;
   }
+  const State& state() const {
+    if constexpr (kTextbook) return textbook_.state();
+    return filter_.state();
+  }
+  const typename Filter::Covariance& covariance() const {
+    if constexpr (kTextbook) return textbook_.covariance();
+    return filter_.covariance();
+  }
+
   Filter prepared_, filter_;
+  TextbookUkf<State> textbook_;
   MarkerFrame<M> frame_{};
   ImuSample s0_{}, s1_{};
+  Exposure<S> exposed_{};
+  typename Filter::Covariance q_;  // the process noise of one step on the IMU block
 };
 
 }  // namespace mirrorcal::bench

@@ -9,6 +9,9 @@
 //                                            a frame's ten predicts at 200 Hz and 20 Hz and the
 //                                            covariance read after them, which applies their
 //                                            deferred cross-covariance)
+//   mirrorcal_opcount textbook-predict|textbook-update|textbook-restore <M> <N>
+//                                            the same operations of the textbook full-state UKF
+//                                            (textbook_ukf.hpp), double, on the same inputs
 //   mirrorcal_opcount stage2-update|stage2-restore <NK> <N>
 //                                            stage 2 (M = 3, double, radtan lens) with NK = 4
 //                                            (lens known) or 8 (its coefficients estimated)
@@ -36,6 +39,7 @@ int usage() {
   std::fputs(
       "usage: mirrorcal_opcount predict|predict2|predict10|update|restore <M> <float|double> "
       "<N>\n"
+      "       mirrorcal_opcount textbook-predict|textbook-update|textbook-restore <M> <N>\n"
       "       mirrorcal_opcount stage2-update|stage2-restore <4|8> <N>\n"
       "       mirrorcal_opcount recording|shipped <N>\n"
       "       mirrorcal_opcount sizes|stack\n",
@@ -133,6 +137,19 @@ int main(int argc, char** argv) {
         for (int k = 0; k < 10; ++k) failed += ops->predict() ? 0 : 1;
         failed += ops->settle() > -1e300 ? 0 : 1;  // uses the value: the read is not elided
       }
+    }
+    return failed == 0 ? 0 : 1;
+  }
+  if ((what == "textbook-predict" || what == "textbook-update" || what == "textbook-restore") &&
+      argc == 4) {
+    const auto ops = mb::make_textbook_ops(std::atoi(argv[2]));
+    if (!ops) return usage();
+    const long n = std::atol(argv[3]);
+    long failed = 0;
+    for (long i = 0; i < n; ++i) {
+      ops->restore();
+      if (what == "textbook-predict") failed += ops->predict() ? 0 : 1;
+      if (what == "textbook-update") failed += ops->update() ? 0 : 1;
     }
     return failed == 0 ? 0 : 1;
   }
