@@ -252,10 +252,9 @@ Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
 // moves by propagate_imu (Runge-Kutta on the parabola through three samples when `before` is
 // given); the covariance propagates with the Jacobian F of the integration at the estimate
 // (imu_transition.hpp): P_dd <- F P_dd F^T + Q, P_dc <- F P_dc (deferred: settle), P_cc
-// unchanged. To first order
-// this is what the sigma-point transform of the block computes (tests/estimator show both agree,
-// the difference falling as the square of the spread), at a fraction of its 31 integrations; the
-// paper campaigns (docs/campaign) are as consistent with it.
+// unchanged. To first order this is what the sigma-point transform of the block computes
+// (tests/estimator show both agree, the difference falling as the square of the spread), at a
+// fraction of its 31 integrations; the paper campaigns (docs/campaign) are as consistent with it.
 template <typename S, int M, int NK>
 FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1,
                                                   const ImuSample* before, double gap_s) {
