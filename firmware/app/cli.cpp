@@ -124,13 +124,14 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
   // --markers N: the random family's rig has N markers (a count this build has).
   std::uint64_t markers = sim::kPaperMarkers;
   if (!parse_count(o, "markers", sim::kPaperMarkers, 1, markers, error, 64)) return false;
-  if (!marker_count_built(int(markers))) {
-    error = "--markers: " + marker_count_not_built(int(markers));
-    return false;
-  }
+  // The paper's rig first: no rebuild gives it another count.
   if (name == "paper" && markers != sim::kPaperMarkers) {
     error = "--markers: the paper scenario has " + std::to_string(sim::kPaperMarkers) +
             " markers; other counts are for --scenario random";
+    return false;
+  }
+  if (!marker_count_built(int(markers))) {
+    error = "--markers: " + marker_count_not_built(int(markers));
     return false;
   }
   if (!sim::scenario_by_name(name, seed, s, int(markers))) {
