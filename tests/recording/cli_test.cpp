@@ -394,7 +394,8 @@ NeesLine nees_of(const std::string& out) {
 
 // A run that locked onto a wrong solution is flagged, not passed off as a calibration: run 136 of
 // `montecarlo --scenario random --seed 1` (a wall mirror, slow sweeps) made in two passes lets
-// its time offset run off and gates 96 % of its markers; a good run gates about 0.1 %. In the
+// its time offset run off and gates or cannot predict nearly all of its markers (which of the two
+// depends on the last digits of the arithmetic); a good run gates about 0.1 %. In the
 // default passes the third restarts from the guesses at an inflated pixel noise (run.hpp), and the
 // run comes back. Run 60 of `montecarlo --passes 1 --seed 1` (paper scenario) locked on in its
 // single pass (7510 markers gated), and the Gauss-Newton refinement after it brings it back.
@@ -409,8 +410,8 @@ TEST(Cli, ARunThatDivergedIsFlaggedInTheOutputAndTheResult) {
   const YAML::Node bad = YAML::LoadFile(d + "/bad/mirrorcal-result.yaml");
   EXPECT_FALSE(bad["consistent"].as<bool>());
   EXPECT_EQ(bad["passes"].as<int>(), 2);
-  EXPECT_GT(bad["markers_gated"].as<double>(),
-            0.005 * (bad["markers_used"].as<double>() + bad["markers_gated"].as<double>()));
+  const double rejected = bad["markers_gated"].as<double>() + bad["markers_invalid"].as<double>();
+  EXPECT_GT(rejected, 0.005 * (bad["markers_used"].as<double>() + rejected));
   const NeesLine bad_nees = nees_of(r.output);
   EXPECT_GT(bad_nees.nees, bad_nees.high) << r.output;
 

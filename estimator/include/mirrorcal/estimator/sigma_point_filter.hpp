@@ -53,35 +53,55 @@ T& thread_workspace() {
 // check use the same code. These loops run along contiguous columns.
 
 // The lower Cholesky factor of m, in place, its strict upper triangle zeroed (left-looking, one
-// column at a time); false if m is not positive definite (or holds a NaN).
+// column at a time); false if m is not positive definite (or holds a NaN). Column j takes the
+// earlier columns four at a time, then two, then one: one pass over column j per four, which at
+// these sizes costs less than the arithmetic of its loop control (22 states: 12.9k -> 9.1k
+// instructions; 15: 5.3k -> 4.7k).
 template <class Mat>
 bool cholesky_in_place(Mat& m) {
   using S = typename Mat::Scalar;
   constexpr int n = Mat::RowsAtCompileTime;
   for (int j = 0; j < n; ++j) {
-    for (int k = 0; k < j; ++k) {
-      const S f = m(j, k);
-      for (int i = j; i < n; ++i) m(i, j) -= m(i, k) * f;
+    S* cj = &m(0, j);
+    int k = 0;
+    for (; k + 4 <= j; k += 4) {
+      const S *c0 = &m(0, k), *c1 = c0 + n, *c2 = c1 + n, *c3 = c2 + n;
+      const S f0 = c0[j], f1 = c1[j], f2 = c2[j], f3 = c3[j];
+      for (int i = j; i < n; ++i) cj[i] -= c0[i] * f0 + c1[i] * f1 + c2[i] * f2 + c3[i] * f3;
     }
-    if (!(m(j, j) > S(0))) return false;
-    const S d = std::sqrt(m(j, j));
-    m(j, j) = d;
-    for (int i = j + 1; i < n; ++i) m(i, j) /= d;
-    for (int i = 0; i < j; ++i) m(i, j) = S(0);
+    if (k + 2 <= j) {
+      const S *c0 = &m(0, k), *c1 = c0 + n;
+      const S f0 = c0[j], f1 = c1[j];
+      for (int i = j; i < n; ++i) cj[i] -= c0[i] * f0 + c1[i] * f1;
+      k += 2;
+    }
+    if (k < j) {
+      const S* c0 = &m(0, k);
+      const S f0 = c0[j];
+      for (int i = j; i < n; ++i) cj[i] -= c0[i] * f0;
+    }
+    if (!(cj[j] > S(0))) return false;
+    const S d = std::sqrt(cj[j]);
+    cj[j] = d;
+    for (int i = j + 1; i < n; ++i) cj[i] /= d;
+    for (int i = 0; i < j; ++i) cj[i] = S(0);
   }
   return true;
 }
 
-// x <- l^-T x for a lower triangular l: back substitution, column by column of x.
+// x <- x l^-1 for a lower triangular l (x l = rhs, backward over the columns of x). A column of
+// x is a few measurement rows: each step is a short fixed-length multiply-add, held in registers
+// (the same solve as l^-T x^T by back substitution, whose inner loop is a reduction the compiler
+// cannot vectorise: at 22 states and 6 rows, 8.4k -> 4.3k instructions).
 template <class Lower, class Rhs>
-void solve_lower_transposed(const Lower& l, Rhs& x) {
+void solve_right_lower(const Lower& l, Rhs& x) {
   constexpr int n = Lower::RowsAtCompileTime;
-  for (int c = 0; c < x.cols(); ++c)
-    for (int i = n - 1; i >= 0; --i) {
-      typename Lower::Scalar sum = x(i, c);
-      for (int k = i + 1; k < n; ++k) sum -= l(k, i) * x(k, c);
-      x(i, c) = sum / l(i, i);
-    }
+  using Column = Eigen::Matrix<typename Lower::Scalar, Rhs::RowsAtCompileTime, 1>;
+  for (int i = n - 1; i >= 0; --i) {
+    Column sum = x.col(i);
+    for (int k = i + 1; k < n; ++k) sum -= l(k, i) * x.col(k);
+    x.col(i) = sum / l(i, i);
+  }
 }
 
 // x <- x l^-T for a lower triangular l (x l^T = rhs, forward over the columns of x).
@@ -501,6 +521,7 @@ class SigmaPointFilter {
     // The transform's a and b (see UnscentedParams) transposed: a column per measurement row, so
     // that the products read contiguous columns.
     Eigen::Matrix<Scalar, L, Z> a_t, b_t;
+    Eigen::Matrix<Scalar, Z, L> reg_t;      // the regression transposed, as its solve runs
     Eigen::Matrix<Scalar, Z, Z> s, s_used;  // innovation covariance; with unused blocks inert
     Eigen::LLT<Eigen::Matrix<Scalar, Z, Z>> llt_s;
     Covariance cov_before;
@@ -557,9 +578,11 @@ class SigmaPointFilter {
         ms.p_zz(i, j) = ms.p_zz(j, i) =
             w.inv_gamma2 * (a_t.col(i).dot(a_t.col(j)) + b_t.col(i).dot(b_t.col(j)));
     // The cross-covariance is P_bz = sum of w (chi - x)(z - z0)^T = chol a^T / gamma, so the
-    // regression P_bb^-1 P_bz = chol^-T a^T / gamma: one triangular solve.
-    ms.reg = a_t / w.gamma;
-    solve_lower_transposed(chol, ms.reg);
+    // regression P_bb^-1 P_bz = chol^-T a^T / gamma: one triangular solve, made on its transpose.
+    auto& reg_t = ws.reg_t;
+    reg_t = a_t.transpose() / w.gamma;
+    solve_right_lower(chol, reg_t);
+    ms.reg = reg_t.transpose();
     ms.z_centre = z0;
     return true;
   }
