@@ -445,6 +445,19 @@ const PaperRow& paper_row(const std::vector<ParamInfo>& params, std::size_t j) {
   return params[j].group == CalibrationGroup::kLens ? kNotInPaper : paper_tables()[j];
 }
 
+// Where the average NEES of `runs` runs of np states lies with probability 99 % (chi-square with
+// runs * np degrees of freedom, divided by runs), and the verdict on one such average.
+struct NeesInterval {
+  double lo, hi;
+  const char* verdict(double nees) const {
+    return nees >= lo && nees <= hi ? "consistent" : "NOT consistent";
+  }
+};
+NeesInterval average_nees_interval99(double runs, std::size_t np) {
+  return {chi2_quantile(0.005, runs * double(np)) / runs,
+          chi2_quantile(0.995, runs * double(np)) / runs};
+}
+
 // The average NEES over the runs that said consistent: true, against its own 99 % interval, when
 // some did not: those were warned of, and one run that diverged moves the average over all runs by
 // orders of magnitude, so that this is the verdict on the calibrations a user would have kept.
@@ -457,32 +470,28 @@ void print_trusted_nees(const std::vector<Outcome>& out, std::size_t np) {
       ++trusted;
     }
   if (trusted == 0 || trusted == out.size()) return;
-  const double k = double(trusted), nees = sum / k;
-  const double lo99 = chi2_quantile(0.005, k * double(np)) / k,
-               hi99 = chi2_quantile(0.995, k * double(np)) / k;
+  const double nees = sum / double(trusted);
+  const NeesInterval i = average_nees_interval99(double(trusted), np);
   std::printf(
       "over the %zu runs that said consistent: true: %.2f (99 %% interval %.2f..%.2f): %s\n",
-      trusted, nees, lo99, hi99, nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
+      trusted, nees, i.lo, i.hi, i.verdict(nees));
 }
 
 // A family's verdict: the average NEES over the rigs against its 99 % interval, then
 // report_family's tables (also into summary).
 void report_family_campaign(const Campaign& c, const std::vector<Outcome>& out, std::size_t np,
                             double nees, std::FILE* summary) {
-  const double n = double(c.runs);
   std::vector<double> each;
   for (const auto& oc : out) each.push_back(oc.nees);
-  const double lo99 = chi2_quantile(0.005, n * double(np)) / n,
-               hi99 = chi2_quantile(0.995, n * double(np)) / n;
+  const NeesInterval i = average_nees_interval99(double(c.runs), np);
   std::printf(
       "\naverage NEES of the %zu calibration states over %llu rigs: %.2f (99 %% interval "
       "%.2f..%.2f), median of the runs %.2f: %s\n",
-      np, (unsigned long long)c.runs, nees, lo99, hi99, median(each),
-      nees >= lo99 && nees <= hi99 ? "consistent" : "NOT consistent");
+      np, (unsigned long long)c.runs, nees, i.lo, i.hi, median(each), i.verdict(nees));
   print_trusted_nees(out, np);
   const std::size_t groups_used = !c.intrinsics ? 4 : c.lens ? 6 : 5;
   const int markers = int(c.scenario.truth.markers.size());
-  report_family(out, groups_used, calibration_layout(markers, estimated_intrinsics(c)), lo99, hi99,
+  report_family(out, groups_used, calibration_layout(markers, estimated_intrinsics(c)), i.lo, i.hi,
                 summary);
 }
 

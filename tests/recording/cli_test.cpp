@@ -715,8 +715,8 @@ TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
   if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
   const std::string sim = disk.path + "/sim", mc_out = disk.path + "/mc", rec = disk.path + "/rec";
   const std::vector<std::vector<std::string>> commands = {
-      {"sim", "--seed", "2", "--passes", "1", "--no-plots", "--out", sim},
-      {"montecarlo", "--runs", "2", "--jobs", "1", "--passes", "1", "--no-plots", "--out", mc_out},
+      {"sim", "--seed", "2", "--no-plots", "--out", sim},
+      {"montecarlo", "--runs", "2", "--jobs", "1", "--no-plots", "--out", mc_out},
       {"record", "--seed", "2", "--force", "--out", rec}};
   for (const auto& c : commands) ASSERT_EQ(run_mirrorcal(c, dir.path).code, 0) << c[0];
   const auto snapshot = [&] {

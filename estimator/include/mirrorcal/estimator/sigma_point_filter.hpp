@@ -46,17 +46,17 @@ T& thread_workspace() {
 }
 
 // Small dense kernels for the update's fixed sizes (a block of 15-30 states, 2M measurement
-// rows). Eigen's triangular solves run general blocked kernels, whose calls and packing cost more
-// than the arithmetic at these sizes (at M = 3, 22 states and 6 rows, about 7k instructions for
-// the regression's solve against 4k here). The factorisation costs about the same either way
-// (12k at 22 states, 5k at 15): this one leaves the factor a plain matrix, and lets predict's
-// check use the same code. These loops run along contiguous columns.
+// rows). Eigen's triangular solves and LLT run general blocked kernels, whose calls and packing
+// cost more than the arithmetic at these sizes. These loops run along contiguous columns, and the
+// factor stays a plain matrix that predict's check uses too. Measured alone under callgrind
+// (docs/performance.md): the factorisation 9.1k instructions at 22 states (Eigen's LLT about
+// 12k), 4.7k at 15; the regression's solve at 22 states and 6 rows 4.5k.
 
 // The lower Cholesky factor of m, in place, its strict upper triangle zeroed (left-looking, one
 // column at a time); false if m is not positive definite (or holds a NaN). Column j takes the
-// earlier columns four at a time, then two, then one: one pass over column j per four, which at
-// these sizes costs less than the arithmetic of its loop control (22 states: 12.9k -> 9.1k
-// instructions; 15: 5.3k -> 4.7k).
+// earlier columns four at a time, then two, then one: one pass over column j per four, since at
+// these sizes a pass's loop control costs more than its arithmetic (one column per pass: 12.9k
+// instructions at 22 states).
 template <class Mat>
 bool cholesky_in_place(Mat& m) {
   using S = typename Mat::Scalar;
@@ -92,7 +92,7 @@ bool cholesky_in_place(Mat& m) {
 // x <- x l^-1 for a lower triangular l (x l = rhs, backward over the columns of x). A column of
 // x is a few measurement rows: each step is a short fixed-length multiply-add, held in registers
 // (the same solve as l^-T x^T by back substitution, whose inner loop is a reduction the compiler
-// cannot vectorise: at 22 states and 6 rows, 8.4k -> 4.3k instructions).
+// cannot vectorise without reassociating: 8.4k instructions at 22 states and 6 rows).
 template <class Lower, class Rhs>
 void solve_right_lower(const Lower& l, Rhs& x) {
   constexpr int n = Lower::RowsAtCompileTime;
