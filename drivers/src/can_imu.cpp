@@ -92,12 +92,15 @@ bool Assembler::add(const Part& part, std::int64_t t_ns, ImuSample& sample) {
   seen_[m] = true;
   last_counter_[m] = part.counter;
 
-  // Counts a sample of counter c as incomplete, once however many of its frames arrive.
+  // Counts a sample of counter c as incomplete, once however many of its frames arrive. Before the
+  // first whole sample nothing is a loss: the kernel registers a socket's filters one message at a
+  // time, so a receiver that joins a live bus may get a TX1 without the TX2 and TX3 behind it.
   const auto drop = [this](std::uint8_t c) {
+    have_ = 0;
+    if (!joined_) return;
     if (!(dropped_valid_ && dropped_counter_ == c)) ++counters_.incomplete_samples;
     dropped_valid_ = true;
     dropped_counter_ = c;
-    have_ = 0;
   };
   // A stream joined between a sample's first and last frame: its rest is not a loss.
   if (!synced_ && m != 0) return false;
@@ -126,6 +129,7 @@ bool Assembler::add(const Part& part, std::int64_t t_ns, ImuSample& sample) {
   pending_.gyro.y() = part.rate;
   pending_.accel.z() = part.accel;
   have_ = 0;
+  joined_ = true;
   if (!pending_ok_) {
     ++counters_.flagged_samples;
     return false;

@@ -174,6 +174,32 @@ TEST(Mm710, AStreamJoinedInsideASampleLosesNothing) {
   }
 }
 
+// The kernel registers a raw socket's three filters one after another: a receiver that binds while
+// the sensor sends may get a sample's TX1 (or TX1 and TX2) and none of the rest. That is joining,
+// not a loss; a frame missing after the first whole sample still is.
+TEST(Mm710, AStreamJoinedWhileTheFiltersRegisterLosesNothing) {
+  for (int first_missing = 1; first_missing < 3; ++first_missing) {
+    Feed feed;
+    mm710::Frame f[3];
+    mm710::encode(sample_of(0.1, 0.2, 0.3, 1, 2, 3), 7, f);
+    for (int m = 0; m < first_missing; ++m) {
+      mm710::Part p;
+      mm710::decode(f[m], p);
+      ImuSample s;
+      EXPECT_FALSE(feed.a.add(p, 0, s));
+    }
+    for (std::uint8_t c = 8; c < 12; ++c) feed.sample(c);
+    EXPECT_EQ(feed.delivered, 4);
+    EXPECT_EQ(feed.a.counters().incomplete_samples, 0u) << "first missing TX" << first_missing + 1;
+    for (int m = 0; m < 3; ++m) EXPECT_EQ(feed.a.counters().lost_frames[m], 0u);
+    feed.sample(12, 2);
+    feed.sample(13);
+    EXPECT_EQ(feed.delivered, 5);
+    EXPECT_EQ(feed.a.counters().incomplete_samples, 1u);
+    EXPECT_EQ(feed.a.counters().lost_frames[2], 1u);
+  }
+}
+
 TEST(Mm710, AWholeLostSampleShowsInEveryMessagesCounter) {
   Feed feed;
   feed.sample(0);

@@ -88,6 +88,7 @@ class Assembler {
  private:
   Counters counters_{};
   bool synced_ = false;  // a sample's first frame (TX1) has arrived
+  bool joined_ = false;  // a whole sample has arrived: from here on a missing frame is a loss
   bool seen_[3] = {false, false, false};
   std::uint8_t last_counter_[3] = {0, 0, 0};
   int have_ = 0;  // how many parts of the pending sample arrived (in order)
