@@ -9,6 +9,8 @@ std::unique_ptr<FilterOps> make_textbook_ops_m6();
 #ifdef MIRRORCAL_BENCH_LARGE_M
 std::unique_ptr<FilterOps> make_filter_ops_m12(bool single_precision);
 std::unique_ptr<FilterOps> make_filter_ops_m24(bool single_precision);
+std::unique_ptr<FilterOps> make_textbook_ops_m12();
+std::unique_ptr<FilterOps> make_textbook_ops_m24();
 #endif
 
 std::unique_ptr<FilterOps> make_filter_ops(int markers, bool single_precision) {
@@ -31,6 +33,10 @@ std::unique_ptr<FilterOps> make_filter_ops(int markers, bool single_precision) {
 std::unique_ptr<FilterOps> make_textbook_ops(int markers) {
   if (markers == 3) return make_textbook_ops_m3();
   if (markers == 6) return make_textbook_ops_m6();
+#ifdef MIRRORCAL_BENCH_LARGE_M
+  if (markers == 12) return make_textbook_ops_m12();
+  if (markers == 24) return make_textbook_ops_m24();
+#endif
   return nullptr;
 }
 

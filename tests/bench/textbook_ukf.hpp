@@ -10,6 +10,7 @@
 
 #include <Eigen/Cholesky>
 #include <array>
+#include <cstddef>
 
 #include "mirrorcal/estimator/mirror_model.hpp"
 
@@ -22,6 +23,13 @@ class TextbookUkf {
   static constexpr int N = State::kDim;
   using Covariance = Eigen::Matrix<S, N, N>;
   using Vector = Eigen::Matrix<S, N, 1>;
+  // The points' offsets, N x 2N: fixed-size while Eigen allows such an object (M = 3, 6, 12), of
+  // dynamic width beyond (M = 24: 141 KB in double), allocated once with the filter.
+  static constexpr bool kFixedDeltas =
+      std::size_t(N) * 2 * N * sizeof(S) <= std::size_t(EIGEN_STACK_ALLOCATION_LIMIT);
+  using Deltas = Eigen::Matrix<S, N, kFixedDeltas ? 2 * N : Eigen::Dynamic>;
+
+  TextbookUkf() : deltas_(N, 2 * N), spread_(N, 2 * N) {}
 
   void reset(const State& x, const Covariance& p) {
     x_ = x;
@@ -43,8 +51,8 @@ class TextbookUkf {
       deltas_.col(i) = point.template boxminus_block<0, N>(centre);
     }
     const Vector mean = deltas_.rowwise().sum() * weight_;  // the centre's weight is 0
-    const Eigen::Matrix<S, N, 2 * N> spread = deltas_.colwise() - mean;
-    p_ = centre_weight_c_ * mean * mean.transpose() + weight_ * spread * spread.transpose() + q;
+    spread_ = deltas_.colwise() - mean;
+    p_ = centre_weight_c_ * mean * mean.transpose() + weight_ * spread_ * spread_.transpose() + q;
     x_ = centre;
     x_.template boxplus_block<0, N>(mean);
     return true;
@@ -111,7 +119,7 @@ class TextbookUkf {
   State x_{};
   Covariance p_ = Covariance::Identity();
   std::array<State, 2 * N> points_{};
-  Eigen::Matrix<S, N, 2 * N> deltas_;
+  Deltas deltas_, spread_;
 };
 
 }  // namespace mirrorcal::bench
