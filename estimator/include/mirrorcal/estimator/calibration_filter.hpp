@@ -264,7 +264,7 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   const Covariance& p = filter_.covariance();
   if (!imu_block_checked_) {
     Eigen::Matrix<S, D, D> factor = p.template topLeftCorner<D, D>();
-    if (!cholesky_in_place(factor)) {
+    if (!cholesky_in_place</*kZeroUpper=*/false>(factor)) {
       ++counters_.failures;
       return FilterStatus::kCovarianceNotPositiveDefinite;
     }

@@ -56,8 +56,9 @@ T& thread_workspace() {
 // column at a time); false if m is not positive definite (or holds a NaN). Column j takes the
 // earlier columns four at a time, then two, then one: one pass over column j per four, since at
 // these sizes a pass's loop control costs more than its arithmetic (one column per pass: 12.9k
-// instructions at 22 states).
-template <class Mat>
+// instructions at 22 states). A caller that only asks whether m is positive definite leaves the
+// upper triangle as it was (kZeroUpper false): the factorisation reads only the lower one.
+template <bool kZeroUpper = true, class Mat>
 bool cholesky_in_place(Mat& m) {
   using S = typename Mat::Scalar;
   constexpr int n = Mat::RowsAtCompileTime;
@@ -84,7 +85,8 @@ bool cholesky_in_place(Mat& m) {
     const S d = std::sqrt(cj[j]);
     cj[j] = d;
     for (int i = j + 1; i < n; ++i) cj[i] /= d;
-    for (int i = 0; i < j; ++i) cj[i] = S(0);
+    if constexpr (kZeroUpper)
+      for (int i = 0; i < j; ++i) cj[i] = S(0);
   }
   return true;
 }
