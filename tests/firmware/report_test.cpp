@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <string>
 #include <vector>
@@ -140,6 +141,43 @@ TEST(Report, ExcitationSaysTheImuGapsAndRestarts) {
   const std::string text = mirrorcal::calibration::report_text(d);
   EXPECT_NE(text.find("IMU: 1200 samples, 3 gaps (1 too long to cross"), std::string::npos) << text;
   EXPECT_NE(text.find("7 frames behind the filter skipped"), std::string::npos) << text;
+}
+
+// The markers' common scale: the covariance's variance along the markers' own direction, relative
+// to their size. Against covariances whose answer is known in closed form: isotropic, where
+// f^T P f = s^2 |f|^2, and one of the scale alone, P = c^2 f f^T, whose relative sigma is c.
+TEST(Report, ExcitationSaysHowWellTheMarkersScaleIsKnown) {
+  namespace mc = mirrorcal::calibration;
+  mc::CalibrationResult r;
+  r.markers = {Eigen::Vector3d(0.06, 0.0, -0.02), Eigen::Vector3d(-0.03, 0.05, 0.01)};
+  const mirrorcal::IndexRange block = r.layout()[mirrorcal::CalibrationGroup::kMarkers];
+  const auto report_of = [](const mc::CalibrationResult& result) {
+    mc::ReportData d = mc::report_data_without_history(result, "test");
+    d.rows.push_back(mc::ReportRow{});
+    return mc::report_text(d);
+  };
+  EXPECT_EQ(mc::marker_scale_sigma(r), 0.0);  // no covariance: nothing said
+  EXPECT_EQ(report_of(r).find("common scale"), std::string::npos);
+
+  Eigen::VectorXd f(6);
+  f << r.markers[0], r.markers[1];
+  const double s = 0.5e-3;  // 0.5 mm on every coordinate
+  r.covariance = Eigen::MatrixXd::Identity(r.layout().size(), r.layout().size()) * 1e-4;
+  r.covariance.block(block.begin, block.begin, 6, 6) = Eigen::MatrixXd::Identity(6, 6) * s * s;
+  EXPECT_NEAR(mc::marker_scale_sigma(r), s / f.norm(), 1e-15);
+  std::string text = report_of(r);
+  char want[64];
+  std::snprintf(want, sizeof want, "known to %.2f %% (1 sigma)\n", 100.0 * s / f.norm());
+  EXPECT_NE(text.find(want), std::string::npos) << text;
+  EXPECT_EQ(text.find("simulated rigs' scale errors"), std::string::npos) << text;
+
+  const double c = 0.07;  // the scale alone, 7 %: beyond kLooseMarkerScale
+  r.covariance.block(block.begin, block.begin, 6, 6) = c * c * f * f.transpose();
+  EXPECT_NEAR(mc::marker_scale_sigma(r), c, 1e-15);
+  text = report_of(r);
+  EXPECT_NE(text.find("known to 7.00 % (1 sigma); beyond 4 % simulated rigs' scale errors"),
+            std::string::npos)
+      << text;
 }
 
 // What the input checks warned of stands beside the verdict, which the self-check alone sets.

@@ -269,6 +269,19 @@ std::string convergence_warning(const CalibrationResult& r) {
   return {};
 }
 
+double marker_scale_sigma(const CalibrationResult& r) {
+  const IndexRange markers = r.layout()[CalibrationGroup::kMarkers];
+  if (markers.size == 0 || r.covariance.rows() < markers.end()) return 0.0;
+  Eigen::VectorXd f(markers.size);
+  for (std::size_t m = 0; m < r.markers.size(); ++m)
+    f.segment<3>(3 * Eigen::Index(m)) = r.markers[m];
+  const double size2 = f.squaredNorm();
+  if (!(size2 > 0.0)) return 0.0;
+  const Eigen::MatrixXd p =
+      r.covariance.block(markers.begin, markers.begin, markers.size, markers.size);
+  return std::sqrt(std::max(0.0, f.dot(p * f))) / size2;
+}
+
 bool consistent(const CalibrationResult& r) {
   return convergence_warning(r).empty();
 }

@@ -134,6 +134,12 @@ bool consistent(const CalibrationResult& r);
 // from 0) and that Kalibr, OpenVINS and VINS-Fusion, which have no skew, will drop it.
 constexpr double kSignificantSkewSigmas = 3.0;
 std::string skew_warning(const CalibrationResult& r);
+// The relative 1-sigma of the markers' common scale about the camera, all markers scaled
+// together: sqrt(f^T P f) / |f|^2, f the markers stacked, P their block of the covariance. The
+// mirror images fix the markers' directions; their size against the mirror's distance only the
+// IMU's acceleration fixes, so slow motion leaves this the least known direction. 0 when there
+// are no markers or no covariance.
+double marker_scale_sigma(const CalibrationResult& r);
 // Every warning a user of the result should read (the filter's fit, the markers used, the prior,
 // the skew).
 std::vector<std::string> result_warnings(const CalibrationResult& r);
