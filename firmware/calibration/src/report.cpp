@@ -420,8 +420,7 @@ void add_marker_scale(std::string& t, const CalibrationResult& r) {
   if (sigma > kLooseMarkerScale)
     t += format(
         "; beyond %.0f %% simulated rigs' scale errors were 1.3-1.5 of their sigmas, not 1: "
-        "brisker "
-        "translation of the rig fixes it better",
+        "brisker translation of the rig fixes it better",
         100.0 * kLooseMarkerScale);
   t += "\n";
 }
