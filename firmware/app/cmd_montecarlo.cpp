@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -247,8 +248,9 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
 // What a campaign runs, from the command line: the rigs, the seeds and how each run calibrates.
 struct Campaign {
   bool intrinsics = false, hold_skew = false, one_stage = false;
-  bool lens = false;    // --estimate-distortion: the lens's coefficients in stage 2
-  bool family = false;  // a rig of its own for every run (the random family)
+  bool lens = false;                 // --estimate-distortion: the lens's coefficients in stage 2
+  bool family = false;               // a rig of its own for every run (the random family)
+  std::optional<std::uint64_t> rig;  // --rig: the family's one rig for every run, by its seed
   FrameMode frames;
   Passes passes;
   std::uint64_t seed = 0, runs = 0, jobs = 0;
@@ -290,6 +292,13 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if (!parse_count(o, "seed", 1, 0, c.seed, error) || !scenario_for(c.seed, c.scenario))
     return false;
   c.family = c.scenario.name == "random";
+  // --rig SEED: one rig of the family for every run; each run draws its own noise and guesses.
+  if (o.flag("rig")) {
+    if (!c.family) return refuse("--rig applies with --scenario random");
+    std::uint64_t rig = 0;
+    if (!parse_count(o, "rig", 0, 0, rig, error)) return false;
+    c.rig = rig;
+  }
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   if (!parse_count(o, "runs", 0, 1, c.runs, error) || !parse_count(o, "jobs", hw, 1, c.jobs, error))
     return false;
@@ -297,7 +306,8 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   // Each run's rig, drawn here: an option the scenario refuses ends the command before any run.
   c.scenarios.resize(c.runs);
   for (std::uint64_t i = 0; i < c.runs; ++i)
-    if (!scenario_for(sim::derive_seed(c.seed, 1000 + i), c.scenarios[i])) return false;
+    if (!scenario_for(c.rig.value_or(sim::derive_seed(c.seed, 1000 + i)), c.scenarios[i]))
+      return false;
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
   if (!passes_option(o, c.passes, error)) return false;
@@ -307,17 +317,19 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
 }
 
 void print_campaign_title(const Campaign& c) {
-  std::printf("mirrorcal montecarlo: scenario '%s'%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
-              c.scenario.name.c_str(), markers_note(c.scenario).c_str(),
-              c.lens ? ", the lens's coefficients estimated in stage 2" : "",
-              !c.intrinsics ? ""
-              : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"
-                                           : " in one stage with the intrinsics")
-              : c.hold_skew ? " with stage 2 (intrinsics, skew held at 0)"
-                            : " with stage 2 (intrinsics)",
-              c.frames.enabled ? ", markers detected in rendered frames, " : "",
-              c.frames.enabled ? hal::to_string(c.frames.format) : "", (unsigned long long)c.runs,
-              (unsigned long long)c.jobs, (unsigned long long)c.seed);
+  const std::string rig = c.rig ? ", every run rig " + std::to_string(*c.rig) : "";
+  std::printf(
+      "mirrorcal montecarlo: scenario '%s'%s%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
+      c.scenario.name.c_str(), rig.c_str(), markers_note(c.scenario).c_str(),
+      c.lens ? ", the lens's coefficients estimated in stage 2" : "",
+      !c.intrinsics ? ""
+      : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"
+                                   : " in one stage with the intrinsics")
+      : c.hold_skew ? " with stage 2 (intrinsics, skew held at 0)"
+                    : " with stage 2 (intrinsics)",
+      c.frames.enabled ? ", markers detected in rendered frames, " : "",
+      c.frames.enabled ? hal::to_string(c.frames.format) : "", (unsigned long long)c.runs,
+      (unsigned long long)c.jobs, (unsigned long long)c.seed);
 }
 
 // Run i of the campaign into oc; the parameters' names and units into params (from the first run
@@ -619,7 +631,8 @@ int cmd_montecarlo(int argc, char** argv) {
   std::string error;
   if (!parse(argc, argv, 2,
              {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
-              "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers"},
+              "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
+              "rig"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"},
              o, error) ||
       !campaign_options(o, c, error))

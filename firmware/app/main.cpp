@@ -51,7 +51,9 @@ const std::vector<Command>& commands() {
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III)\n"
        "              [--estimate-distortion]  (as sim)\n"
        "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
-       "              [--pixel-sigma PX]  (as sim)\n",
+       "              [--pixel-sigma PX]  (as sim)\n"
+       "              [--rig SEED]  (random: every run the rig sim --seed SEED draws, with\n"
+       "              noise and prior guesses of its own: how well that one rig calibrates)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "mirrorcal/calibration/statistics.hpp"
@@ -194,7 +195,16 @@ struct RandomSummary {
   std::vector<std::string> cell;
   std::string printed;       // what montecarlo printed
   std::vector<double> nees;  // each run's, from runs.csv
+  std::vector<std::string> runs_header;
+  std::vector<std::vector<std::string>> runs;  // runs.csv's rows, cell by cell
 };
+
+std::vector<std::string> csv_cells(const std::string& row) {
+  std::vector<std::string> cells;
+  std::stringstream ss(row);
+  for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+  return cells;
+}
 RandomSummary random_campaign(const std::string& name, const std::string& options,
                               const std::string& seed = "11") {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() /
@@ -211,13 +221,12 @@ RandomSummary random_campaign(const std::string& name, const std::string& option
   std::ifstream runs(dir / "runs.csv");
   std::string row;
   std::getline(runs, row);
+  out.runs_header = csv_cells(row);
   const std::size_t nees_column = static_cast<std::size_t>(
-      std::count(row.begin(), row.begin() + static_cast<long>(row.find(",nees,")), ',') + 1);
+      std::find(out.runs_header.begin(), out.runs_header.end(), "nees") - out.runs_header.begin());
   while (std::getline(runs, row)) {
-    std::stringstream cells(row);
-    std::string cell;
-    for (std::size_t c = 0; c <= nees_column; ++c) std::getline(cells, cell, ',');
-    out.nees.push_back(std::stod(cell));
+    out.runs.push_back(csv_cells(row));
+    out.nees.push_back(std::stod(out.runs.back().at(nees_column)));
   }
   std::ifstream in(dir / "summary.csv");
   EXPECT_TRUE(in) << "no summary.csv";
@@ -315,6 +324,37 @@ TEST(Campaign, TheRunsThatSaidConsistentGetTheirOwnVerdict) {
   EXPECT_NEAR(hi, mirrorcal::calibration::chi2_quantile(0.995, states * kept) / kept, 0.006);
   const bool inside = average >= lo && average <= hi;
   EXPECT_STREQ(verdict, inside ? "consistent" : "NOT consistent");
+}
+
+// --rig S: every run the rig whose run seed is S (noise and prior guesses of each run's own). The
+// rig a campaign drew for its first run comes back in every run of a --rig campaign at that run's
+// seed: the same mirror, motion, camera rate, pixel noise, IMU grade and prior widths (continuous
+// draws, so a different rig would not match), and a new seed per run.
+TEST(Campaign, OneRigWithNewNoiseInEveryRun) {
+  const RandomSummary drawn = random_campaign("random-drawn", "--runs 1", "3");
+  ASSERT_EQ(drawn.runs.size(), 1u) << drawn.printed;
+  const std::vector<std::string>& header = drawn.runs_header;
+  const auto column = [&](const std::string& name) {
+    return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
+  };
+  const std::size_t seed = column("seed"), first_rig_column = column("mirror");
+  ASSERT_LT(first_rig_column, header.size());
+  const RandomSummary one_rig =
+      random_campaign("random-one-rig", "--runs 2 --rig " + drawn.runs[0][seed], "5");
+  EXPECT_NE(one_rig.printed.find("every run rig " + drawn.runs[0][seed]), std::string::npos)
+      << one_rig.printed;
+  ASSERT_EQ(one_rig.runs.size(), 2u) << one_rig.printed;
+  ASSERT_EQ(one_rig.runs_header, header);
+  for (const std::vector<std::string>& run : one_rig.runs) {
+    EXPECT_NE(run[seed], drawn.runs[0][seed]);
+    for (std::size_t c = first_rig_column; c < header.size(); ++c)
+      EXPECT_EQ(run[c], drawn.runs[0][c]) << header[c];
+  }
+  EXPECT_NE(one_rig.runs[0][seed], one_rig.runs[1][seed]);
+  // The paper scenario has one rig already.
+  const std::string refused =
+      std::string(MIRRORCAL_BIN) + " montecarlo --runs 1 --rig 3 > /dev/null 2>&1";
+  EXPECT_EQ(WEXITSTATUS(std::system(refused.c_str())), 2);
 }
 
 // The random family's stage 2 (--intrinsics --hold-skew: each rig's camera guessed within its own
