@@ -169,13 +169,20 @@ TEST(Report, ExcitationSaysHowWellTheMarkersScaleIsKnown) {
   char want[64];
   std::snprintf(want, sizeof want, "known to %.2f %% (1 sigma)\n", 100.0 * s / f.norm());
   EXPECT_NE(text.find(want), std::string::npos) << text;
-  EXPECT_EQ(text.find("simulated rigs' scale errors"), std::string::npos) << text;
+  EXPECT_EQ(text.find("not trusted"), std::string::npos) << text;
+  EXPECT_FALSE(mc::scale_unresolved(r));
 
   const double c = 0.07;  // the scale alone, 7 %: beyond kLooseMarkerScale
   r.covariance.block(block.begin, block.begin, 6, 6) = c * c * f * f.transpose();
   EXPECT_NEAR(mc::marker_scale_sigma(r), c, 1e-15);
   text = report_of(r);
-  EXPECT_NE(text.find("known to 7.00 % (1 sigma); beyond 4 % simulated rigs' scale errors"),
+  EXPECT_NE(text.find("known to 7.00 % (1 sigma); beyond 4 %: not trusted"), std::string::npos)
+      << text;
+  // And the verdict says so: a scale that loose is no calibration to trust.
+  EXPECT_TRUE(mc::scale_unresolved(r));
+  EXPECT_FALSE(mc::consistent(r));
+  EXPECT_NE(text.find("WARNING: the markers' size against the mirror's distance, which only the "
+                      "IMU's acceleration fixes, is known to 7.0 %"),
             std::string::npos)
       << text;
 }

@@ -408,8 +408,8 @@ void add_biases(std::string& t, const ReportData& d) {
               sg(0), g(1), sg(1), g(2), sg(2));
 }
 
-// How well the data fixed the markers' size against the mirror's distance, and what the random
-// family showed of such figures beyond kLooseMarkerScale.
+// How well the data fixed the markers' size against the mirror's distance (scale_unresolved()
+// beyond kLooseMarkerScale).
 void add_marker_scale(std::string& t, const CalibrationResult& r) {
   const double sigma = marker_scale_sigma(r);
   if (!(sigma > 0.0)) return;
@@ -417,11 +417,8 @@ void add_marker_scale(std::string& t, const CalibrationResult& r) {
       "the markers' common scale about the camera (only the IMU's acceleration fixes it): known "
       "to %.2f %% (1 sigma)",
       100.0 * sigma);
-  if (sigma > kLooseMarkerScale)
-    t += format(
-        "; beyond %.0f %% simulated rigs' scale errors were 1.3-1.5 of their sigmas, not 1: "
-        "brisker translation of the rig fixes it better",
-        100.0 * kLooseMarkerScale);
+  if (scale_unresolved(r))
+    t += format("; beyond %.0f %%: not trusted (the WARNING above)", 100.0 * kLooseMarkerScale);
   t += "\n";
 }
 

@@ -170,6 +170,10 @@ bool prior_contradicted(const CalibrationResult& r) {
   return r.prior_offset_sigmas > kPriorContradictedSigmas;
 }
 
+bool scale_unresolved(const CalibrationResult& r) {
+  return marker_scale_sigma(r) > kLooseMarkerScale;
+}
+
 namespace {
 
 std::string fit_warning(const CalibrationResult& r) {
@@ -250,6 +254,19 @@ std::string prior_warning(const CalibrationResult& r) {
   return text;
 }
 
+std::string scale_warning(const CalibrationResult& r) {
+  if (!scale_unresolved(r)) return {};
+  char text[480];
+  std::snprintf(text, sizeof text,
+                "the markers' size against the mirror's distance, which only the IMU's "
+                "acceleration fixes, is known to %.1f %% (more than %.0f %%): the rig was hardly "
+                "accelerated, and on simulated rigs like this the estimates were off by more "
+                "than their sigmas say. Move the rig more briskly (quicker sweeps along and "
+                "toward the mirror) and calibrate again.",
+                100.0 * marker_scale_sigma(r), 100.0 * kLooseMarkerScale);
+  return text;
+}
+
 // A calibration that started from one its own self-check did not trust (stage 2 from a stage 1
 // that locked on, or used no marker) rests on a prior that may hold information it does not have,
 // and its own checks cannot see that: its fit to the prior and the data can look as good.
@@ -263,8 +280,8 @@ std::string start_warning(const CalibrationResult& r) {
 }  // namespace
 
 std::string convergence_warning(const CalibrationResult& r) {
-  for (std::string w :
-       {fit_warning(r), markers_used_warning(r), prior_warning(r), start_warning(r)})
+  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r), scale_warning(r),
+                        start_warning(r)})
     if (!w.empty()) return w;
   return {};
 }
@@ -304,8 +321,8 @@ std::string skew_warning(const CalibrationResult& r) {
 
 std::vector<std::string> result_warnings(const CalibrationResult& r) {
   std::vector<std::string> w;
-  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), start_warning(r),
-                        skew_warning(r)})
+  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), scale_warning(r),
+                        start_warning(r), skew_warning(r)})
     if (!s.empty()) w.push_back(std::move(s));
   return w;
 }
@@ -380,11 +397,16 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                "when converged\n",
                r.nis_per_dof, r.sigma_ratio, r.refinement_step_sigmas);
   std::fprintf(o,
+               "marker_scale_sigma: %.4f  # the markers' common scale, relative 1-sigma: only "
+               "the IMU's acceleration fixes it\n",
+               marker_scale_sigma(r));
+  std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
                "above 1, sigma_ratio below %g, refinement_step above %g, under half the markers "
-               "used, a prior contradicted by 5 sigma or a start (--from) that said false: do "
-               "not trust it\n",
-               consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit);
+               "used, a prior contradicted by 5 sigma, marker_scale_sigma above %g or a start "
+               "(--from) that said false: do not trust it\n",
+               consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit,
+               kLooseMarkerScale);
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);

@@ -25,10 +25,6 @@ constexpr double kWeaklyObservedRatio = 0.5;
 // The same for a state that started from an earlier calibration's estimate and covariance (stage
 // 1, --from): data as informative as the earlier ones bring it to 0.71 of that.
 constexpr double kWeaklyObservedFromEarlierRatio = 0.9;
-// The markers' common scale (marker_scale_sigma) known only to worse than this: in the random rig
-// family (docs/campaign/random), the 2.6 % of rigs beyond it, all slow sweeps, had scale errors of
-// 1.3-1.5 of their sigmas RMS, against 1.00 for the rest; the report says so beside the figure.
-constexpr double kLooseMarkerScale = 0.04;
 // The normalised innovation squared is judged over windows of this many frames with markers used.
 constexpr int kNisWindowFrames = 60;
 
