@@ -34,6 +34,8 @@ template <int M, int NK>
 struct TrajectoryPoint {
   typename CalibrationRun<M, NK>::State state;
   std::int64_t t_ns = 0;
+  Eigen::Vector3d body_rate = Eigen::Vector3d::Zero();  // rad/s, bias-free
+  bool has_rate = false;
 };
 template <int M, int NK>
 class Trajectory final : public CalibrationRun<M, NK>::Filter::LinearisationPoints {
@@ -42,13 +44,35 @@ class Trajectory final : public CalibrationRun<M, NK>::Filter::LinearisationPoin
   std::size_t count() const override { return points_.size(); }
   std::int64_t stamp(std::size_t k) override { return at(k).t_ns; }
   const State& state(std::size_t k) override { return at(k).state; }
+  bool body_rate(std::size_t k, Eigen::Vector3d& rate) override {
+    rate = at(k).body_rate;
+    return at(k).has_rate;
+  }
   void set(std::size_t k, const State& state, std::int64_t t_ns) {
     points_.set(k, {state, t_ns});
+    read_ = kNone;
+  }
+  // Each point's body rate from the attitudes of the points either side of it (one side at the
+  // ends): the gyro's samples between them, averaged, and the smoother's corrections, centred so
+  // that it does not lag the motion as a fit through past samples would (which biased the offset:
+  // docs/campaign/random). None across a gap longer than kMaxRateSpanS (an IMU gap, a restart).
+  void set_rates() {
+    const std::size_t n = points_.size();
+    for (std::size_t k = 0; k < n && n > 1; ++k) {
+      const TrajectoryPoint<M, NK> a = points_[k > 0 ? k - 1 : 0];
+      const TrajectoryPoint<M, NK> b = points_[std::min(k + 1, n - 1)];
+      const double span_s = static_cast<double>(b.t_ns - a.t_ns) * 1e-9;
+      TrajectoryPoint<M, NK> p = points_[k];
+      p.has_rate = span_s > 0.0 && span_s <= kMaxRateSpanS;
+      if (p.has_rate) p.body_rate = so3::boxminus<double>(b.state.q_n_b, a.state.q_n_b) / span_s;
+      points_.set(k, p);
+    }
     read_ = kNone;
   }
 
  private:
   static constexpr std::size_t kNone = ~std::size_t{0};
+  static constexpr double kMaxRateSpanS = 0.25;
   const TrajectoryPoint<M, NK>& at(std::size_t k) {
     if (k != read_) {
       point_ = points_[k];
@@ -168,6 +192,7 @@ void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& 
     next_row = row;
     next = row_motion;
   }
+  out.set_rates();
 }
 
 // The first stretch of the data, for imu_start_from(): from the first IMU sample to the one after
