@@ -307,6 +307,61 @@ TEST(CalibrationFilter, LinearisedAlongItsOwnEstimatesRetracesTheRun) {
   EXPECT_LT((along_shifted.first.markers - free_run.first.markers).cwiseAbs().maxCoeff(), 1e-3);
 }
 
+// A trajectory's body rate stands in for the gyro's sample (LinearisationPoints::body_rate): the
+// rate the sample gives (its gyro less the point's bias) retraces the run along the same points
+// without rates, to rounding; another rate changes what the update learns of the time offset,
+// which the rate carries into the pose.
+TEST(CalibrationFilter, ATrajectorysBodyRateStandsInForTheGyroSample) {
+  using Filter = CalibrationFilter<double, 3, 0>;
+  const Scenario sc = make_scenario(3.0, 0.5, 4);
+  StartGuess pr = make_start_guess(sc);
+  pr.p *= 1e-4;
+  struct Points final : Filter::LinearisationPoints {
+    std::vector<StateD> states;
+    std::vector<std::int64_t> stamps;
+    std::vector<Eigen::Vector3d> rates;  // empty: none
+    std::size_t count() const override { return states.size(); }
+    std::int64_t stamp(std::size_t k) override { return stamps[k]; }
+    const StateD& state(std::size_t k) override { return states[k]; }
+    bool body_rate(std::size_t k, Eigen::Vector3d& rate) override {
+      if (rates.empty()) return false;
+      rate = rates[k];
+      return true;
+    }
+  };
+  Points points;
+  const auto run = [&](Points* along, bool record) {
+    Filter f(wall_config());
+    f.reset(pr.x, pr.p);
+    if (along != nullptr) f.linearise_along(along);
+    for (std::size_t k = 1; k < sc.imu.size(); ++k) {
+      EXPECT_EQ(f.predict(sc.imu[k - 1], sc.imu[k]), FilterStatus::kOk);
+      if (k % kImuPerFrame != 0) continue;
+      if (record) {
+        points.states.push_back(f.state());
+        points.stamps.push_back(sc.frames[k / kImuPerFrame].t_ns);
+        // The sample at the filter's time, less the bias: what the update takes without a rate.
+        points.rates.push_back(sc.imu[k].gyro - f.state().b_g);
+      }
+      EXPECT_EQ(f.update(sc.frames[k / kImuPerFrame]).status, FilterStatus::kOk);
+    }
+    return CovD(f.covariance());
+  };
+  run(nullptr, true);
+  ASSERT_GT(points.states.size(), 10u);
+  const CovD with_sample_rates = run(&points, false);
+  const std::vector<Eigen::Vector3d> sample_rates = points.rates;
+  points.rates.clear();
+  const CovD without_rates = run(&points, false);
+  EXPECT_LT((with_sample_rates - without_rates).cwiseAbs().maxCoeff(),
+            1e-9 * without_rates.cwiseAbs().maxCoeff());
+  points.rates = sample_rates;
+  for (Eigen::Vector3d& w : points.rates) w *= 0.5;
+  const CovD half_rates = run(&points, false);
+  // Half the rate, half the slope along the offset: less learnt of it.
+  EXPECT_GT(half_rates(StateD::kTd, StateD::kTd), 1.01 * without_rates(StateD::kTd, StateD::kTd));
+}
+
 // --------------------------------------------------------------------------------------------
 // Bad inputs
 
