@@ -24,6 +24,14 @@
 
 namespace {
 
+// A CSV row's cells (montecarlo writes no quoted commas).
+std::vector<std::string> csv_cells(const std::string& row) {
+  std::vector<std::string> cells;
+  std::stringstream ss(row);
+  for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+  return cells;
+}
+
 // Runs a campaign of `runs` runs with the extra options and checks summary.csv's `params` rows.
 void expect_campaign_meets_bar(const std::string& options, int params, int runs = 10) {
   const std::filesystem::path dir =
@@ -107,12 +115,6 @@ TEST(Campaign, SixRunsOfStageTwoWithTheRadtanLensEstimatedAreConsistent) {
                           "radtan --estimate-distortion --out " +
                           dir.string() + " > " + (dir.string() + ".log") + " 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  const auto cells = [](const std::string& line) {
-    std::vector<std::string> c;
-    std::stringstream ss(line);
-    for (std::string x; std::getline(ss, x, ',');) c.push_back(x);
-    return c;
-  };
   std::ifstream summary(dir / "summary.csv");
   ASSERT_TRUE(summary) << "no summary.csv";
   std::string line;
@@ -123,7 +125,7 @@ TEST(Campaign, SixRunsOfStageTwoWithTheRadtanLensEstimatedAreConsistent) {
   while (std::getline(summary, line)) {
     if (line.rfind("# nees_mean=", 0) == 0) nees = std::stod(line.substr(12));
     if (line.rfind("#", 0) == 0) continue;
-    const auto c = cells(line);
+    const auto c = csv_cells(line);
     ASSERT_EQ(c.size(), 7u) << line;
     names.push_back(c[0]);
     if (c[6] != "nan") {
@@ -142,11 +144,11 @@ TEST(Campaign, SixRunsOfStageTwoWithTheRadtanLensEstimatedAreConsistent) {
   std::ifstream runs(dir / "runs.csv");
   ASSERT_TRUE(runs) << "no runs.csv";
   std::getline(runs, line);
-  const auto header = cells(line);
+  const auto header = csv_cells(line);
   double sum_sq[4] = {0, 0, 0, 0};
   int n = 0;
   while (std::getline(runs, line)) {
-    const auto c = cells(line);
+    const auto c = csv_cells(line);
     ASSERT_GE(c.size(), std::size_t(2 + 2 * kParams));
     for (int j = 0; j < 4; ++j) {
       const std::size_t e = std::size_t(2 + kParams - 4 + j), s = e + std::size_t(kParams);
@@ -198,13 +200,6 @@ struct RandomSummary {
   std::vector<std::string> runs_header;
   std::vector<std::vector<std::string>> runs;  // runs.csv's rows, cell by cell
 };
-
-std::vector<std::string> csv_cells(const std::string& row) {
-  std::vector<std::string> cells;
-  std::stringstream ss(row);
-  for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
-  return cells;
-}
 RandomSummary random_campaign(const std::string& name, const std::string& options,
                               const std::string& seed = "11") {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() /
@@ -233,8 +228,7 @@ RandomSummary random_campaign(const std::string& name, const std::string& option
   std::getline(in, out.header);
   std::string line;
   std::getline(in, line);
-  std::stringstream ss(line);
-  for (std::string c; std::getline(ss, c, ',');) out.cell.push_back(c);
+  out.cell = csv_cells(line);
   std::filesystem::remove_all(dir);
   std::filesystem::remove(log);
   return out;
