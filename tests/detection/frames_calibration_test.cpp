@@ -11,38 +11,46 @@
 
 namespace mc = mirrorcal;
 
-TEST(FramesCalibration, MatchesTheListedMarkersRun) {
+// One test per pixel format, so that the two run side by side.
+class FramesCalibration : public testing::TestWithParam<mc::hal::PixelFormat> {};
+
+TEST_P(FramesCalibration, MatchesTheListedMarkersRun) {
   // Half the paper's minute: every frame is rendered and detected again in each of the
   // calibration's passes (about 8), and the bars below scale with the sigmas.
   mc::sim::Scenario s = mc::sim::paper_scenario();
   s.duration_s = 30.0;
   const auto listed = mc::evaluation::run_simulation<3>(s, 4);
-  for (const auto format : {mc::hal::PixelFormat::kGrey, mc::hal::PixelFormat::kYuyv}) {
-    mc::evaluation::FrameMode mode;
-    mode.enabled = true;
-    mode.format = format;
-    const auto framed = mc::evaluation::run_simulation<3>(s, 4, {}, mode);
-    const mc::calibration::DetectionReport& d = framed.detection;
-    std::printf("%s: %llu frames, %llu of %llu labelled, %llu wrong, %.3f px RMS, %.2f ms/frame\n",
-                mc::hal::to_string(format), (unsigned long long)d.frames,
-                (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
-                (unsigned long long)d.wrong_labels, d.centroid_rms_px, d.ms_per_frame);
-    // Every frame but those exposed before the first IMU sample at the time offset's guess.
-    EXPECT_EQ(d.frames + framed.loop_counters.frames_before_filter, listed.frames);
-    EXPECT_EQ(d.wrong_labels, 0u);
-    EXPECT_GE(d.markers_labelled, d.markers_drawn * 98 / 100);
-    EXPECT_LT(d.centroid_rms_px, 0.1);
+  const mc::hal::PixelFormat format = GetParam();
+  mc::evaluation::FrameMode mode;
+  mode.enabled = true;
+  mode.format = format;
+  const auto framed = mc::evaluation::run_simulation<3>(s, 4, {}, mode);
+  const mc::calibration::DetectionReport& d = framed.detection;
+  std::printf("%s: %llu frames, %llu of %llu labelled, %llu wrong, %.3f px RMS, %.2f ms/frame\n",
+              mc::hal::to_string(format), (unsigned long long)d.frames,
+              (unsigned long long)d.markers_labelled, (unsigned long long)d.markers_drawn,
+              (unsigned long long)d.wrong_labels, d.centroid_rms_px, d.ms_per_frame);
+  // Every frame but those exposed before the first IMU sample at the time offset's guess.
+  EXPECT_EQ(d.frames + framed.loop_counters.frames_before_filter, listed.frames);
+  EXPECT_EQ(d.wrong_labels, 0u);
+  EXPECT_GE(d.markers_labelled, d.markers_drawn * 98 / 100);
+  EXPECT_LT(d.centroid_rms_px, 0.1);
 
-    // Both runs end near the truth and near each other. Bars: the paper's Table I and II
-    // accuracies (1 mm, 0.1 deg) and, for what one mirror observes poorly (p_b_c along the
-    // mirror's plane, sigma several mm), three of the filter's sigmas.
-    const auto& a = listed.history.back();
-    const auto& b = framed.history.back();
-    for (int j = 0; j < 15; ++j) {
-      const double bar = (j >= 3 && j < 6) ? 0.1 * M_PI / 180.0 : 0.001;
-      const double tol = 3.0 * bar + 3.0 * a.sigma(j);
-      EXPECT_LT(std::abs(b.error(j)), tol) << "parameter " << j;
-      EXPECT_LT(std::abs(b.error(j) - a.error(j)), tol) << "parameter " << j;
-    }
+  // Both runs end near the truth and near each other. Bars: the paper's Table I and II
+  // accuracies (1 mm, 0.1 deg) and, for what one mirror observes poorly (p_b_c along the
+  // mirror's plane, sigma several mm), three of the filter's sigmas.
+  const auto& a = listed.history.back();
+  const auto& b = framed.history.back();
+  for (int j = 0; j < 15; ++j) {
+    const double bar = (j >= 3 && j < 6) ? 0.1 * M_PI / 180.0 : 0.001;
+    const double tol = 3.0 * bar + 3.0 * a.sigma(j);
+    EXPECT_LT(std::abs(b.error(j)), tol) << "parameter " << j;
+    EXPECT_LT(std::abs(b.error(j) - a.error(j)), tol) << "parameter " << j;
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(PixelFormats, FramesCalibration,
+                         testing::Values(mc::hal::PixelFormat::kGrey, mc::hal::PixelFormat::kYuyv),
+                         [](const testing::TestParamInfo<mc::hal::PixelFormat>& info) {
+                           return info.param == mc::hal::PixelFormat::kGrey ? "Grey" : "Yuyv";
+                         });
