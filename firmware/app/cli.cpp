@@ -138,6 +138,20 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
     error = "unknown scenario '" + name + "' (known: paper, random)";
     return false;
   }
+  // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.
+  if (o.flag("duration")) {
+    const std::string text = o.get("duration", "");
+    char* end = nullptr;
+    const double seconds = std::strtod(text.c_str(), &end);
+    if (end == text.c_str() || *end != '\0' || !(seconds >= kMinSimulatedDurationS) ||
+        !(seconds <= kMaxSimulatedDurationS)) {
+      error = "--duration: '" + text + "' is not seconds of simulated data within " +
+              std::to_string(int(kMinSimulatedDurationS)) + ".." +
+              std::to_string(int(kMaxSimulatedDurationS));
+      return false;
+    }
+    s.duration_s = seconds;
+  }
   // --timeshift S: the camera stamps its frames S seconds before the IMU's clock shows them.
   if (o.flag("timeshift")) {
     const std::string text = o.get("timeshift", "");

@@ -53,11 +53,15 @@ bool parse_count(const Options& o, const std::string& key, std::uint64_t def, st
                  std::uint64_t& value, std::string& error, std::uint64_t max = UINT64_MAX);
 
 // The scenario named by --scenario (default "paper"); the random family's draw for seed, with
-// --markers N markers (a built count; the paper's rig has three). With
+// --markers N markers (a built count; the paper's rig has three). With --duration S (s, within
+// kMinSimulatedDurationS..kMaxSimulatedDurationS), S seconds of its motion instead of its minute
+// (sim and record take it; a campaign's runs keep their minute). With
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
 // --distortion MODEL, the camera has that lens (sim::set_lens); with --line-delay S, a rolling
 // shutter reading each row S seconds after the one above (a whole frame within
 // kMaxSimulatedReadoutS).
+constexpr double kMinSimulatedDurationS = 1.0;
+constexpr double kMaxSimulatedDurationS = 600.0;
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
 constexpr double kMaxSimulatedReadoutS = 0.1;
 bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error);

@@ -274,15 +274,6 @@ int cmd_record(int argc, char** argv) {
   if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
     fail(error);
   if (hold_skew) s = sim::without_skew(s);
-  // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.
-  if (o.flag("duration")) {
-    const std::string text = o.get("duration", "");
-    char* end = nullptr;
-    const double seconds = std::strtod(text.c_str(), &end);
-    if (end == text.c_str() || *end != '\0' || !(seconds >= 1.0 && seconds <= 600.0))
-      fail("--duration: '" + text + "' is not seconds of simulated data within 1..600");
-    s.duration_s = seconds;
-  }
   return with_markers(int(s.truth.markers.size()), [&](auto markers) {
     constexpr int M = decltype(markers)::value;
     RecordingFolder folder(dir, o.flag("force"));

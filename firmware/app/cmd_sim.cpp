@@ -135,9 +135,9 @@ bool check_stage_options(const Options& o, const FrameMode& frames, std::string&
 
 int cmd_sim(int argc, char** argv) {
   std::vector<std::string>
-      with_value = {"scenario",          "seed",   "out",       "format",     "pixel-sigma",
-                    "spot-noise",        "passes", "timeshift", "distortion", "line-delay",
-                    "filter-line-delay", "markers"},
+      with_value = {"scenario",          "seed",    "out",       "format",     "pixel-sigma",
+                    "spot-noise",        "passes",  "timeshift", "distortion", "line-delay",
+                    "filter-line-delay", "markers", "duration"},
       flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());

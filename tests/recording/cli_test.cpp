@@ -151,7 +151,7 @@ TEST(Cli, AMarkerCountNotBuiltIsRefusedNamingTheOption) {
 TEST(Cli, CamchainTCamImuIsTheInverseOfTheCameraPoseInTheImuFrame) {
   TempDir dir("cli-camchain");
   const std::string& d = dir.path;
-  ASSERT_EQ(run_mirrorcal("record --seed 8 --out " + d + "/rec", d).code, 0);
+  ASSERT_EQ(run_mirrorcal("record --seed 8 --duration 20 --out " + d + "/rec", d).code, 0);
   const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
   ASSERT_EQ(r.code, 0) << r.output;
 
@@ -538,7 +538,7 @@ TEST(Cli, EveryCommandPrintsItsUsageOnHelp) {
 TEST(Cli, ProgressInALogIsAFewLines) {
   TempDir dir("cli-progress");
   const std::string& d = dir.path;
-  ASSERT_EQ(run_mirrorcal("record --seed 3 --out " + d + "/rec", d).code, 0);
+  ASSERT_EQ(run_mirrorcal("record --seed 3 --duration 20 --out " + d + "/rec", d).code, 0);
   const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output.find('\r'), std::string::npos);
@@ -569,7 +569,7 @@ TEST(Cli, ASignificantSkewIsWarnedOfAndStatedInTheFiles) {
 TEST(Cli, ExportRefusesWhatItCannotWrite) {
   TempDir dir("cli-export");
   const std::string& d = dir.path;
-  ASSERT_EQ(run_mirrorcal("sim --seed 5 --no-plots --out " + d, d).code, 0);
+  ASSERT_EQ(run_mirrorcal("sim --seed 5 --duration 20 --no-plots --out " + d, d).code, 0);
   Result r = run_mirrorcal("export --format kalibr " + d + " " + d + "/x.yaml", d);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("--format: 'kalibr' is not a format"), std::string::npos) << r.output;
@@ -586,6 +586,26 @@ TEST(Cli, ExportRefusesWhatItCannotWrite) {
   r = run_mirrorcal("export --format ros-camera-info " + d + " " + d + "/no/such/dir/x.yaml", d);
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find(d + "/no/such/dir/x.yaml: cannot write"), std::string::npos) << r.output;
+}
+
+// --duration S: S seconds of the simulated motion (200 Hz IMU: 200 S + 1 samples), for sim and
+// record alike; anything but seconds within 1..600 is refused before anything runs.
+TEST(Cli, ADurationShortensTheSimulatedMotion) {
+  TempDir dir("cli-duration");
+  const std::string& d = dir.path;
+  const Result r = run_mirrorcal("sim --duration 10 --seed 4 --no-plots --out " + d + "/sim", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("10 s of data"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(": 2001 IMU samples"), std::string::npos) << r.output;
+  for (const std::string command : {"sim", "record"})
+    for (const std::string bad : {"0.5", "601", "ten", "10s"}) {
+      const Result b = run_mirrorcal(command + " --duration " + bad + " --out " + d + "/x", d);
+      EXPECT_EQ(b.code, 2) << command << " " << bad << ": " << b.output;
+      EXPECT_NE(
+          b.output.find("--duration: '" + bad + "' is not seconds of simulated data within 1..600"),
+          std::string::npos)
+          << b.output;
+    }
 }
 
 // --passes replays the whole recording each time: a count beyond kMaxRequestedPasses (20) is
@@ -610,7 +630,8 @@ TEST(Cli, AnOutputFolderNamedLikeACommandIsOnlyAFolder) {
   TempDir dir("cli-hostile-out");
   const std::string out =
       dir.path + "/John's run $(touch PWNED1) `touch PWNED2`; touch PWNED3; '\n\"x";
-  const Result r = run_mirrorcal({"sim", "--seed", "2", "--out", out}, dir.path, dir.path);
+  const Result r =
+      run_mirrorcal({"sim", "--seed", "2", "--duration", "20", "--out", out}, dir.path, dir.path);
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output.find("no plots"), std::string::npos) << r.output;
   for (const char* f :
@@ -715,9 +736,9 @@ TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
   if (!disk.mounted) GTEST_SKIP() << "mounting a tmpfs needs root (CAP_SYS_ADMIN): " << disk.why;
   const std::string sim = disk.path + "/sim", mc_out = disk.path + "/mc", rec = disk.path + "/rec";
   const std::vector<std::vector<std::string>> commands = {
-      {"sim", "--seed", "2", "--no-plots", "--out", sim},
+      {"sim", "--seed", "2", "--duration", "20", "--no-plots", "--out", sim},
       {"montecarlo", "--runs", "2", "--jobs", "1", "--no-plots", "--out", mc_out},
-      {"record", "--seed", "2", "--force", "--out", rec}};
+      {"record", "--seed", "2", "--duration", "20", "--force", "--out", rec}};
   for (const auto& c : commands) ASSERT_EQ(run_mirrorcal(c, dir.path).code, 0) << c[0];
   const auto snapshot = [&] {
     std::map<std::string, std::string> bytes;
