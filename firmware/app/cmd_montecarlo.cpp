@@ -71,6 +71,9 @@ struct GroupStats {
   std::vector<double> nees;
   int beyond = 0, flagged = 0, missed = 0;  // beyond 4 sigma; consistent: false; both but flagged
   PerGroup sq{}, var{}, lim{}, count{}, sq_ok{}, lim_ok{};  // _ok: consistent runs
+  // Each consistent run's limit (its group's coordinates' variances summed), squared, summed:
+  // effective_runs().
+  PerGroup run_lim_sq_ok{};
   // Each consistent run's squared error over its own limit, summed, and how many: a run whose rig
   // the data see poorly (large sigmas and errors) weighs no more than any other here.
   PerGroup per_run_ok{}, count_ok{};
@@ -84,6 +87,7 @@ struct GroupStats {
     beyond += far ? 1 : 0;
     flagged += oc.suspect ? 1 : 0;
     missed += far && !oc.suspect ? 1 : 0;
+    PerGroup run_lim{};
     for (std::size_t j = 0; j < oc.error.size(); ++j) {
       const std::size_t k = group_of(j);
       const double e2 = oc.error[j] * oc.error[j];
@@ -95,12 +99,14 @@ struct GroupStats {
       if (!oc.suspect) {
         sq_ok[k] += e2;
         lim_ok[k] += l2;
+        run_lim[k] += l2;
         if (l2 > 0.0) {
           per_run_ok[k] += e2 / l2;
           count_ok[k] += 1.0;
         }
       }
     }
+    for (std::size_t k = 0; k < kGroups; ++k) run_lim_sq_ok[k] += run_lim[k] * run_lim[k];
   }
   double mean_nees() const {
     double m = 0;
@@ -127,6 +133,17 @@ struct GroupStats {
       const double e = consistent_only ? sq_ok[k] : sq[k], l = consistent_only ? lim_ok[k] : lim[k];
       r[k] = l > 0.0 ? std::sqrt(e / l) : 0.0;
     }
+    return r;
+  }
+
+  // How many runs the consistent runs' RMS over the limit rests on, in effect: it weighs each run
+  // by its limit's variance, so a few weakly seen rigs can carry a group (the sum of the runs'
+  // variances, squared, over the sum of their squares). Chance moves the ratio of a one-coordinate
+  // group by about 1 / sqrt(2 n) (docs/campaign/random/README.md, "Over the whole family").
+  PerGroup effective_runs() const {
+    PerGroup r{};
+    for (std::size_t k = 0; k < kGroups; ++k)
+      r[k] = run_lim_sq_ok[k] > 0.0 ? lim_ok[k] * lim_ok[k] / run_lim_sq_ok[k] : 0.0;
     return r;
   }
 
@@ -204,12 +221,14 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
                    const CalibrationLayout& layout, double nees_lo, double nees_hi, std::FILE* f) {
   const bool has_limit = groups_used == 4;  // over_limit's columns are 0 in stage 2's summary.csv
   family_headers(groups_used, has_limit, f);
+  GroupStats::PerGroup effective{};  // of all runs
   for (const FamilyGroup& g : family_groups(groups_used)) {
     GroupStats st;
     st.layout = layout;
     for (const Outcome& oc : out)
       if (g.has(oc.scenario)) st.add(oc);
     if (st.nees.empty()) continue;
+    if (g.axis == "all") effective = st.effective_runs();
     const auto rms = st.rms(), sig = st.sigma(), lim = st.over_limit(false),
                lim_ok = st.over_limit(true), per_run = st.per_run_over_limit();
     const double mean = st.mean_nees(), med = median(st.nees);
@@ -243,6 +262,15 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
                   "limit, RMS, so that a rig the data see poorly weighs no more than another;"
                 : "",
       nees_lo, nees_hi);
+  if (has_limit) {
+    std::printf(
+        "consistent / lim rests on, in effect, so many runs (it weighs each by its "
+        "limit's variance; chance alone moves it by about 1/sqrt(2n)):");
+    for (std::size_t k = 0; k < groups_used; ++k)
+      std::printf(" %s %.0f (+-%.2f)", kGroupName[k], effective[k],
+                  effective[k] > 0.0 ? 1.0 / std::sqrt(2.0 * effective[k]) : 0.0);
+    std::printf("\n");
+  }
 }
 
 // What a campaign runs, from the command line: the rigs, the seeds and how each run calibrates.

@@ -270,6 +270,22 @@ TEST(Campaign, TwentyRandomRigsHoldTheirFigures) {
     EXPECT_GT(per_run[k], 0.0) << k;
     EXPECT_LT(per_run[k], 1.45) << k;
   }
+  // How many runs each ratio rests on, in effect: at least one (all the weight on one run), at
+  // most every consistent run (equal weights).
+  const std::size_t line = summary.printed.find("consistent / lim rests on");
+  ASSERT_NE(line, std::string::npos) << summary.printed;
+  double n[4];
+  ASSERT_EQ(std::sscanf(summary.printed.c_str() + summary.printed.find("):", line) + 2,
+                        " p_b_c [cm] %lf (%*[^)]) rot_b_c [deg] %lf (%*[^)]) markers [mm] %lf "
+                        "(%*[^)]) timeshift [ms] %lf",
+                        &n[0], &n[1], &n[2], &n[3]),
+            4)
+      << summary.printed;
+  const int consistent = 20 - std::stoi(cell[6]);
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_GE(n[k], 1.0) << k;
+    EXPECT_LE(n[k], consistent + 0.5) << k;  // printed rounded
+  }
 }
 
 // A campaign with runs that said consistent: false gives a second verdict, on the runs a user would
