@@ -197,8 +197,9 @@ TEST(Cli, CalibrateWithIntrinsicsRunsTheStage2Filter) {
 TEST(Cli, RecordWithIntrinsicsAsksForThemInThePriors) {
   TempDir dir("cli-record-intrinsics");
   const std::string& d = dir.path;
-  ASSERT_EQ(run_mirrorcal("record --seed 9 --intrinsics --out " + d + "/a", d).code, 0);
-  ASSERT_EQ(run_mirrorcal("record --seed 9 --out " + d + "/b", d).code, 0);
+  ASSERT_EQ(run_mirrorcal("record --seed 9 --intrinsics --duration 20 --out " + d + "/a", d).code,
+            0);
+  ASSERT_EQ(run_mirrorcal("record --seed 9 --duration 20 --out " + d + "/b", d).code, 0);
   EXPECT_TRUE(YAML::LoadFile(d + "/a/mirrorcal.yaml")["estimate_intrinsics"].as<bool>());
   EXPECT_FALSE(YAML::LoadFile(d + "/b/mirrorcal.yaml")["estimate_intrinsics"].as<bool>());
   // Without --intrinsics on calibrate, the priors' request runs the intrinsics filter: the same
@@ -781,7 +782,7 @@ TEST(Cli, AFullDiskFailsNamingTheFileAndLeavesTheEarlierResults) {
 TEST(Cli, CalibratingFromAResultOfTheSameDataIsRefused) {
   TempDir dir("cli-same-data");
   const std::string& d = dir.path;
-  Result r = run_mirrorcal("record --seed 5 --out " + d + "/rec", d);
+  Result r = run_mirrorcal("record --seed 5 --duration 20 --out " + d + "/rec", d);
   ASSERT_EQ(r.code, 0) << r.output;
   r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/c1", d);
   ASSERT_EQ(r.code, 0) << r.output;
@@ -803,7 +804,7 @@ TEST(Cli, CalibratingFromAResultOfTheSameDataIsRefused) {
   fs::copy(d + "/rec", d + "/copy", fs::copy_options::recursive);
   r = run_mirrorcal("calibrate " + d + "/copy --from " + d + "/c1 --out " + d + "/c3", d);
   EXPECT_EQ(r.code, 1) << r.output;
-  r = run_mirrorcal("record --seed 6 --out " + d + "/rec6", d);
+  r = run_mirrorcal("record --seed 6 --duration 20 --out " + d + "/rec6", d);
   ASSERT_EQ(r.code, 0) << r.output;
   r = run_mirrorcal("calibrate " + d + "/rec6 --from " + d + "/c1 --out " + d + "/c4", d);
   EXPECT_EQ(r.code, 0) << r.output;
