@@ -398,7 +398,8 @@ class SigmaPointFilter {
     // Gate each block on its own marginal innovation covariance.
     ZVec innovation = z - ms.z_centre;
     if (linearise_at != nullptr)  // z ~ h(ref) + A (x - ref), A = (P_bb^-1 P_bz)^T
-      innovation.noalias() -= ms.reg.transpose() * own.template boxminus_block<B, L>(*linearise_at);
+      innovation.noalias() -=
+          ms.reg.transpose().lazyProduct(own.template boxminus_block<B, L>(*linearise_at));
     ZMat& s = ws.s;
     s = ms.p_zz;
     s.diagonal() += r_diag;
@@ -674,7 +675,11 @@ class SigmaPointFilter {
     // Each entry a dot product of two contiguous columns (Eigen's blocked product packs both).
     w_t.noalias() = ws.reg_w.transpose().lazyProduct(cov_.template middleRows<L>(B));
     llt_s.matrixL().solveInPlace(innovation);
-    const ErrorVector dx = w_t.transpose() * innovation;
+    // Lazy, as the linearised innovation's product in update(): a dot product per row along
+    // contiguous columns. Eigen's general matrix-vector kernel, which it picks from M = 4 on, drew
+    // GCC's -Waggressive-loop-optimizations (an iteration count no fixed size reaches) at M = 12,
+    // float; at M = 3 Eigen took this path already.
+    const ErrorVector dx = w_t.transpose().lazyProduct(innovation);
     if (!dx.allFinite() || !w_t.allFinite()) return FilterStatus::kNonFinite;
     // Every variance must stay positive; then |W_i . W_j| < sqrt(P_ii P_jj) bounds every entry.
     for (int i = 0; i < N; ++i)
