@@ -209,20 +209,24 @@ bool read_file(const std::string& path, std::string& text, std::string& error) {
   if (fd < 0) return false;
   struct stat st {};
   ::fstat(fd, &st);
-  text.clear();
-  text.reserve(static_cast<std::size_t>(st.st_size));
-  char buffer[1 << 16];
+  // Straight into the string, sized from fstat and grown if the file grew: no 64 KiB buffer on
+  // the stack.
+  text.resize(static_cast<std::size_t>(st.st_size) + 1);
+  std::size_t used = 0;
   for (;;) {
-    const ssize_t n = ::read(fd, buffer, sizeof buffer);
+    if (used == text.size()) text.resize(2 * text.size());
+    const ssize_t n = ::read(fd, text.data() + used, text.size() - used);
     if (n < 0 && errno == EINTR) continue;
     if (n < 0) {
       error = path + ": read error: " + reason(errno);
       ::close(fd);
+      text.clear();
       return false;
     }
     if (n == 0) break;
-    text.append(buffer, static_cast<std::size_t>(n));
+    used += static_cast<std::size_t>(n);
   }
+  text.resize(used);
   ::close(fd);
   return true;
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <optional>
 
 #include "mirrorcal/calibration/image_markers.hpp"
@@ -417,8 +418,11 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     from.p = start.p;
     from.v = start.v;
     from.q_n_b = start.q_n_b;
-    const CalibrationRun<M, NK> track = run_pass<M, NK>(
-        c, from, calibration_held<M, NK>(p0, run), data, nullptr, {}, next_hooks(), nullptr, true);
+    // The two runs a step makes live on the heap: on the stack they took 80 KB at 6 markers with
+    // the lens estimated. (A new-expression builds each in place from run_pass's result.)
+    const std::unique_ptr<const CalibrationRun<M, NK>> track(
+        new CalibrationRun<M, NK>(run_pass<M, NK>(c, from, calibration_held<M, NK>(p0, run), data,
+                                                  nullptr, {}, next_hooks(), nullptr, true)));
     // Each frame is linearised at the track smoothed over the whole pass, never at the track's
     // estimate after that frame's update: an estimate that holds the frame's own noise moves
     // the linearisation with that noise, and where the rig's motion leaves a direction weak
@@ -430,27 +434,27 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     // linearised after each update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05;
     // smoothed 3 and 0.96 (along the true motion, a diagnostic: 3 and 0.97).
     Trajectory<M, NK> trajectory;
-    smoothed_trajectory<M, NK>(track, trajectory);
+    smoothed_trajectory<M, NK>(*track, trajectory);
     // From the prior's guesses of the calibration (the data count once), and the IMU start the
     // trajectory has.
     State prior = x0;
     prior.p = from.p;
     prior.v = from.v;
     prior.q_n_b = from.q_n_b;
-    CalibrationRun<M, NK> refined =
-        run_pass<M, NK>(c, prior, p0, data, truth, {}, next_hooks(), &trajectory);
+    const std::unique_ptr<CalibrationRun<M, NK>> refined(new CalibrationRun<M, NK>(
+        run_pass<M, NK>(c, prior, p0, data, truth, {}, next_hooks(), &trajectory)));
     // A replay that did not meet the same frames (a source that ran dry) refines nothing.
-    if (frames_met(refined) != frames_met(run) || frames_met(track) != frames_met(run) ||
-        refined.filter_counters.failures > 0)
+    if (frames_met(*refined) != frames_met(run) || frames_met(*track) != frames_met(run) ||
+        refined->filter_counters.failures > 0)
       return false;
     // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
     // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
-    if (suspect(refined.result) && !suspect(run.result)) return false;
-    refined.result.refinement_step_sigmas = step_sigmas<M, NK>(refined, run);
-    refined.first_frame = run.first_frame;
-    refined.result.passes = free_passes;
-    refined.result.restarted_pass = run.result.restarted_pass;
-    run = std::move(refined);
+    if (suspect(refined->result) && !suspect(run.result)) return false;
+    refined->result.refinement_step_sigmas = step_sigmas<M, NK>(*refined, run);
+    refined->first_frame = run.first_frame;
+    refined->result.passes = free_passes;
+    refined->result.restarted_pass = run.result.restarted_pass;
+    run = std::move(*refined);
     imu_start_from<M, NK>(config, run, p0, data, start);
     return true;
   };
