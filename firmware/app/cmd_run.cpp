@@ -212,7 +212,8 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
                    CalibrationResult& result, ReportData& report, std::string& error) {
   std::printf(
       "calibrating from the run's %zu IMU samples and %zu labelled frames%s, in %d passes "
-      "(more if one gates too many) as `mirrorcal calibrate` does\n",
+      "(more if one gates too many) and the Gauss-Newton refinement's, as `mirrorcal calibrate` "
+      "does\n",
       log.imu.size(), log.frames.size(),
       log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
   log.to_recording(sensors);

@@ -17,7 +17,7 @@
 //                                            (lens known) or 8 (its coefficients estimated)
 //   mirrorcal_opcount recording <N>          N runs of the whole loop over the 60 s recording
 //   mirrorcal_opcount shipped <N>            N calibrations of it as mirrorcal runs them
-//                                            (two passes)
+//                                            (its free passes and the Gauss-Newton refinement)
 //   mirrorcal_opcount sizes                  sizeof the filter of every configuration built,
 //                                            and of its thread-local workspaces
 //   mirrorcal_opcount stack                  peak stack depth of predict and update, measured, of

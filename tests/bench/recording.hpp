@@ -19,8 +19,9 @@ Recording paper_recording();
 // optimised away, and a caller can check it did something).
 std::uint64_t calibrate(const Recording& r);
 
-// Calibrates as `mirrorcal calibrate` and `mirrorcal sim` do: calibration::run_loop's
-// kDefaultPasses passes over the data, keeping the history; returns the last pass's markers used.
+// Calibrates as `mirrorcal calibrate` and `mirrorcal sim` do: calibration::run_loop's passes over
+// the data (kDefaultPasses at least) and its Gauss-Newton refinement, keeping the history; returns
+// the last pass's markers used.
 std::uint64_t calibrate_as_shipped(const Recording& r);
 
 }  // namespace mirrorcal::bench
