@@ -227,6 +227,40 @@ Scenario random_scenario(std::uint64_t seed, int markers) {
   return s;
 }
 
+void add_mems_imperfections(Scenario& s, std::uint64_t seed) {
+  constexpr double deg = M_PI / 180.0;
+  Draw d(seed ^ 0x4D454D53ull);  // "MEMS": a stream of its own, the rig's draws unchanged
+  const double scale = d.uniform(0.0, 0.03), angle = d.uniform(0.0, 1.0 * deg);
+  const double g_sensitivity = d.uniform(0.0, 0.05 * deg / 9.81);
+  Eigen::Matrix3d t_a = Eigen::Matrix3d::Identity(), t_g = Eigen::Matrix3d::Identity();
+  for (int i = 0; i < 3; ++i) {
+    t_a(i, i) += d.uniform(-scale, scale);
+    t_g(i, i) += d.uniform(-scale, scale);
+    for (int j = 0; j < 3; ++j) {
+      if (j >= i) continue;  // lower: the accelerometer's axes are the frame's, the gyro's x
+      t_a(i, j) = d.uniform(-angle, angle);  // axis is the accelerometer's
+      t_g(i, j) = d.uniform(-angle, angle);
+    }
+  }
+  ImuIntrinsics<double>& k = s.imu_intrinsics;
+  k.d_a = t_a.inverse();
+  k.d_g = t_g.inverse();
+  for (int i = 0; i < 9; ++i) k.t_s.data()[i] = d.uniform(-g_sensitivity, g_sensitivity);
+}
+
+Scenario mems_scenario(std::uint64_t seed, int markers) {
+  Scenario s = random_scenario(seed, markers);
+  s.name = "mems";
+  add_mems_imperfections(s, seed);
+  return s;
+}
+
+bool has_imu_intrinsics(const Scenario& s) {
+  const ImuIntrinsics<double>& k = s.imu_intrinsics;
+  return k.d_a != Eigen::Matrix3d::Identity() || k.d_g != Eigen::Matrix3d::Identity() ||
+         k.t_s != Eigen::Matrix3d::Zero();
+}
+
 void set_lens(Scenario& s, Distortion model) {
   Pinhole<double>& k = s.truth.intrinsics;
   k.distortion = model;
@@ -251,6 +285,10 @@ bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out
   }
   if (name == "random") {
     out = random_scenario(seed, markers);
+    return true;
+  }
+  if (name == "mems") {
+    out = mems_scenario(seed, markers);
     return true;
   }
   return false;

@@ -66,14 +66,23 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
   d.b_g0 = noise3(rng_bias) * s.priors.gyro_bias;
   Eigen::Vector3d b_a = d.b_a0, b_g = d.b_g0;
   const auto n_imu = static_cast<std::size_t>(std::llround(s.duration_s * rate)) + 1;
+  const bool mems = has_imu_intrinsics(s);
   d.imu.reserve(n_imu);
   for (std::size_t k = 0; k < n_imu; ++k) {
     const std::int64_t t_ns = std::llround(static_cast<double>(k) * 1e9 / rate);
     const Kinematics kin = kinematics(s.motion, static_cast<double>(t_ns) * 1e-9);
     ImuSample smp;
     smp.t_ns = t_ns;
-    smp.gyro = kin.omega_b + b_g + sg * noise3(rng_imu);
-    smp.accel = kin.q_n_b.conjugate() * (kin.a - s.gravity_n) + b_a + sa * noise3(rng_imu);
+    const Eigen::Vector3d specific_force = kin.q_n_b.conjugate() * (kin.a - s.gravity_n);
+    if (mems) {
+      smp.gyro = gyro_reading(s.imu_intrinsics, b_g, kin.omega_b, specific_force);
+      smp.accel = accel_reading(s.imu_intrinsics, b_a, specific_force);
+      smp.gyro += sg * noise3(rng_imu);
+      smp.accel += sa * noise3(rng_imu);
+    } else {
+      smp.gyro = kin.omega_b + b_g + sg * noise3(rng_imu);
+      smp.accel = specific_force + b_a + sa * noise3(rng_imu);
+    }
     d.imu.push_back(smp);
     b_g += sbg * noise3(rng_bias);
     b_a += sba * noise3(rng_bias);

@@ -155,7 +155,8 @@ CalibrationRun<M, NK> run_pass(
 template <int M, int NK>
 void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& out) {
   using State = typename CalibrationRun<M, NK>::State;
-  using Mat15 = Eigen::Matrix<double, 15, 15>;
+  constexpr int D = CalibrationRun<M, NK>::Filter::kMotionDim;
+  using MotionMatrix = Eigen::Matrix<double, D, D>;
   const std::size_t n = track.motion ? std::min(track.history.size(), track.motion->size()) : 0;
   if (n == 0) return;
   const RecordStore<MotionRow<typename CalibrationRun<M, NK>::Filter>>& motion = *track.motion;
@@ -169,6 +170,7 @@ void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& 
     s.markers = final_estimate.markers;
     s.t_d = final_estimate.t_d;
     s.intrinsics = final_estimate.intrinsics;
+    s.imu = final_estimate.imu;
     return s;
   };
   HistoryRow<typename CalibrationRun<M, NK>::Filter> next_row = track.history[n - 1];
@@ -182,11 +184,11 @@ void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& 
     // A row that followed no update (the final one) says nothing new about the one before it.
     if (next.step.update != row_motion.step.update) {
       // C = P_k F^T P_{k+1|k}^-1, so C^T = P_{k+1|k}^-1 F P_k (both covariances symmetric).
-      const Mat15 f_p = next.step.transition * row_motion.covariance;
-      const Mat15 gain_t = next.step.predicted_covariance.ldlt().solve(f_p);
-      const Eigen::Matrix<double, 15, 1> d =
-          next_smoothed.template boxminus_block<0, 15>(next_row.predicted);
-      if (gain_t.allFinite()) smoothed.template boxplus_block<0, 15>(gain_t.transpose() * d);
+      const MotionMatrix f_p = next.step.transition * row_motion.covariance;
+      const MotionMatrix gain_t = next.step.predicted_covariance.ldlt().solve(f_p);
+      const Eigen::Matrix<double, D, 1> d =
+          next_smoothed.template boxminus_block<0, D>(next_row.predicted);
+      if (gain_t.allFinite()) smoothed.template boxplus_block<0, D>(gain_t.transpose() * d);
     }
     out.set(k, held(smoothed), row.t_ns);
     next_smoothed = smoothed;

@@ -20,5 +20,9 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
   template class CalibrationLoop<double, M, 8>;
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_LOOPS_)
 #undef MIRRORCAL_LOOPS_
+// Stage 1 with the IMU's intrinsics, for every built IMU model (MIRRORCAL_IMU_MODELS).
+#define MIRRORCAL_IMU_LOOP_(M, NI) template class CalibrationLoop<double, M, 0, NI>;
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_IMU_LOOP_)
+#undef MIRRORCAL_IMU_LOOP_
 
 }  // namespace mirrorcal::firmware

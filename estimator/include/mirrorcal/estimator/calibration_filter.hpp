@@ -47,10 +47,11 @@ struct FilterCounters {
   std::uint64_t nis_dof = 0;
 };
 
-template <typename S, int M, int NK>
+template <typename S, int M, int NK, int NI = 0>
 class CalibrationFilter {
  public:
-  using State = MirrorState<S, M, NK>;
+  using State = MirrorState<S, M, NK, NI>;
+  using Transition = ImuTransition<S, NI>;
   using Filter = SigmaPointFilter<State>;
   using Covariance = typename Filter::Covariance;
   static constexpr int kDim = State::kDim;
@@ -64,7 +65,7 @@ class CalibrationFilter {
   // A new estimate for the filter's present time (which reset leaves as it is).
   void reset(const State& x, const Covariance& p) {
     filter_.reset(x, p);
-    unsettled_ = ImuTransition<S>::identity();
+    unsettled_ = Transition::identity();
     has_unsettled_ = false;
     imu_block_checked_ = false;
   }
@@ -140,14 +141,16 @@ class CalibrationFilter {
   // update before the latest to the latest, the motion block's transition (the product of the
   // predicts' F; zero across a restart) and its covariance before the latest update. Off by
   // default: the board's loop does not pay the 15x15 product per predict.
+  static constexpr int kMotionDim = State::kDynamicDim;
+  using MotionMatrix = Eigen::Matrix<S, kMotionDim, kMotionDim>;
   struct MotionStep {
-    Eigen::Matrix<S, 15, 15> transition = Eigen::Matrix<S, 15, 15>::Identity();
-    Eigen::Matrix<S, 15, 15> predicted_covariance = Eigen::Matrix<S, 15, 15>::Zero();
+    MotionMatrix transition = MotionMatrix::Identity();
+    MotionMatrix predicted_covariance = MotionMatrix::Zero();
     std::uint64_t update = 0;  // how many updates the filter had made, the latest included
   };
   void keep_motion_steps(bool on) {
     keep_steps_ = on;
-    since_update_ = ImuTransition<S>::identity();
+    since_update_ = Transition::identity();
     restarted_since_update_ = false;
   }
   const MotionStep& motion_step() const { return step_; }
@@ -210,16 +213,16 @@ class CalibrationFilter {
   // calibration P_cd only when it is needed (an update, a restart, covariance()): the steps'
   // transitions since then compose (ImuTransition::followed_by, six 3x3 products) and P_cd F^T is
   // applied once, per frame instead of per IMU sample: a predict's cost then does not grow with M.
-  mutable ImuTransition<S> unsettled_ = ImuTransition<S>::identity();
+  mutable Transition unsettled_ = Transition::identity();
   mutable bool has_unsettled_ = false;
   void settle() const {
     if (!has_unsettled_) return;
     filter_.template move_leading_cross<State::kDynamicDim>(unsettled_);
-    unsettled_ = ImuTransition<S>::identity();
+    unsettled_ = Transition::identity();
     has_unsettled_ = false;
   }
   bool keep_steps_ = false;
-  ImuTransition<S> since_update_ = ImuTransition<S>::identity();
+  Transition since_update_ = Transition::identity();
   bool restarted_since_update_ = false;  // the motion before a restart says nothing of after it
   MotionStep step_{};
   ImuSample now_{};  // the IMU signal at the filter's time, if timed_
@@ -233,9 +236,9 @@ class CalibrationFilter {
   bool imu_block_checked_ = false;
 };
 
-template <typename S, int M, int NK>
-const typename CalibrationFilter<S, M, NK>::State* CalibrationFilter<S, M, NK>::linearisation_point(
-    std::int64_t t_ns, Exposure<S>& exposed) {
+template <typename S, int M, int NK, int NI>
+const typename CalibrationFilter<S, M, NK, NI>::State*
+CalibrationFilter<S, M, NK, NI>::linearisation_point(std::int64_t t_ns, Exposure<S>& exposed) {
   LinearisationPoints* points = along_arrays_ ? &arrays_ : along_;
   if (points == nullptr) return nullptr;
   const std::size_t count = points->count();
@@ -245,18 +248,24 @@ const typename CalibrationFilter<S, M, NK>::State* CalibrationFilter<S, M, NK>::
   const State& point = points->state(k);
   Vec3<S> rate;
   // The exposure's gyro is raw: the model takes the sigma point's bias (the point's) off it.
-  if (timed_ && points->body_rate(k, rate)) exposed.gyro = rate + point.b_g;
+  if (timed_ && points->body_rate(k, rate))
+    exposed.gyro = point.gyro_sample(rate, point.specific_force(exposed.accel));
   return &point;
 }
 
-template <typename S, int M, int NK>
-Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
+template <typename S, int M, int NK, int NI>
+Exposure<S> CalibrationFilter<S, M, NK, NI>::exposure(std::int64_t t_cam_ns) const {
   Exposure<S> e;
   e.gravity_n = gravity_;
   if (!timed_) {  // at t_cam + t_d, at rest
     e.stamp_minus_filter_s = -filter_.mean().t_d;
     e.accel = -(filter_.mean().q_n_b.conjugate() * gravity_) + filter_.mean().b_a;
     e.gyro = filter_.mean().b_g;
+    if constexpr (NI > 0) {  // the raw signals at rest read through the intrinsics
+      const State& x = filter_.mean();
+      e.accel = accel_reading(x.imu, x.b_a, Vec3<S>(-(x.q_n_b.conjugate() * gravity_)));
+      e.gyro = x.gyro_sample(Vec3<S>::Zero(), x.specific_force(e.accel));
+    }
     return e;
   }
   e.stamp_minus_filter_s = S(static_cast<double>(t_cam_ns - now_.t_ns) * 1e-9);
@@ -266,16 +275,16 @@ Exposure<S> CalibrationFilter<S, M, NK>::exposure(std::int64_t t_cam_ns) const {
   return e;
 }
 
-// Only the IMU block [0, 15) moves: the 6 + 3M (+ NK) calibration states are constants. The mean
-// moves by propagate_imu (Runge-Kutta on the parabola through three samples when `before` is
+// Only the IMU block [0, 15 + NI) moves: the 6 + 3M (+ NK) calibration states are constants. The
+// mean moves by propagate_imu (Runge-Kutta on the parabola through three samples when `before` is
 // given); the covariance propagates with the Jacobian F of the integration at the estimate
 // (imu_transition.hpp): P_dd <- F P_dd F^T + Q, P_dc <- F P_dc (deferred: settle), P_cc
 // unchanged. To first order this is what the sigma-point transform of the block computes
 // (tests/estimator show both agree, the difference falling as the square of the spread), at a
 // fraction of its 31 integrations; the paper campaigns (docs/campaign) are as consistent with it.
-template <typename S, int M, int NK>
-FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const ImuSample& s1,
-                                                  const ImuSample* before, double gap_s) {
+template <typename S, int M, int NK, int NI>
+FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const ImuSample& s1,
+                                                      const ImuSample* before, double gap_s) {
   constexpr int D = State::kDynamicDim;
   static_assert(State::kDynamicBegin == 0, "the IMU block leads the error state");
   ++counters_.predicts;
@@ -289,7 +298,7 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
     imu_block_checked_ = true;
   }
   const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
-  const ImuTransition<S> f = imu_transition(filter_.mean(), s0, s1);
+  const Transition f = imu_transition(filter_.mean(), s0, s1);
   State x = filter_.mean();
   propagate_imu(x, s0, s1, gravity_, before);
   // P_dd' = F (P_dd F^T); P_cd' = P_cd F^T waits in unsettled_.
@@ -316,8 +325,8 @@ FilterStatus CalibrationFilter<S, M, NK>::predict(const ImuSample& s0, const Imu
   return FilterStatus::kOk;
 }
 
-template <typename S, int M, int NK>
-void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
+template <typename S, int M, int NK, int NI>
+void CalibrationFilter<S, M, NK, NI>::restart_motion(const ImuSample& s) {
   State x = filter_.mean();
   x.v.setZero();
   Covariance& p = thread_workspace<RestartWorkspace>().next;
@@ -336,16 +345,17 @@ void CalibrationFilter<S, M, NK>::restart_motion(const ImuSample& s) {
   start_at(s);
 }
 
-template <typename S, int M, int NK>
-UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
+template <typename S, int M, int NK, int NI>
+UpdateResult CalibrationFilter<S, M, NK, NI>::update(const MarkerFrame<M>& frame) {
   predicted_ = filter_.mean();
   settle();
   if (keep_steps_) {
     step_.transition =
-        restarted_since_update_ ? Eigen::Matrix<S, 15, 15>::Zero().eval() : since_update_.dense();
-    step_.predicted_covariance = filter_.covariance().template topLeftCorner<15, 15>();
+        restarted_since_update_ ? MotionMatrix::Zero().eval() : since_update_.dense();
+    step_.predicted_covariance =
+        filter_.covariance().template topLeftCorner<kMotionDim, kMotionDim>();
     ++step_.update;
-    since_update_ = ImuTransition<S>::identity();
+    since_update_ = Transition::identity();
     restarted_since_update_ = false;
   }
   Eigen::Matrix<S, 2 * M, 1> z = Eigen::Matrix<S, 2 * M, 1>::Zero();
@@ -387,6 +397,12 @@ UpdateResult CalibrationFilter<S, M, NK>::update(const MarkerFrame<M>& frame) {
   extern template class CalibrationFilter<double, M, 8>;
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_FILTERS_)
 #undef MIRRORCAL_EXTERN_FILTERS_
+// Stage 1 with the IMU's intrinsics, for every built marker count and IMU model
+// (MIRRORCAL_IMU_MODELS; marker_counts.hpp).
+#define MIRRORCAL_EXTERN_IMU_FILTER_(M, NI) \
+  extern template class CalibrationFilter<double, M, 0, NI>;
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_FILTER_)
+#undef MIRRORCAL_EXTERN_IMU_FILTER_
 extern template class CalibrationFilter<float, 3, 0>;
 
 }  // namespace mirrorcal

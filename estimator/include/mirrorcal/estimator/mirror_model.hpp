@@ -8,7 +8,9 @@
 #include <cmath>
 #include <cstdint>
 #include <string_view>
+#include <type_traits>
 
+#include "mirrorcal/estimator/imu_intrinsics.hpp"
 #include "mirrorcal/estimator/so3.hpp"
 
 namespace mirrorcal {
@@ -214,23 +216,40 @@ constexpr CalibrationLayout calibration_layout(int markers, int intrinsics, bool
 // Calibration state: stage 1 has NK = 0 (22 + 3M error states); stage 2 adds the intrinsics
 // (NK = 5: fu, fv, cu, cv, skew; NK = 4 holds skew at the configured value; NK = 8: fu, fv, cu,
 // cv and the lens's four distortion coefficients, skew held, OpenVINS's eight camera parameters).
+// NI more states hold the IMU's intrinsics (imu_intrinsics.hpp: 0, 12, 15 or 24, the ImuModel's).
 //
 // The error state is ordered so that the two structured operations touch contiguous blocks:
-// IMU propagation changes [v, b_a, b_g, p, theta] = [0, 15), the camera reads
-// [p, theta, p_b_c, phi, markers, t_d, intrinsics] = [9, kDim). Rotations are perturbed on the
+// IMU propagation changes [v, b_a, b_g, imu, p, theta] = [0, 15 + NI) (the IMU's intrinsics are
+// constants, but the propagation's Jacobian reaches them as it does the biases), the camera reads
+// [p, theta, p_b_c, phi, markers, t_d, intrinsics] = [kP, kDim). Rotations are perturbed on the
 // right (body side): R_n_b = R^_n_b Exp(theta), R_b_c = R^_b_c Exp(phi), so phi is the rotation
 // error log(R_b_c,true^T R_b_c,est) up to sign, the figure the paper's tables report.
-template <typename S, int M, int NK>
+template <typename S, int M, int NK, int NI = 0>
 struct MirrorState {
   static_assert(M >= 1, "at least one marker");
   static_assert(NK == 0 || NK == 4 || NK == 5 || NK == 8,
                 "intrinsics: none, fu fv cu cv, with skew, or with the distortion coefficients");
+  static_assert(NI == imu_intrinsics_dim(imu_model_of_dim(NI)), "an ImuModel's dimension");
   using Scalar = S;
   static constexpr int kMarkers = M;
   static constexpr int kIntrinsics = NK;
-  static constexpr int kV = 0, kBa = 3, kBg = 6, kP = 9, kTheta = 12, kPbc = 15, kPhi = 18,
-                       kPi = 21, kTd = 21 + 3 * M, kK = 22 + 3 * M, kDim = 22 + 3 * M + NK;
-  static constexpr int kDynamicBegin = 0, kDynamicDim = 15;
+  static constexpr int kImuIntrinsics = NI;
+  static constexpr ImuModel kImuModel = imu_model_of_dim(NI);
+  // Every block of the error state, {index, dimension}, in order; the rest derives from them.
+  static constexpr IndexRange kVelocity{0, 3}, kAccelBias{kVelocity.end(), 3},
+      kGyroBias{kAccelBias.end(), 3}, kImuBlock{kGyroBias.end(), NI}, kPosition{kImuBlock.end(), 3},
+      kAttitude{kPosition.end(), 3}, kCameraPosition{kAttitude.end(), 3},
+      kCameraRotation{kCameraPosition.end(), 3}, kMarkerBlock{kCameraRotation.end(), 3 * M},
+      kTimeOffset{kMarkerBlock.end(), 1}, kCameraBlock{kTimeOffset.end(), NK};
+  static constexpr int kV = kVelocity.begin, kBa = kAccelBias.begin, kBg = kGyroBias.begin,
+                       kImu = kImuBlock.begin, kP = kPosition.begin, kTheta = kAttitude.begin,
+                       kPbc = kCameraPosition.begin, kPhi = kCameraRotation.begin,
+                       kPi = kMarkerBlock.begin, kTd = kTimeOffset.begin, kK = kCameraBlock.begin,
+                       kDim = kCameraBlock.end();
+  // The block the IMU moves: velocity to attitude. Its sensor parameters [b_a, b_g, imu] are the
+  // constants the propagation's Jacobian reaches.
+  static constexpr int kDynamicBegin = kVelocity.begin, kDynamicDim = kAttitude.end();
+  static constexpr IndexRange kSensorBlock{kAccelBias.begin, 6 + NI};
   static constexpr int kMeasuredBegin = kP, kMeasuredDim = kDim - kP;
   // The calibration block [p_b_c, phi, markers, t_d, intrinsics], what a calibration reports, and
   // its groups (counted from kCalibrationBegin).
@@ -258,14 +277,56 @@ struct MirrorState {
   S t_d = S(0);
   // fu fv cu cv [skew | c0 c1 c2 c3: the lens's Pinhole::coeffs]
   Eigen::Matrix<S, NK, 1> intrinsics = Eigen::Matrix<S, NK, 1>::Zero();
+  // The IMU's intrinsics (NI > 0; nothing otherwise).
+  std::conditional_t<(NI > 0), ImuIntrinsics<S>, NoImuIntrinsics> imu{};
 
   Vec3<S> marker(int i) const { return markers.template segment<3>(3 * i); }
+
+  // The specific force (m/s^2) and body rate (rad/s) of the IMU frame that raw samples f_m, w_m
+  // read at this state's biases and intrinsics (imu_intrinsics.hpp).
+  Vec3<S> specific_force(const Vec3<S>& f_m) const {
+    if constexpr (NI == 0) {
+      return f_m - b_a;
+    } else {
+      return imu.d_a * (f_m - b_a);
+    }
+  }
+  Vec3<S> body_rate(const Vec3<S>& w_m, const Vec3<S>& f_m) const {
+    if constexpr (NI == 0) {
+      (void)f_m;
+      return w_m - b_g;
+    } else if constexpr (NI < 24) {
+      (void)f_m;
+      return imu.d_g * (w_m - b_g);
+    } else {
+      return imu.d_g * (w_m - b_g - imu.t_s * specific_force(f_m));
+    }
+  }
+  // The body rate's change that a change of the raw gyro signal reads.
+  Vec3<S> body_rate_change(const Vec3<S>& dw_m) const {
+    if constexpr (NI == 0) {
+      return dw_m;
+    } else {
+      return imu.d_g * dw_m;
+    }
+  }
+  // The raw gyro sample that reads body rate w with specific force a (body_rate's inverse).
+  Vec3<S> gyro_sample(const Vec3<S>& w, const Vec3<S>& a) const {
+    if constexpr (NI == 0) {
+      (void)a;
+      return w + b_g;
+    } else {
+      return gyro_reading(imu, b_g, w, a);
+    }
+  }
 
   template <int B, int L>
   void boxplus_block(const Eigen::Matrix<S, L, 1>& d) {
     add<B, L, kV>(v, d);
     add<B, L, kBa>(b_a, d);
     add<B, L, kBg>(b_g, d);
+    if constexpr (NI > 0 && covers<B, L, kImu, NI>())
+      imu.template add<NI>(d.template segment<NI>(kImu - B));
     add<B, L, kP>(p, d);
     if constexpr (covers<B, L, kTheta, 3>()) rotate(q_n_b, d.template segment<3>(kTheta - B));
     add<B, L, kPbc>(p_b_c, d);
@@ -281,6 +342,10 @@ struct MirrorState {
     sub<B, L, kV>(v, ref.v, d);
     sub<B, L, kBa>(b_a, ref.b_a, d);
     sub<B, L, kBg>(b_g, ref.b_g, d);
+    if constexpr (NI > 0 && covers<B, L, kImu, NI>()) {
+      auto block = d.template segment<NI>(kImu - B);
+      imu.template difference<NI>(ref.imu, block);
+    }
     sub<B, L, kP>(p, ref.p, d);
     if constexpr (covers<B, L, kTheta, 3>())
       d.template segment<3>(kTheta - B) = so3::boxminus<S>(q_n_b, ref.q_n_b);
@@ -361,14 +426,15 @@ void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
   using S = typename State::Scalar;
   const S dt = S(static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9);
   if (before == nullptr) {
-    const Vec3<S> w0 = s0.gyro.cast<S>() - x.b_g;
-    const Vec3<S> w1 = s1.gyro.cast<S>() - x.b_g;
+    const Vec3<S> f0 = s0.accel.cast<S>(), f1 = s1.accel.cast<S>();
+    const Vec3<S> w0 = x.body_rate(s0.gyro.cast<S>(), f0);
+    const Vec3<S> w1 = x.body_rate(s1.gyro.cast<S>(), f1);
     const Mat3<S> r0 = x.q_n_b.toRotationMatrix();
     const Vec3<S> dtheta = (S(0.5) * dt) * (w0 + w1) + (dt * dt / S(12)) * w0.cross(w1);
     x.q_n_b = (x.q_n_b * so3::exp<S>(dtheta)).normalized();
     const Mat3<S> r1 = x.q_n_b.toRotationMatrix();
-    const Vec3<S> a0 = r0 * (s0.accel.cast<S>() - x.b_a) + gravity_n;
-    const Vec3<S> a1 = r1 * (s1.accel.cast<S>() - x.b_a) + gravity_n;
+    const Vec3<S> a0 = r0 * x.specific_force(f0) + gravity_n;
+    const Vec3<S> a1 = r1 * x.specific_force(f1) + gravity_n;
     x.p += dt * x.v + (dt * dt / S(6)) * (S(2) * a0 + a1);
     x.v += (S(0.5) * dt) * (a0 + a1);
     return;
@@ -381,10 +447,11 @@ void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
   const ImuSample mid = imu_signal_at(before, s0, s1, s0.t_ns + (s1.t_ns - s0.t_ns) / 2);
   const auto rate = [&](const ImuSample& sig, const Eigen::Matrix<S, 4, 1>& qc, const Vec3<S>& v) {
     const Eigen::Quaternion<S> q(qc);  // coeffs order x, y, z, w
-    const Vec3<S> w = sig.gyro.cast<S>() - x.b_g;
+    const Vec3<S> f = sig.accel.cast<S>();
+    const Vec3<S> w = x.body_rate(sig.gyro.cast<S>(), f);
     Rate r;
     r.q = (q * Eigen::Quaternion<S>(S(0), S(0.5) * w.x(), S(0.5) * w.y(), S(0.5) * w.z())).coeffs();
-    r.v = q.toRotationMatrix() * (sig.accel.cast<S>() - x.b_a) + gravity_n;
+    r.v = q.toRotationMatrix() * x.specific_force(f) + gravity_n;
     r.p = v;
     return r;
   };
@@ -400,31 +467,34 @@ void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
   x.v += sixth * (k1.v + S(2) * k2.v + S(2) * k3.v + k4.v);
 }
 
-// Discrete process noise over the dynamic block [v, b_a, b_g, p, theta] for an interval dt, from
-// the continuous densities: white accelerometer noise integrates into v (sigma^2 dt), p
-// (sigma^2 dt^3/3) with their correlation (sigma^2 dt^2/2); white gyro noise into theta; the bias
-// random walks into the biases. The noise is isotropic, so rotating it into n changes nothing.
-template <typename S>
-void add_imu_process_noise(const ImuNoise& n, double dt, Eigen::Matrix<S, 15, 15>& p) {
+// Discrete process noise over the dynamic block [v, b_a, b_g, imu, p, theta] (MirrorState's, of D
+// states: the IMU's intrinsics, constants, take none) for an interval dt, from the continuous
+// densities: white accelerometer noise integrates into v (sigma^2 dt), p (sigma^2 dt^3/3) with
+// their correlation (sigma^2 dt^2/2); white gyro noise into theta; the bias random walks into the
+// biases. The noise is isotropic, so rotating it into n changes nothing.
+template <typename S, int D>
+void add_imu_process_noise(const ImuNoise& n, double dt, Eigen::Matrix<S, D, D>& p) {
+  using Layout = MirrorState<S, 1, 0, D - 15>;  // the dynamic block's layout is the same for any M
   const double sa2 = n.accel_noise_density * n.accel_noise_density;
   const double sg2 = n.gyro_noise_density * n.gyro_noise_density;
   const auto add = [&p](int row, int col, double q) {  // q I on one 3x3 block
     for (int i = 0; i < 3; ++i) p(row + i, col + i) += S(q);
   };
-  add(0, 0, sa2 * dt);                                        // v
-  add(3, 3, n.accel_random_walk * n.accel_random_walk * dt);  // b_a
-  add(6, 6, n.gyro_random_walk * n.gyro_random_walk * dt);    // b_g
-  add(9, 9, sa2 * dt * dt * dt / 3.0);                        // p
-  add(0, 9, sa2 * dt * dt / 2.0);
-  add(9, 0, sa2 * dt * dt / 2.0);
-  add(12, 12, sg2 * dt);  // theta
+  constexpr int kV = Layout::kV, kP = Layout::kP;
+  add(kV, kV, sa2 * dt);
+  add(Layout::kBa, Layout::kBa, n.accel_random_walk * n.accel_random_walk * dt);
+  add(Layout::kBg, Layout::kBg, n.gyro_random_walk * n.gyro_random_walk * dt);
+  add(kP, kP, sa2 * dt * dt * dt / 3.0);
+  add(kV, kP, sa2 * dt * dt / 2.0);
+  add(kP, kV, sa2 * dt * dt / 2.0);
+  add(Layout::kTheta, Layout::kTheta, sg2 * dt);
 }
 
 // The same as a matrix.
-template <typename S>
-Eigen::Matrix<S, 15, 15> imu_process_noise(const ImuNoise& n, double dt) {
-  Eigen::Matrix<S, 15, 15> q = Eigen::Matrix<S, 15, 15>::Zero();
-  add_imu_process_noise<S>(n, dt, q);
+template <typename S, int D = 15>
+Eigen::Matrix<S, D, D> imu_process_noise(const ImuNoise& n, double dt) {
+  Eigen::Matrix<S, D, D> q = Eigen::Matrix<S, D, D>::Zero();
+  add_imu_process_noise<S, D>(n, dt, q);
   return q;
 }
 
@@ -514,8 +584,10 @@ MirrorInCamera<typename State::Scalar> mirror_in_camera(const State& x,
   const Vec3<S> up_b0(S(2) * (q.x() * q.z() - q.w() * q.y()),
                       S(2) * (q.y() * q.z() + q.w() * q.x()),
                       S(1) - S(2) * (q.x() * q.x() + q.y() * q.y()));
-  const Vec3<S> up_b = so3::exp<S>(-(e.gyro - x.b_g + (S(0.5) * dt) * e.gyro_rate) * dt) * up_b0;
-  const S accel_up = up_b0.dot(e.accel - x.b_a) + e.gravity_n.z();  // e_z^T a_n
+  const Vec3<S> rate =
+      x.body_rate(e.gyro, e.accel) + (S(0.5) * dt) * x.body_rate_change(e.gyro_rate);
+  const Vec3<S> up_b = so3::exp<S>(-rate * dt) * up_b0;
+  const S accel_up = up_b0.dot(x.specific_force(e.accel)) + e.gravity_n.z();  // e_z^T a_n
   MirrorInCamera<S> m;
   m.normal_c = x.q_b_c.conjugate() * up_b;
   m.height = x.p.z() + dt * x.v.z() + (S(0.5) * dt * dt) * accel_up + up_b.dot(x.p_b_c);
@@ -524,8 +596,8 @@ MirrorInCamera<typename State::Scalar> mirror_in_camera(const State& x,
 
 // The intrinsics a state implies: its own for stage 2, the configured ones otherwise. NK = 8 takes
 // the distortion coefficients from the state too (the model stays the configured one's).
-template <typename S, int M, int NK>
-Pinhole<S> intrinsics_of(const MirrorState<S, M, NK>& x, const Pinhole<S>& fixed) {
+template <typename S, int M, int NK, int NI>
+Pinhole<S> intrinsics_of(const MirrorState<S, M, NK, NI>& x, const Pinhole<S>& fixed) {
   Pinhole<S> k = fixed;
   if constexpr (NK >= 4) {
     k.fu = x.intrinsics(0);

@@ -33,6 +33,9 @@ struct Prior {
   // The distortion coefficients' 1-sigma (Pinhole::coeffs order), when stage 2 estimates them
   // (NK = 8); their guess is intrinsics.coeffs.
   std::array<double, 4> sigma_distortion = default_sigma_distortion(Distortion::kRadtan);
+  // The IMU's intrinsics, when the state estimates them (NI > 0): guess and 1-sigma.
+  ImuIntrinsics<double> imu_intrinsics{};
+  ImuIntrinsicsSigma sigma_imu_intrinsics{};
 };
 
 // The camera parameters a stage-2 state of NK intrinsics estimates, in the state's order (fu fv
@@ -63,10 +66,11 @@ std::array<double, NK> camera_parameter_sigmas(const std::array<double, 5>& sigm
 }
 
 // The initial state and (diagonal) covariance a prior implies.
-template <typename S, int M, int NK>
-void initialise(const Prior<M>& pr, MirrorState<S, M, NK>& x,
-                Eigen::Matrix<S, MirrorState<S, M, NK>::kDim, MirrorState<S, M, NK>::kDim>& p) {
-  using X = MirrorState<S, M, NK>;
+template <typename S, int M, int NK, int NI>
+void initialise(
+    const Prior<M>& pr, MirrorState<S, M, NK, NI>& x,
+    Eigen::Matrix<S, MirrorState<S, M, NK, NI>::kDim, MirrorState<S, M, NK, NI>::kDim>& p) {
+  using X = MirrorState<S, M, NK, NI>;
   x.p = pr.p.template cast<S>();
   x.v = pr.v.template cast<S>();
   x.q_n_b = pr.q_n_b.normalized().template cast<S>();
@@ -98,6 +102,11 @@ void initialise(const Prior<M>& pr, MirrorState<S, M, NK>& x,
       x.intrinsics(j) = S(k[static_cast<std::size_t>(j)]);
       sigma(X::kK + j) = S(sk[static_cast<std::size_t>(j)]);
     }
+  }
+  if constexpr (NI > 0) {
+    x.imu = pr.imu_intrinsics.template cast<S>();
+    const std::array<double, NI> si = imu_intrinsics_sigmas<NI>(pr.sigma_imu_intrinsics);
+    for (int j = 0; j < NI; ++j) sigma(X::kImu + j) = S(si[static_cast<std::size_t>(j)]);
   }
   p = sigma.array().square().matrix().asDiagonal();
 }

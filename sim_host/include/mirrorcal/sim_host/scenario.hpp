@@ -74,6 +74,9 @@ struct Scenario {
   double imu_noise_scale = 1.0;       // the IMU noise densities against the ADIS16448's
   Eigen::Vector3d gravity_n{0.0, -9.81, 0.0};
   ImuNoise imu{};  // the true noise; the filter is told the same
+  // The IMU's true intrinsics (imu_intrinsics.hpp: its samples read T_a a + b_a and
+  // T_g w + T_s a + b_g); the identity, an ideal IMU, but in the mems family.
+  ImuIntrinsics<double> imu_intrinsics{};
   double imu_rate_hz = 200.0;
   double camera_rate_hz = 20.0;
   double camera_offset_s = 0.0025;  // frames fall between IMU samples
@@ -102,12 +105,23 @@ Scenario paper_scenario();
 constexpr int kPaperMarkers = 3;  // the paper's rig, and the random family's by default
 Scenario random_scenario(std::uint64_t seed, int markers = kPaperMarkers);
 
+// The random family's rig with a MEMS IMU's own errors (docs/scenarios.md, "The mems family"):
+// every axis's scale factor off by up to 0-3 % and every non-orthogonality angle of both triads
+// by up to 0-1 deg (the gyro's x axis on the accelerometer's), each rig's levels drawn first; a
+// gyro g-sensitivity up to 0.05 deg/s per g. Drawn from a stream of their own, so that the rig is
+// random_scenario(seed, markers)'s.
+Scenario mems_scenario(std::uint64_t seed, int markers = kPaperMarkers);
+// The same draws, on any scenario.
+void add_mems_imperfections(Scenario& s, std::uint64_t seed);
+// Whether the scenario's IMU has intrinsics other than the identity.
+bool has_imu_intrinsics(const Scenario& s);
+
 // Gives the scenario's camera a lens: radtan with EuRoC cam0's coefficients (k1 = -0.283, barrel),
 // equidistant with a fisheye's (the issue tracker's), or none.
 void set_lens(Scenario& s, Distortion model);
 
-// Scenario by name: "paper" (seed and markers ignored: three markers) or "random" (drawn from seed,
-// with `markers` markers); false if unknown.
+// Scenario by name: "paper" (seed and markers ignored: three markers), "random" or "mems" (drawn
+// from seed, with `markers` markers); false if unknown.
 bool scenario_by_name(const std::string& name, std::uint64_t seed, Scenario& out,
                       int markers = kPaperMarkers);
 

@@ -137,7 +137,7 @@ void record_residuals(const Filter& f, const MarkerFrame<Filter::State::kMarkers
 template <class Filter>
 struct MotionRow {
   typename Filter::MotionStep step;
-  Eigen::Matrix<double, 15, 15> covariance;
+  Eigen::Matrix<double, Filter::kMotionDim, Filter::kMotionDim> covariance;
 };
 
 template <class Filter>
@@ -170,7 +170,8 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     rows_.push_back(r);
     if (motion_) {
       motion_row_.step = f.motion_step();
-      motion_row_.covariance = f.covariance().template topLeftCorner<15, 15>();
+      motion_row_.covariance =
+          f.covariance().template topLeftCorner<Filter::kMotionDim, Filter::kMotionDim>();
       motion_->push_back(motion_row_);
     }
   }

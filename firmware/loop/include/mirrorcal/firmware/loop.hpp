@@ -53,10 +53,10 @@ class EstimateSink {
   virtual void publish(std::int64_t t_ns, const Filter& filter) = 0;
 };
 
-template <typename S, int M, int NK>
+template <typename S, int M, int NK, int NI = 0>
 class CalibrationLoop {
  public:
-  using Filter = CalibrationFilter<S, M, NK>;
+  using Filter = CalibrationFilter<S, M, NK, NI>;
 
   CalibrationLoop(Filter& filter, hal::ImuSource& imu, hal::MarkerSource<M>& markers,
                   const LoopConfig& config, EstimateSink<Filter>* sink = nullptr)
@@ -132,5 +132,8 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
   extern template class CalibrationLoop<double, M, 8>;
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_LOOPS_)
 #undef MIRRORCAL_EXTERN_LOOPS_
+#define MIRRORCAL_EXTERN_IMU_LOOP_(M, NI) extern template class CalibrationLoop<double, M, 0, NI>;
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_LOOP_)
+#undef MIRRORCAL_EXTERN_IMU_LOOP_
 
 }  // namespace mirrorcal::firmware

@@ -9,8 +9,8 @@
 
 namespace mirrorcal::firmware {
 
-template <typename S, int M, int NK>
-void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
+template <typename S, int M, int NK, int NI>
+void CalibrationLoop<S, M, NK, NI>::propagate_to(const ImuSample& next) {
   const StageTimer timer(config_.profiler, Stage::kPropagation);
   if (next.t_ns <= last_.t_ns) return;
   if (gap_s_ > 0.0) {
@@ -29,8 +29,8 @@ void CalibrationLoop<S, M, NK>::propagate_to(const ImuSample& next) {
   last_ = next;
 }
 
-template <typename S, int M, int NK>
-bool CalibrationLoop<S, M, NK>::cross_gap(const ImuSample& sample) {
+template <typename S, int M, int NK, int NI>
+bool CalibrationLoop<S, M, NK, NI>::cross_gap(const ImuSample& sample) {
   const std::int64_t silent_ns = sample.t_ns - measured_.t_ns;
   gap_s_ = 0.0;
   if (static_cast<double>(silent_ns) <=
@@ -47,8 +47,8 @@ bool CalibrationLoop<S, M, NK>::cross_gap(const ImuSample& sample) {
   return true;
 }
 
-template <typename S, int M, int NK>
-void CalibrationLoop<S, M, NK>::apply_frame(const MarkerFrame<M>& frame) {
+template <typename S, int M, int NK, int NI>
+void CalibrationLoop<S, M, NK, NI>::apply_frame(const MarkerFrame<M>& frame) {
   ++counters_.frames;
   UpdateResult r;
   {
@@ -67,8 +67,8 @@ void CalibrationLoop<S, M, NK>::apply_frame(const MarkerFrame<M>& frame) {
   if (config_.profiler != nullptr) config_.profiler->end_frame();
 }
 
-template <typename S, int M, int NK>
-hal::SourceStatus CalibrationLoop<S, M, NK>::poll_markers() {
+template <typename S, int M, int NK, int NI>
+hal::SourceStatus CalibrationLoop<S, M, NK, NI>::poll_markers() {
   LoopProfiler* const p = config_.profiler;
   if (p == nullptr) return markers_.poll(pending_);
   const std::int64_t t0 = p->now_ns();
@@ -77,8 +77,8 @@ hal::SourceStatus CalibrationLoop<S, M, NK>::poll_markers() {
   return st;
 }
 
-template <typename S, int M, int NK>
-hal::SourceStatus CalibrationLoop<S, M, NK>::read_imu(ImuSample& sample) {
+template <typename S, int M, int NK, int NI>
+hal::SourceStatus CalibrationLoop<S, M, NK, NI>::read_imu(ImuSample& sample) {
   LoopProfiler* const p = config_.profiler;
   if (p == nullptr) return imu_.next(sample);
   const std::int64_t t0 = p->now_ns();
@@ -87,8 +87,8 @@ hal::SourceStatus CalibrationLoop<S, M, NK>::read_imu(ImuSample& sample) {
   return st;
 }
 
-template <typename S, int M, int NK>
-bool CalibrationLoop<S, M, NK>::step() {
+template <typename S, int M, int NK, int NI>
+bool CalibrationLoop<S, M, NK, NI>::step() {
   ImuSample sample;
   const hal::SourceStatus st = read_imu(sample);
   if (st != hal::SourceStatus::kOk) {
@@ -156,29 +156,29 @@ bool CalibrationLoop<S, M, NK>::step() {
   return true;
 }
 
-template <typename S, int M, int NK>
-std::int64_t CalibrationLoop<S, M, NK>::time_offset_ns() const {
+template <typename S, int M, int NK, int NI>
+std::int64_t CalibrationLoop<S, M, NK, NI>::time_offset_ns() const {
   const double t_d = static_cast<double>(filter_.state().t_d);
   if (!(std::abs(t_d) < kMaxTimeOffsetS)) return 0;  // NaN or beyond any camera: not trusted
   return std::llround(t_d * 1e9);
 }
 
-template <typename S, int M, int NK>
-std::int64_t CalibrationLoop<S, M, NK>::readout_ns(const MarkerFrame<M>& frame) const {
+template <typename S, int M, int NK, int NI>
+std::int64_t CalibrationLoop<S, M, NK, NI>::readout_ns(const MarkerFrame<M>& frame) const {
   const double line_delay_s = filter_.config().intrinsics.line_delay_s;
   if (line_delay_s == 0.0) return 0;
   return std::llround(line_delay_s * readout_anchor_row(frame) * 1e9);
 }
 
-template <typename S, int M, int NK>
-void CalibrationLoop<S, M, NK>::finish() {
+template <typename S, int M, int NK, int NI>
+void CalibrationLoop<S, M, NK, NI>::finish() {
   if (pending_valid_) ++counters_.frames_after_imu;
   pending_valid_ = false;
   if (sink_ != nullptr) sink_->publish(last_.t_ns, filter_);
 }
 
-template <typename S, int M, int NK>
-LoopEnd CalibrationLoop<S, M, NK>::run() {
+template <typename S, int M, int NK, int NI>
+LoopEnd CalibrationLoop<S, M, NK, NI>::run() {
   while (step()) {
   }
   finish();
