@@ -110,5 +110,31 @@ TEST(MemsImu, TheScaleMisalignmentModelIsConsistentWhereTheIdealOneIsNot) {
   EXPECT_LT(imu_nees.maxCoeff(), 2.8);
 }
 
+// The calibration as shipped (passes, Gauss-Newton refinement, self-check) from the user's guesses
+// on rigs of the mems family: with the IMU's intrinsics estimated, every run that says
+// `consistent: true` is within its sigmas.
+TEST(MemsImu, ThePipelineFromTheGuessesIsConsistent) {
+  constexpr int kRigs = 10;
+  double nees_sum = 0.0;
+  int unflagged = 0;
+  for (std::uint64_t seed = 1; seed <= kRigs; ++seed) {
+    const sim::Scenario s = sim::mems_scenario(seed);
+    const auto with = evaluation::run_simulation<3, kScaleMisalignment>(s, seed);
+    const auto without = evaluation::run_simulation<3, 0>(s, seed);
+    const double nees = with.history.back().nees;
+    const bool trusted = calibration::consistent(with.result);
+    std::printf("rig %d: NEES %.2f (%s) with the IMU's intrinsics, %.2f (%s) without\n", int(seed),
+                nees, trusted ? "consistent" : "flagged", without.history.back().nees,
+                calibration::consistent(without.result) ? "consistent" : "flagged");
+    if (!trusted) continue;
+    ++unflagged;
+    nees_sum += nees;
+    EXPECT_LT(nees, 40.0) << "rig " << seed;  // chi-square(16) beyond 99.9 %
+  }
+  ASSERT_GE(unflagged, kRigs / 2);
+  std::printf("unflagged %d, average NEES %.2f\n", unflagged, nees_sum / unflagged);
+  EXPECT_LT(nees_sum / unflagged, 24.0);
+}
+
 }  // namespace
 }  // namespace mirrorcal

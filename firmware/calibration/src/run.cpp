@@ -31,17 +31,17 @@ namespace {
 
 // The estimates a pass published at its frames, to linearise another pass along: in a temporary
 // file, read by the filter as its frames come.
-template <int M, int NK>
+template <int M, int NK, int NI>
 struct TrajectoryPoint {
-  typename CalibrationRun<M, NK>::State state;
+  typename CalibrationRun<M, NK, NI>::State state;
   std::int64_t t_ns = 0;
   Eigen::Vector3d body_rate = Eigen::Vector3d::Zero();  // rad/s, bias-free
   bool has_rate = false;
 };
-template <int M, int NK>
-class Trajectory final : public CalibrationRun<M, NK>::Filter::LinearisationPoints {
+template <int M, int NK, int NI>
+class Trajectory final : public CalibrationRun<M, NK, NI>::Filter::LinearisationPoints {
  public:
-  using State = typename CalibrationRun<M, NK>::State;
+  using State = typename CalibrationRun<M, NK, NI>::State;
   std::size_t count() const override { return points_.size(); }
   std::int64_t stamp(std::size_t k) override { return at(k).t_ns; }
   const State& state(std::size_t k) override { return at(k).state; }
@@ -60,10 +60,10 @@ class Trajectory final : public CalibrationRun<M, NK>::Filter::LinearisationPoin
   void set_rates() {
     const std::size_t n = points_.size();
     for (std::size_t k = 0; k < n && n > 1; ++k) {
-      const TrajectoryPoint<M, NK> a = points_[k > 0 ? k - 1 : 0];
-      const TrajectoryPoint<M, NK> b = points_[std::min(k + 1, n - 1)];
+      const TrajectoryPoint<M, NK, NI> a = points_[k > 0 ? k - 1 : 0];
+      const TrajectoryPoint<M, NK, NI> b = points_[std::min(k + 1, n - 1)];
       const double span_s = static_cast<double>(b.t_ns - a.t_ns) * 1e-9;
-      TrajectoryPoint<M, NK> p = points_[k];
+      TrajectoryPoint<M, NK, NI> p = points_[k];
       p.has_rate = span_s > 0.0 && span_s <= kMaxRateSpanS;
       if (p.has_rate) p.body_rate = so3::boxminus<double>(b.state.q_n_b, a.state.q_n_b) / span_s;
       points_.set(k, p);
@@ -74,33 +74,34 @@ class Trajectory final : public CalibrationRun<M, NK>::Filter::LinearisationPoin
  private:
   static constexpr std::size_t kNone = ~std::size_t{0};
   static constexpr double kMaxRateSpanS = 0.25;
-  const TrajectoryPoint<M, NK>& at(std::size_t k) {
+  const TrajectoryPoint<M, NK, NI>& at(std::size_t k) {
     if (k != read_) {
       point_ = points_[k];
       read_ = k;
     }
     return point_;
   }
-  RecordStore<TrajectoryPoint<M, NK>> points_{"the smoothed trajectory"};
-  TrajectoryPoint<M, NK> point_{};
+  RecordStore<TrajectoryPoint<M, NK, NI>> points_{"the smoothed trajectory"};
+  TrajectoryPoint<M, NK, NI> point_{};
   std::size_t read_ = kNone;
 };
 
 // Every frame a pass's loop met, used or not: the same in every replay of the same data.
-template <int M, int NK>
-std::uint64_t frames_met(const CalibrationRun<M, NK>& run) {
+template <int M, int NK, int NI>
+std::uint64_t frames_met(const CalibrationRun<M, NK, NI>& run) {
   const firmware::LoopCounters& c = run.loop_counters;
   return c.frames + c.frames_before_filter + c.frames_after_imu;
 }
 
 // One pass of the loop over the data from (x0, p0).
-template <int M, int NK>
-CalibrationRun<M, NK> run_pass(
-    const CalibrationConfig& config, const typename CalibrationRun<M, NK>::State& x0,
-    const typename CalibrationRun<M, NK>::Filter::Covariance& p0, const LoopData& data,
-    const typename CalibrationRun<M, NK>::State* truth, const std::function<void(double)>& progress,
-    const LoopHooks<M>& input, Trajectory<M, NK>* along = nullptr, bool keep_motion = false) {
-  using Run = CalibrationRun<M, NK>;
+template <int M, int NK, int NI>
+CalibrationRun<M, NK, NI> run_pass(
+    const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
+    const typename CalibrationRun<M, NK, NI>::State* truth,
+    const std::function<void(double)>& progress, const LoopHooks<M>& input,
+    Trajectory<M, NK, NI>* along = nullptr, bool keep_motion = false) {
+  using Run = CalibrationRun<M, NK, NI>;
   using Filter = typename Run::Filter;
   Run run;
   if (truth != nullptr) run.truth = *truth;
@@ -126,7 +127,7 @@ CalibrationRun<M, NK> run_pass(
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
-  firmware::CalibrationLoop<double, M, NK> loop(filter, *imu, markers, lc, &sink);
+  firmware::CalibrationLoop<double, M, NK, NI> loop(filter, *imu, markers, lc, &sink);
   if (relabeler != nullptr) loop.set_identifier(&markers);
 
   const std::size_t report_every = data.imu_samples() / 100 + 1;
@@ -152,14 +153,14 @@ CalibrationRun<M, NK> run_pass(
 // its frames, the calibration held at the pass's final estimate, as the pass held it): each
 // frame's linearisation point then rests on every frame, not on those before it, and holds its
 // own frame's noise no more than any other's.
-template <int M, int NK>
-void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& out) {
-  using State = typename CalibrationRun<M, NK>::State;
-  constexpr int D = CalibrationRun<M, NK>::Filter::kMotionDim;
+template <int M, int NK, int NI>
+void smoothed_trajectory(const CalibrationRun<M, NK, NI>& track, Trajectory<M, NK, NI>& out) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
+  constexpr int D = CalibrationRun<M, NK, NI>::Filter::kMotionDim;
   using MotionMatrix = Eigen::Matrix<double, D, D>;
   const std::size_t n = track.motion ? std::min(track.history.size(), track.motion->size()) : 0;
   if (n == 0) return;
-  const RecordStore<MotionRow<typename CalibrationRun<M, NK>::Filter>>& motion = *track.motion;
+  const RecordStore<MotionRow<typename CalibrationRun<M, NK, NI>::Filter>>& motion = *track.motion;
   // Backwards over the frames, reading each row and motion step once: what step k needs of k + 1
   // is carried over from the step before.
   const State final_estimate = track.history[n - 1].state;
@@ -173,12 +174,12 @@ void smoothed_trajectory(const CalibrationRun<M, NK>& track, Trajectory<M, NK>& 
     s.imu = final_estimate.imu;
     return s;
   };
-  HistoryRow<typename CalibrationRun<M, NK>::Filter> next_row = track.history[n - 1];
-  MotionRow<typename CalibrationRun<M, NK>::Filter> next = motion[n - 1], row_motion;
+  HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> next_row = track.history[n - 1];
+  MotionRow<typename CalibrationRun<M, NK, NI>::Filter> next = motion[n - 1], row_motion;
   State next_smoothed = final_estimate;
   out.set(n - 1, held(final_estimate), next_row.t_ns);
   for (std::size_t k = n - 1; k-- > 0;) {
-    const HistoryRow<typename CalibrationRun<M, NK>::Filter> row = track.history[k];
+    const HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> row = track.history[k];
     row_motion = motion[k];
     State smoothed = row.state;
     // A row that followed no update (the final one) says nothing new about the one before it.
@@ -235,13 +236,13 @@ LoopData first_stretch(const LoopData& data) {
 
 // The prior's covariance with the calibration block replaced by a pass's (and no correlation
 // between the two blocks): a pass from it holds the calibration near that pass's estimate.
-template <int M, int NK>
-typename CalibrationRun<M, NK>::Filter::Covariance calibration_held(
-    const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-    const CalibrationRun<M, NK>& pass) {
-  using State = typename CalibrationRun<M, NK>::State;
+template <int M, int NK, int NI>
+typename CalibrationRun<M, NK, NI>::Filter::Covariance calibration_held(
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+    const CalibrationRun<M, NK, NI>& pass) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
-  typename CalibrationRun<M, NK>::Filter::Covariance p = p0;
+  typename CalibrationRun<M, NK, NI>::Filter::Covariance p = p0;
   p.template block<L, State::kDim>(B, 0).setZero();
   p.template block<State::kDim, L>(0, B).setZero();
   p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
@@ -252,11 +253,11 @@ typename CalibrationRun<M, NK>::Filter::Covariance calibration_held(
 // calibration (estimate and covariance) and the prior's IMU guess, which pins the rig's distance
 // from the mirror, its tilt and their rates within a fraction of a second, then integrated back to
 // the first IMU sample. False (x unchanged) if the stretch has too few frames or the run fails.
-template <int M, int NK>
-bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK>& pass,
-                    const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                    const LoopData& data, typename CalibrationRun<M, NK>::State& x) {
-  using State = typename CalibrationRun<M, NK>::State;
+template <int M, int NK, int NI>
+bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK, NI>& pass,
+                    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                    const LoopData& data, typename CalibrationRun<M, NK, NI>::State& x) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   const LoopData stretch = first_stretch<M>(data);
   if (stretch.imu.size() < 2) return false;
   State start = pass.history.back().state;
@@ -265,8 +266,8 @@ bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK>
   start.q_n_b = x.q_n_b;
   start.b_a = x.b_a;
   start.b_g = x.b_g;
-  const CalibrationRun<M, NK> fit = run_pass<M, NK>(
-      config, start, calibration_held<M, NK>(p0, pass), stretch, nullptr, {}, LoopHooks<M>{});
+  const CalibrationRun<M, NK, NI> fit = run_pass<M, NK, NI>(
+      config, start, calibration_held<M, NK, NI>(p0, pass), stretch, nullptr, {}, LoopHooks<M>{});
   if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
   State back = fit.history.back().state;
   for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
@@ -287,11 +288,11 @@ std::uint64_t markers_in(const LoopData& data) {
 
 // For the self-check: the calibration state the final estimate lies furthest from its prior guess,
 // in the prior's sigmas (rotations as the error vector, R = R_guess Exp(e)).
-template <int M, int NK>
-void record_prior_offset(const typename CalibrationRun<M, NK>::State& x0,
-                         const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                         CalibrationRun<M, NK>& run) {
-  using State = typename CalibrationRun<M, NK>::State;
+template <int M, int NK, int NI>
+void record_prior_offset(const typename CalibrationRun<M, NK, NI>::State& x0,
+                         const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                         CalibrationRun<M, NK, NI>& run) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const auto d = run.history.back().state.template boxminus_block<B, L>(x0);
   CalibrationResult& r = run.result;
@@ -306,9 +307,10 @@ void record_prior_offset(const typename CalibrationRun<M, NK>::State& x0,
 
 // How far a refinement step moved the calibration from the estimate it started at, in the step's
 // own sigmas (Mahalanobis distance under its covariance): the self-check's convergence test.
-template <int M, int NK>
-double step_sigmas(const CalibrationRun<M, NK>& after, const CalibrationRun<M, NK>& before) {
-  using State = typename CalibrationRun<M, NK>::State;
+template <int M, int NK, int NI>
+double step_sigmas(const CalibrationRun<M, NK, NI>& after,
+                   const CalibrationRun<M, NK, NI>& before) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   const Eigen::Matrix<double, L, 1> d =
       after.history.back().state.template boxminus_block<B, L>(before.history.back().state);
@@ -319,12 +321,12 @@ double step_sigmas(const CalibrationRun<M, NK>& after, const CalibrationRun<M, N
 // The start of the pass after run: the calibration parameters at its estimate, and the IMU's start.
 // noise_scale: the pixel noise of run's pass over the true one (kAnnealedPixelNoise after a
 // restart), whose square its covariance is larger than what the data hold.
-template <int M, int NK>
-void carry_estimate(const CalibrationConfig& config, const CalibrationRun<M, NK>& run,
-                    const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                    const LoopData& data, typename CalibrationRun<M, NK>::State& start,
+template <int M, int NK, int NI>
+void carry_estimate(const CalibrationConfig& config, const CalibrationRun<M, NK, NI>& run,
+                    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                    const LoopData& data, typename CalibrationRun<M, NK, NI>::State& start,
                     double noise_scale = 1.0) {
-  using State = typename CalibrationRun<M, NK>::State;
+  using State = typename CalibrationRun<M, NK, NI>::State;
   // The next pass starts the calibration parameters at this pass's estimate, with the prior's
   // covariance: the data are linearised about a far better guess (see run.hpp). Only where
   // the prior no longer weighs in, though: a prior as informative as the data (stage 1's result
@@ -343,25 +345,31 @@ void carry_estimate(const CalibrationConfig& config, const CalibrationRun<M, NK>
     if (prior_negligible(State::kPi + 3 * m, 3))
       start.markers.template segment<3>(3 * m) = est.markers.template segment<3>(3 * m);
   if (NK > 0 && prior_negligible(State::kK, NK)) start.intrinsics = est.intrinsics;
+  // The IMU's intrinsics one by one: the motion leaves some of them weak.
+  if constexpr (NI > 0) {
+    Eigen::Matrix<double, NI, 1> d = est.template boxminus_block<State::kImu, NI>(start);
+    for (int j = 0; j < NI; ++j)
+      if (!prior_negligible(State::kImu + j, 1)) d(j) = 0.0;
+    start.template boxplus_block<State::kImu, NI>(d);
+  }
   // And the IMU's start, which every pass otherwise begins from the prior's guess (10 cm and
   // 5 deg off for a user's hand-held start): the frames of the first seconds would pull the
   // calibration towards that guess again.
-  imu_start_from<M, NK>(config, run, p0, data, start);
+  imu_start_from<M, NK, NI>(config, run, p0, data, start);
 }
 
 // The free passes: passes.min of them, and more while the last gated too many (Passes); each
 // after the first starts where the one before ended (carry_estimate), and so would the next.
-template <int M, int NK>
-CalibrationRun<M, NK> free_passes(const CalibrationConfig& config,
-                                  const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                                  const LoopData& data,
-                                  const typename CalibrationRun<M, NK>::State* truth,
-                                  const std::function<void(double)>& progress,
-                                  const std::function<LoopHooks<M>(int pass)>& hooks, Passes passes,
-                                  typename CalibrationRun<M, NK>::State& start) {
-  const typename CalibrationRun<M, NK>::State guess = start;
-  CalibrationRun<M, NK> run;
-  HistoryRow<typename CalibrationRun<M, NK>::Filter> first_frame;
+template <int M, int NK, int NI>
+CalibrationRun<M, NK, NI> free_passes(
+    const CalibrationConfig& config,
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
+    const typename CalibrationRun<M, NK, NI>::State* truth,
+    const std::function<void(double)>& progress, const std::function<LoopHooks<M>(int pass)>& hooks,
+    Passes passes, typename CalibrationRun<M, NK, NI>::State& start) {
+  const typename CalibrationRun<M, NK, NI>::State guess = start;
+  CalibrationRun<M, NK, NI> run;
+  HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> first_frame;
   int restarted = 0;
   for (int pass = 0; pass < passes.max; ++pass) {
     const bool after_restart = restarted > 0 && restarted == pass;  // wants the true noise next
@@ -378,14 +386,14 @@ CalibrationRun<M, NK> free_passes(const CalibrationConfig& config,
       pass_config.pixel_sigma *= kAnnealedPixelNoise;
       restarted = pass + 1;
     }
-    run = run_pass<M, NK>(pass_config, start, p0, data, truth, pass_progress,
-                          hooks ? hooks(pass) : LoopHooks<M>{});
+    run = run_pass<M, NK, NI>(pass_config, start, p0, data, truth, pass_progress,
+                              hooks ? hooks(pass) : LoopHooks<M>{});
     run.result.passes = pass + 1;
     run.result.restarted_pass = restarted;
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();
     run.first_frame = first_frame;
     if (run.history.empty()) break;
-    carry_estimate<M, NK>(config, run, p0, data, start, restart ? kAnnealedPixelNoise : 1.0);
+    carry_estimate<M, NK, NI>(config, run, p0, data, start, restart ? kAnnealedPixelNoise : 1.0);
   }
   return run;
 }
@@ -400,15 +408,15 @@ CalibrationRun<M, NK> free_passes(const CalibrationConfig& config,
 // covariance holds information the data do not (random family: sigmas down to a third of the
 // linearised one's) and their estimate lies further from the truth than the data allow. How
 // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
-template <int M, int NK>
-void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK>::State& x0,
-            const typename CalibrationRun<M, NK>::Filter::Covariance& p0, const LoopData& data,
-            const typename CalibrationRun<M, NK>::State* truth,
+template <int M, int NK, int NI>
+void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
+            const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
+            const typename CalibrationRun<M, NK, NI>::State* truth,
             const std::function<LoopHooks<M>(int pass)>& hooks,
-            typename CalibrationRun<M, NK>::State& start, CalibrationRun<M, NK>& run) {
-  using State = typename CalibrationRun<M, NK>::State;
+            typename CalibrationRun<M, NK, NI>::State& start, CalibrationRun<M, NK, NI>& run) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin;
-  const typename CalibrationRun<M, NK>::Filter::Covariance own = run.covariance;
+  const typename CalibrationRun<M, NK, NI>::Filter::Covariance own = run.covariance;
   const int free_passes = run.result.passes;
   // Their markers come from where the passes' did (rendered frames through detection with
   // sim --frames): hooks numbered on from the passes'.
@@ -422,9 +430,9 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     from.q_n_b = start.q_n_b;
     // The two runs a step makes live on the heap: on the stack they took 80 KB at 6 markers with
     // the lens estimated. (A new-expression builds each in place from run_pass's result.)
-    const std::unique_ptr<const CalibrationRun<M, NK>> track(
-        new CalibrationRun<M, NK>(run_pass<M, NK>(c, from, calibration_held<M, NK>(p0, run), data,
-                                                  nullptr, {}, next_hooks(), nullptr, true)));
+    const std::unique_ptr<const CalibrationRun<M, NK, NI>> track(new CalibrationRun<M, NK, NI>(
+        run_pass<M, NK, NI>(c, from, calibration_held<M, NK, NI>(p0, run), data, nullptr, {},
+                            next_hooks(), nullptr, true)));
     // Each frame is linearised at the track smoothed over the whole pass, never at the track's
     // estimate after that frame's update: an estimate that holds the frame's own noise moves
     // the linearisation with that noise, and where the rig's motion leaves a direction weak
@@ -435,16 +443,16 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     // rigs, runs beyond 4 sigma and the consistent runs' marker RMS over the data's limit:
     // linearised after each update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05;
     // smoothed 3 and 0.96 (along the true motion, a diagnostic: 3 and 0.97).
-    Trajectory<M, NK> trajectory;
-    smoothed_trajectory<M, NK>(*track, trajectory);
+    Trajectory<M, NK, NI> trajectory;
+    smoothed_trajectory<M, NK, NI>(*track, trajectory);
     // From the prior's guesses of the calibration (the data count once), and the IMU start the
     // trajectory has.
     State prior = x0;
     prior.p = from.p;
     prior.v = from.v;
     prior.q_n_b = from.q_n_b;
-    const std::unique_ptr<CalibrationRun<M, NK>> refined(new CalibrationRun<M, NK>(
-        run_pass<M, NK>(c, prior, p0, data, truth, {}, next_hooks(), &trajectory)));
+    const std::unique_ptr<CalibrationRun<M, NK, NI>> refined(new CalibrationRun<M, NK, NI>(
+        run_pass<M, NK, NI>(c, prior, p0, data, truth, {}, next_hooks(), &trajectory)));
     // A replay that did not meet the same frames (a source that ran dry) refines nothing.
     if (frames_met(*refined) != frames_met(run) || frames_met(*track) != frames_met(run) ||
         refined->filter_counters.failures > 0)
@@ -452,12 +460,12 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
     // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
     if (suspect(refined->result) && !suspect(run.result)) return false;
-    refined->result.refinement_step_sigmas = step_sigmas<M, NK>(*refined, run);
+    refined->result.refinement_step_sigmas = step_sigmas<M, NK, NI>(*refined, run);
     refined->first_frame = run.first_frame;
     refined->result.passes = free_passes;
     refined->result.restarted_pass = run.result.restarted_pass;
     run = std::move(*refined);
-    imu_start_from<M, NK>(config, run, p0, data, start);
+    imu_start_from<M, NK, NI>(config, run, p0, data, start);
     return true;
   };
   bool taken = true;
@@ -478,22 +486,23 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
 
 }  // namespace
 
-template <int M, int NK>
-CalibrationRun<M, NK> run_loop(const CalibrationConfig& config,
-                               const typename CalibrationRun<M, NK>::State& x0,
-                               const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                               const LoopData& data,
-                               const typename CalibrationRun<M, NK>::State* truth,
-                               const std::function<void(double)>& progress,
-                               const std::function<LoopHooks<M>(int pass)>& hooks, Passes passes) {
-  using State = typename CalibrationRun<M, NK>::State;
+template <int M, int NK, int NI>
+CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
+                                   const typename CalibrationRun<M, NK, NI>::State& x0,
+                                   const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                                   const LoopData& data,
+                                   const typename CalibrationRun<M, NK, NI>::State* truth,
+                                   const std::function<void(double)>& progress,
+                                   const std::function<LoopHooks<M>(int pass)>& hooks,
+                                   Passes passes) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   State start = x0;
-  CalibrationRun<M, NK> run =
-      free_passes<M, NK>(config, p0, data, truth, progress, hooks, passes, start);
+  CalibrationRun<M, NK, NI> run =
+      free_passes<M, NK, NI>(config, p0, data, truth, progress, hooks, passes, start);
   if (passes.refine && !run.history.empty())
-    refine<M, NK>(config, x0, p0, data, truth, hooks, start, run);
+    refine<M, NK, NI>(config, x0, p0, data, truth, hooks, start, run);
   run.result.markers_observed = markers_in(data);
-  if (!run.history.empty()) record_prior_offset<M, NK>(x0, p0, run);
+  if (!run.history.empty()) record_prior_offset<M, NK, NI>(x0, p0, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
     run.prior_sigma.push_back(std::sqrt(p0(i, i)));
   run.pixel_sigma = config.pixel_sigma;
@@ -501,22 +510,24 @@ CalibrationRun<M, NK> run_loop(const CalibrationConfig& config,
   return run;
 }
 
-template <int M, int NK>
-CalibrationRun<M, NK> run_single_pass(const CalibrationConfig& config,
-                                      const typename CalibrationRun<M, NK>::State& x0,
-                                      const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                                      const LoopData& data,
-                                      const typename CalibrationRun<M, NK>::State* truth) {
-  return run_pass<M, NK>(config, x0, p0, data, truth, {}, LoopHooks<M>{});
+template <int M, int NK, int NI>
+CalibrationRun<M, NK, NI> run_single_pass(
+    const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
+    const typename CalibrationRun<M, NK, NI>::State* truth) {
+  return run_pass<M, NK, NI>(config, x0, p0, data, truth, {}, LoopHooks<M>{});
 }
 #define MIRRORCAL_INSTANTIATE_RUN_LOOP_(M) \
-  template MIRRORCAL_RUN_LOOP(M, 0);       \
-  template MIRRORCAL_RUN_LOOP(M, 4);       \
-  template MIRRORCAL_RUN_LOOP(M, 5);       \
-  template MIRRORCAL_RUN_LOOP(M, 8);       \
+  template MIRRORCAL_RUN_LOOP(M, 0, 0);    \
+  template MIRRORCAL_RUN_LOOP(M, 4, 0);    \
+  template MIRRORCAL_RUN_LOOP(M, 5, 0);    \
+  template MIRRORCAL_RUN_LOOP(M, 8, 0);    \
   template MIRRORCAL_RUN_SINGLE_PASS(M);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_INSTANTIATE_RUN_LOOP_)
 #undef MIRRORCAL_INSTANTIATE_RUN_LOOP_
+#define MIRRORCAL_INSTANTIATE_IMU_RUN_LOOP_(M, NI) template MIRRORCAL_RUN_LOOP(M, 0, NI);
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_INSTANTIATE_IMU_RUN_LOOP_)
+#undef MIRRORCAL_INSTANTIATE_IMU_RUN_LOOP_
 
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   sim::CalibrationStart s;

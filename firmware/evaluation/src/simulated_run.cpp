@@ -28,12 +28,12 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
-template <int M>
-CalibrationRun<M, 0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                    const std::function<void(double)>& progress,
-                                    const FrameMode& frames, firmware::LoopProfiler* profiler,
-                                    Passes passes) {
-  using Run = CalibrationRun<M, 0>;
+template <int M, int NI>
+CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                        const std::function<void(double)>& progress,
+                                        const FrameMode& frames, firmware::LoopProfiler* profiler,
+                                        Passes passes) {
+  using Run = CalibrationRun<M, 0, NI>;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
   typename Run::State x0;
@@ -60,7 +60,7 @@ CalibrationRun<M, 0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
   };
   CalibrationConfig config = scenario_config(s);
   if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
-  Run run = run_loop<M, 0>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
+  Run run = run_loop<M, 0, NI>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) {
     run.detection = rendered->report();
@@ -138,7 +138,7 @@ CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint
 }
 
 #define MIRRORCAL_SIMULATED_RUNS_(M)                                                      \
-  template MIRRORCAL_RUN_SIMULATION(M);                                                   \
+  template MIRRORCAL_RUN_SIMULATION(M, 0);                                                \
   template std::vector<double> data_limit_sigmas<M>(const sim::Scenario&, std::uint64_t); \
   template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                   \
   template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                   \
@@ -148,5 +148,8 @@ CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint
   template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_SIMULATED_RUNS_)
 #undef MIRRORCAL_SIMULATED_RUNS_
+#define MIRRORCAL_IMU_SIMULATION_(M, NI) template MIRRORCAL_RUN_SIMULATION(M, NI);
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_IMU_SIMULATION_)
+#undef MIRRORCAL_IMU_SIMULATION_
 
 }  // namespace mirrorcal::evaluation

@@ -38,10 +38,11 @@ struct DetectionReport {
 };
 
 // One calibration of M markers: its final estimate and result, the estimate after every frame
-// (history), and what the loop, the filter and detection met on the way.
-template <int M, int NK>
+// (history), and what the loop, the filter and detection met on the way. NK camera parameters
+// and NI of the IMU's are estimated (MirrorState).
+template <int M, int NK, int NI = 0>
 struct CalibrationRun {
-  using Filter = CalibrationFilter<double, M, NK>;
+  using Filter = CalibrationFilter<double, M, NK, NI>;
   using State = typename Filter::State;
   State truth{};
   // One row per frame, and the final one (last pass); in a temporary file (record_store.hpp).
@@ -176,47 +177,50 @@ struct Passes {
 // history row carries the error and NEES against it. progress(f) is called with the fraction done
 // now and then (an extra pass starts it again from the fraction the passes before it make);
 // hooks(pass), if given, adds a marker source or profiler to a pass.
-template <int M, int NK>
-CalibrationRun<M, NK> run_loop(const CalibrationConfig& config,
-                               const typename CalibrationRun<M, NK>::State& x0,
-                               const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                               const LoopData& data,
-                               const typename CalibrationRun<M, NK>::State* truth,
-                               const std::function<void(double)>& progress = {},
-                               const std::function<LoopHooks<M>(int pass)>& hooks = {},
-                               Passes passes = {});
+template <int M, int NK, int NI = 0>
+CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
+                                   const typename CalibrationRun<M, NK, NI>::State& x0,
+                                   const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                                   const LoopData& data,
+                                   const typename CalibrationRun<M, NK, NI>::State* truth,
+                                   const std::function<void(double)>& progress = {},
+                                   const std::function<LoopHooks<M>(int pass)>& hooks = {},
+                                   Passes passes = {});
 
 // One pass of the loop over the data from (x0, p0), nothing more: no further pass, no refinement
 // (what a filter linearised at the truth ends with: evaluation's data_limit_sigmas).
-template <int M, int NK>
-CalibrationRun<M, NK> run_single_pass(const CalibrationConfig& config,
-                                      const typename CalibrationRun<M, NK>::State& x0,
-                                      const typename CalibrationRun<M, NK>::Filter::Covariance& p0,
-                                      const LoopData& data,
-                                      const typename CalibrationRun<M, NK>::State* truth);
+template <int M, int NK, int NI = 0>
+CalibrationRun<M, NK, NI> run_single_pass(
+    const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
+    const typename CalibrationRun<M, NK, NI>::State* truth);
 // The filters the product instantiates for each built M (MIRRORCAL_FOR_EACH_MARKER_COUNT): stage 1
 // (NK = 0), stage 2 (NK = 5), stage 2 with the skew held at the configured value (NK = 4: Kalibr
 // and OpenVINS have no slot for skew), and stage 2 with the lens's coefficients too, skew held
 // (NK = 8, estimate_distortion).
-#define MIRRORCAL_RUN_LOOP(M, NK)                                              \
-  CalibrationRun<M, NK> run_loop<M, NK>(                                       \
-      const CalibrationConfig&, const CalibrationRun<M, NK>::State&,           \
-      const CalibrationRun<M, NK>::Filter::Covariance&, const LoopData&,       \
-      const CalibrationRun<M, NK>::State*, const std::function<void(double)>&, \
+#define MIRRORCAL_RUN_LOOP(M, NK, NI)                                              \
+  CalibrationRun<M, NK, NI> run_loop<M, NK, NI>(                                   \
+      const CalibrationConfig&, const CalibrationRun<M, NK, NI>::State&,           \
+      const CalibrationRun<M, NK, NI>::Filter::Covariance&, const LoopData&,       \
+      const CalibrationRun<M, NK, NI>::State*, const std::function<void(double)>&, \
       const std::function<LoopHooks<M>(int)>&, Passes)
 #define MIRRORCAL_RUN_SINGLE_PASS(M)                                                          \
   CalibrationRun<M, 0> run_single_pass<M, 0>(const CalibrationConfig&,                        \
                                              const CalibrationRun<M, 0>::State&,              \
                                              const CalibrationRun<M, 0>::Filter::Covariance&, \
                                              const LoopData&, const CalibrationRun<M, 0>::State*)
-#define MIRRORCAL_EXTERN_RUN_LOOP_(M)       \
-  extern template MIRRORCAL_RUN_LOOP(M, 0); \
-  extern template MIRRORCAL_RUN_LOOP(M, 4); \
-  extern template MIRRORCAL_RUN_LOOP(M, 5); \
-  extern template MIRRORCAL_RUN_LOOP(M, 8); \
+#define MIRRORCAL_EXTERN_RUN_LOOP_(M)          \
+  extern template MIRRORCAL_RUN_LOOP(M, 0, 0); \
+  extern template MIRRORCAL_RUN_LOOP(M, 4, 0); \
+  extern template MIRRORCAL_RUN_LOOP(M, 5, 0); \
+  extern template MIRRORCAL_RUN_LOOP(M, 8, 0); \
   extern template MIRRORCAL_RUN_SINGLE_PASS(M);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_RUN_LOOP_)
 #undef MIRRORCAL_EXTERN_RUN_LOOP_
+// Stage 1 with the IMU's intrinsics, for every built IMU model (MIRRORCAL_IMU_MODELS).
+#define MIRRORCAL_EXTERN_IMU_RUN_LOOP_(M, NI) extern template MIRRORCAL_RUN_LOOP(M, 0, NI);
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_RUN_LOOP_)
+#undef MIRRORCAL_EXTERN_IMU_RUN_LOOP_
 
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
@@ -243,9 +247,9 @@ void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0)
 
 // camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir: added to out, or
 // written.
-template <int M, int NK>
+template <int M, int NK, int NI>
 bool add_run_outputs(files::OutputSet& out, const std::string& dir,
-                     const CalibrationRun<M, NK>& run, std::string& error) {
+                     const CalibrationRun<M, NK, NI>& run, std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
          write_estimates_csv(out, dir + "/estimates.csv", run.history,
@@ -253,8 +257,8 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir,
          (!run.features_found ||
           write_features_csv(out, dir + "/features.csv", run.history, error));
 }
-template <int M, int NK>
-bool write_run_outputs(const std::string& dir, const CalibrationRun<M, NK>& run,
+template <int M, int NK, int NI>
+bool write_run_outputs(const std::string& dir, const CalibrationRun<M, NK, NI>& run,
                        std::string& error) {
   files::OutputSet out;
   return add_run_outputs(out, dir, run, error) && out.commit(error);

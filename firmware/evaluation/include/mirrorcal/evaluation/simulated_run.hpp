@@ -36,12 +36,14 @@ CalibrationConfig scenario_config(const sim::Scenario& s);
 LoopData loop_data(const sim::Scenario& s, const sim::SimData& data);
 
 // Simulates one run (data and initial guess from seed) and calibrates it: simulate, then run_loop.
-// M is the scenario's number of markers (s.truth.markers).
-template <int M>
-CalibrationRun<M, 0> run_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                    const std::function<void(double)>& progress = {},
-                                    const FrameMode& frames = {},
-                                    firmware::LoopProfiler* profiler = nullptr, Passes passes = {});
+// M is the scenario's number of markers (s.truth.markers); NI the IMU's intrinsics estimated (an
+// ImuModel's, from the default ImuIntrinsicsSigma prior about the ideal IMU).
+template <int M, int NI = 0>
+CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                        const std::function<void(double)>& progress = {},
+                                        const FrameMode& frames = {},
+                                        firmware::LoopProfiler* profiler = nullptr,
+                                        Passes passes = {});
 
 // What the data of a simulated run can hold: the 1-sigma of each calibration state (SI, in
 // calibration_params() order) that a filter linearised at the truth ends with, on the same rig,
@@ -68,15 +70,15 @@ CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint
                                                const std::function<void(double)>& progress = {});
 
 // Compiled in simulated_run.cpp for every built M (NK = 4, 5, 8 for the staged ones).
-#define MIRRORCAL_RUN_SIMULATION(M)                                                            \
-  CalibrationRun<M, 0> run_simulation<M>(const sim::Scenario&, std::uint64_t,                  \
-                                         const std::function<void(double)>&, const FrameMode&, \
-                                         firmware::LoopProfiler*, Passes)
+#define MIRRORCAL_RUN_SIMULATION(M, NI)                                                          \
+  CalibrationRun<M, 0, NI> run_simulation<M, NI>(                                                \
+      const sim::Scenario&, std::uint64_t, const std::function<void(double)>&, const FrameMode&, \
+      firmware::LoopProfiler*, Passes)
 #define MIRRORCAL_STAGED_SIMULATION(name, M, NK)                         \
   CalibrationRun<M, NK> name<M, NK>(const sim::Scenario&, std::uint64_t, \
                                     const std::function<void(double)>&)
 #define MIRRORCAL_EXTERN_SIMULATED_RUNS_(M)                                                      \
-  extern template MIRRORCAL_RUN_SIMULATION(M);                                                   \
+  extern template MIRRORCAL_RUN_SIMULATION(M, 0);                                                \
   extern template std::vector<double> data_limit_sigmas<M>(const sim::Scenario&, std::uint64_t); \
   extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                   \
   extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                   \
@@ -86,8 +88,12 @@ CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint
   extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_SIMULATED_RUNS_)
 #undef MIRRORCAL_EXTERN_SIMULATED_RUNS_
+#define MIRRORCAL_EXTERN_IMU_SIMULATION_(M, NI) extern template MIRRORCAL_RUN_SIMULATION(M, NI);
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_SIMULATION_)
+#undef MIRRORCAL_EXTERN_IMU_SIMULATION_
 
-// The calibration state a scenario's truth is (the IMU's motion block left at zero).
+// The calibration state a scenario's truth is, with the IMU's intrinsics (the IMU's motion block
+// left at zero).
 template <class State>
 State truth_state(const sim::Scenario& s) {
   State t;
@@ -100,6 +106,7 @@ State truth_state(const sim::Scenario& s) {
     const auto k = camera_parameters<State::kIntrinsics>(s.truth.intrinsics);
     for (int j = 0; j < State::kIntrinsics; ++j) t.intrinsics(j) = k[static_cast<std::size_t>(j)];
   }
+  if constexpr (State::kImuIntrinsics > 0) t.imu = s.imu_intrinsics;
   return t;
 }
 
