@@ -485,8 +485,8 @@ bool analyse_imu_noise(const std::vector<ImuSample>& samples, const std::string&
 namespace {
 
 std::string figure_cell(const NoiseFigure& f) {
-  if (!f.resolved) return format("<%-9.3e %-9s", f.value, "");
-  return format("%-10.3e +-%-6s", f.value, format("%.2g %%", 100.0 * f.rel_sigma).c_str());
+  if (!f.resolved) return format("<%.3e", f.value);
+  return format("%.3e +-%.2g %%", f.value, 100.0 * f.rel_sigma);
 }
 
 // What a figure's uncertainty means and what it takes to resolve it, in a sentence.
@@ -521,10 +521,10 @@ std::string imu_noise_summary(const ImuNoiseAnalysis& a) {
       "tau %.3g s to %.4g s, a ninth of it)\n\n",
       a.file.c_str(), a.samples, a.rate_hz, duration(a.duration_s).c_str(),
       a.tau_s.empty() ? 0.0 : a.tau_s.front(), a.tau_s.empty() ? 0.0 : a.tau_s.back());
-  s += format("  %-14s %-19s %-19s %-19s\n", "", "noise density N", "bias instability B",
+  s += format("  %-14s %-21s %-21s %s\n", "", "noise density N", "bias instability B",
               "random walk K");
   const auto row = [&](const char* name, const AxisNoise& x) {
-    s += format("  %-14s %-19s %-19s %-19s\n", name, figure_cell(x.white).c_str(),
+    s += format("  %-14s %-21s %-21s %s\n", name, figure_cell(x.white).c_str(),
                 figure_cell(x.instability).c_str(), figure_cell(x.random_walk).c_str());
   };
   for (int axis = 0; axis < kImuAxes; ++axis) {
