@@ -205,7 +205,8 @@ AxisNoise fit_allan_curve(const std::vector<std::size_t>& m, const std::vector<d
   if (!white.empty()) N = white_of(0.0);
   if (walk_resolved) {
     K = walk_of(N);
-    if (!white.empty()) N = white_of(K);
+    // A walk line above the white region's points would leave no white noise: keep the first N.
+    if (!white.empty() && white_of(K) > 0.0) N = white_of(K);
     K = walk_of(N);
   }
   if (!white.empty()) {

@@ -52,7 +52,11 @@ std::string imu_noise_yaml(const ImuNoiseAnalysis& a) {
   // The rate to a hundredth of a hertz: a board's timestamp jitter moves the median step by less.
   sensors.imu_rate_hz = std::round(a.rate_hz * 100.0) / 100.0;
   std::string y = sim::imu_yaml_text(sensors);
-  y += "# Estimated by mirrorcal imu-noise from " + a.file + " (" + std::to_string(a.samples) +
+  // The file's name goes into a comment: a line break in it would end the comment.
+  std::string file = a.file;
+  for (char& c : file)
+    if (c == '\n' || c == '\r') c = '?';
+  y += "# Estimated by mirrorcal imu-noise from " + file + " (" + std::to_string(a.samples) +
        " still samples); the Allan deviations are in allan.csv beside it.\n";
   y += bound_note("accelerometer_noise_density", a.accel.white);
   y += bound_note("accelerometer_random_walk", a.accel.random_walk);
