@@ -33,4 +33,8 @@ ReportPlots report_plots(bool draw) {
   return plots;
 }
 
+AllanPlotter allan_plotter() {
+  return nullptr;
+}
+
 }  // namespace mirrorcal::app

@@ -1,8 +1,10 @@
 // What the host's build of the program has and the board's does not (firmware/evaluation, which
-// the board's program does not link): the sim and montecarlo commands, and report.html's plots.
+// the board's program does not link): the sim and montecarlo commands, report.html's plots and
+// imu-noise's allan.png.
 // host_tools.cpp or board_tools.cpp defines these (MIRRORCAL_HOST_TOOLS).
 #pragma once
 
+#include "mirrorcal/calibration/imu_noise_files.hpp"
 #include "mirrorcal/calibration/report.hpp"
 
 namespace mirrorcal::app {
@@ -14,5 +16,8 @@ int cmd_montecarlo(int argc, char** argv);
 
 // How report.html gets its plots in this build (draw: false for --no-plots).
 ReportPlots report_plots(bool draw = true);
+
+// What draws imu-noise's allan.png in this build (nullptr: none).
+calibration::AllanPlotter allan_plotter();
 
 }  // namespace mirrorcal::app

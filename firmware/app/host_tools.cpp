@@ -1,5 +1,6 @@
 #include "build_tools.hpp"
 
+#include "mirrorcal/evaluation/allan_plot.hpp"
 #include "mirrorcal/evaluation/report_plots.hpp"
 
 namespace mirrorcal::app {
@@ -12,6 +13,10 @@ ReportPlots report_plots(bool draw) {
   plots.draw = draw;
   plots.drawer = draw_report_figures;
   return plots;
+}
+
+AllanPlotter allan_plotter() {
+  return draw_allan_plot;
 }
 
 }  // namespace mirrorcal::app

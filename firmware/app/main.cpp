@@ -15,6 +15,7 @@ int cmd_record(int argc, char** argv);
 int cmd_calibrate(int argc, char** argv);
 int cmd_run(int argc, char** argv);
 int cmd_export(int argc, char** argv);
+int cmd_imu_noise(int argc, char** argv);
 
 const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
@@ -112,6 +113,16 @@ const std::vector<Command>& commands() {
        "              its camera file OUT's stem + _cam0.yaml beside it; ros-camera-info: a ROS\n"
        "              camera_info YAML)\n",
        cmd_export},
+      {"imu-noise",
+       "  imu-noise   an IMU's noise from a still recording, as Kalibr's imu.yaml\n"
+       "              PATH [--out DIR]  (PATH: a recording's folder, whose mav0/imu0/data.csv\n"
+       "              is read, or such a data.csv itself; default --out out/imu-noise)\n"
+       "              (the overlapping Allan deviation of each axis; its white-noise density,\n"
+       "              bias instability and bias random walk with their uncertainties, and how\n"
+       "              long to record for those not resolved; writes imu.yaml, allan.csv and,\n"
+       "              in the host's build, allan.png. The IMU must stay still: a recording\n"
+       "              that moves, is shorter than a minute or drops samples is refused)\n",
+       cmd_imu_noise},
   };
   return table;
 }

@@ -484,7 +484,7 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
   return true;
 }
 
-bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string& error) {
+std::string imu_yaml_text(const SensorInfo& s) {
   std::string imu = "# Kalibr IMU description (continuous-time noise densities)\nrostopic: /imu0\n";
   imu +=
       "accelerometer_noise_density: " + number(s.imu.accel_noise_density) + "  # m/s^2/sqrt(Hz)\n";
@@ -492,6 +492,11 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   imu += "gyroscope_noise_density: " + number(s.imu.gyro_noise_density) + "  # rad/s/sqrt(Hz)\n";
   imu += "gyroscope_random_walk: " + number(s.imu.gyro_random_walk) + "  # rad/s^2/sqrt(Hz)\n";
   imu += "update_rate: " + number(s.imu_rate_hz) + "  # Hz\n";
+  return imu;
+}
+
+bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string& error) {
+  const std::string imu = imu_yaml_text(s);
   const auto k = as_array(s.intrinsics);
   std::string cam = "# Kalibr camera description (pixels: origin at the top-left pixel's centre)\n";
   cam += "cam0:\n  camera_model: pinhole\n  intrinsics: " + list(k.data(), 4) + "\n";

@@ -518,7 +518,8 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
 // --help (or -h), anywhere among a command's arguments, prints that command's usage and exits 0.
 TEST(Cli, EveryCommandPrintsItsUsageOnHelp) {
   TempDir dir("cli-help");
-  for (const std::string command : {"sim", "montecarlo", "record", "calibrate", "run", "export"}) {
+  for (const std::string command :
+       {"sim", "montecarlo", "record", "calibrate", "run", "export", "imu-noise"}) {
     for (const std::string args : {" --help", " -h", " somewhere --bogus --help"}) {
       SCOPED_TRACE(command + args);
       const Result r = run_mirrorcal(command + args, dir.path);

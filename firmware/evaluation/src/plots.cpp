@@ -1,7 +1,10 @@
 #include "mirrorcal/evaluation/plots.hpp"
 
+#include <stdlib.h>
+
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 
 #include "mirrorcal/evaluation/process.hpp"
@@ -26,6 +29,16 @@ std::vector<PlotGroup> plot_groups(const std::vector<ParamInfo>& params) {
   for (auto& x : g)
     if (!x.params.empty()) used.push_back(x);
   return used;
+}
+
+PlotFolder::PlotFolder(const std::string& prefix) {
+  std::string pattern = (std::filesystem::temp_directory_path() / (prefix + "-XXXXXX")).string();
+  if (mkdtemp(pattern.data()) != nullptr) path = pattern;
+}
+
+PlotFolder::~PlotFolder() {
+  std::error_code ec;
+  if (!path.empty()) std::filesystem::remove_all(path, ec);
 }
 
 std::string gnuplot_quoted(const std::string& text) {

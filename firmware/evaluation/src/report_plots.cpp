@@ -1,10 +1,7 @@
 #include "mirrorcal/evaluation/report_plots.hpp"
 
-#include <stdlib.h>
-
 #include <algorithm>
 #include <cmath>
-#include <filesystem>
 #include <fstream>
 
 #include "mirrorcal/calibration/statistics.hpp"
@@ -22,22 +19,6 @@ constexpr double kDeg = 180.0 / M_PI;
 int marker_count(const ReportData& d) {
   return static_cast<int>(d.result.markers.size());
 }
-
-// A temporary folder for the plots, removed with it.
-struct PlotFolder {
-  PlotFolder() {
-    std::string pattern =
-        (std::filesystem::temp_directory_path() / "mirrorcal-report-XXXXXX").string();
-    if (mkdtemp(pattern.data()) != nullptr) path = pattern;
-  }
-  ~PlotFolder() {
-    std::error_code ec;
-    if (!path.empty()) std::filesystem::remove_all(path, ec);
-  }
-  PlotFolder(const PlotFolder&) = delete;
-  PlotFolder& operator=(const PlotFolder&) = delete;
-  std::string path;
-};
 
 struct Figure {
   std::string file, caption;
@@ -237,7 +218,7 @@ std::vector<ReportFigure> draw_report_figures(const ReportData& d, std::string& 
     why = "no frame was calibrated from";
     return drawn;
   }
-  const PlotFolder folder;
+  const PlotFolder folder("mirrorcal-report");
   if (folder.path.empty()) {
     why = "cannot create a temporary folder";
     return drawn;

@@ -236,6 +236,8 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                        const Pinhole<double>& camera, RecordingPriors& out,
                        std::vector<std::string>& notes, std::string& error);
 
+// imu.yaml's text (Kalibr's keys, rostopic /imu0), which parse_imu_yaml reads back.
+std::string imu_yaml_text(const SensorInfo& sensors);
 // imu.yaml and camchain.yaml into dir.
 bool write_sensor_yaml(const std::string& dir, const SensorInfo& sensors, std::string& error);
 // mirrorcal.yaml into dir.

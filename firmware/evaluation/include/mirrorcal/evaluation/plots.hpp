@@ -47,6 +47,15 @@ struct PlotGroup {
 };
 std::vector<PlotGroup> plot_groups(const std::vector<ParamInfo>& params);
 
+// A temporary folder for gnuplot's files, removed with it (path empty if it cannot be created).
+struct PlotFolder {
+  explicit PlotFolder(const std::string& prefix);  // $TMPDIR/<prefix>-XXXXXX
+  ~PlotFolder();
+  PlotFolder(const PlotFolder&) = delete;
+  PlotFolder& operator=(const PlotFolder&) = delete;
+  std::string path;
+};
+
 // text as a gnuplot string: single-quoted, where only a doubled quote is special.
 std::string gnuplot_quoted(const std::string& text);
 
