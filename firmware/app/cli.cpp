@@ -98,6 +98,34 @@ std::string marker_count_not_built(int m) {
          "; rebuild with -DMIRRORCAL_MARKERS=\"" + option + std::to_string(m) + "\"";
 }
 
+bool imu_model_option(const Options& o, ImuModel& model, std::string& error) {
+  const std::string name = o.get("imu-model", to_string(kDefaultImuModel));
+  if (!imu_model_from_string(name, model)) {
+    error = "--imu-model: '" + name +
+            "' is not an IMU model (calibrated, scale-misalignment, scale-misalignment-rotation, "
+            "scale-misalignment-rotation-g-sensitivity)";
+    return false;
+  }
+  if (!imu_model_built(imu_intrinsics_dim(model))) {
+    error = "--imu-model: " + imu_model_not_built(model);
+    return false;
+  }
+  return true;
+}
+
+std::string imu_model_not_built(ImuModel model) {
+  std::string built = "calibrated", option = "calibrated";
+  for (const ImuModel m :
+       {ImuModel::kScaleMisalignment, ImuModel::kRotation, ImuModel::kGSensitivity})
+    if (imu_model_built(imu_intrinsics_dim(m))) {
+      built += std::string(", ") + to_string(m);
+      option += std::string(";") + to_string(m);
+    }
+  return std::string("the IMU model ") + to_string(model) + " is not in this build (it has " +
+         built + "); rebuild with -DMIRRORCAL_IMU_MODELS=\"" + option + ";" + to_string(model) +
+         "\"";
+}
+
 namespace {
 
 // A rolling shutter's line delay: seconds per row, the whole frame read within
@@ -127,7 +155,7 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
   // The paper's rig first: no rebuild gives it another count.
   if (name == "paper" && markers != sim::kPaperMarkers) {
     error = "--markers: the paper scenario has " + std::to_string(sim::kPaperMarkers) +
-            " markers; other counts are for --scenario random";
+            " markers; other counts are for --scenario random or mems";
     return false;
   }
   if (!marker_count_built(int(markers))) {
@@ -135,7 +163,7 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
     return false;
   }
   if (!sim::scenario_by_name(name, seed, s, int(markers))) {
-    error = "unknown scenario '" + name + "' (known: paper, random)";
+    error = "unknown scenario '" + name + "' (known: paper, random, mems)";
     return false;
   }
   // --duration S: a shorter (or longer) stretch of the simulated rig's motion than its minute.

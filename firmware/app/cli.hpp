@@ -71,6 +71,24 @@ std::string markers_note(const sim::Scenario& s);
 // What a count this build does not have gets told: the counts it has and how to add one.
 std::string marker_count_not_built(int m);
 
+// The IMU model the calibration estimates (imu_intrinsics.hpp) when neither --imu-model nor
+// imu.yaml names one.
+constexpr ImuModel kDefaultImuModel = ImuModel::kCalibrated;
+// --imu-model NAME (default kDefaultImuModel), a model this build has.
+bool imu_model_option(const Options& o, ImuModel& model, std::string& error);
+// What a model not built gets told: the models this build has and how to add one.
+std::string imu_model_not_built(ImuModel model);
+
+// Calls f(ImuIntrinsicsCount<NI>{}) for model's NI (marker_counts.hpp); a model not built fails
+// (exit code 2).
+template <class F>
+int with_imu_model_of(ImuModel model, F&& f) {
+  int code = 0;
+  if (!with_imu_model(imu_intrinsics_dim(model), [&](auto ni) { code = f(ni); }))
+    fail(imu_model_not_built(model));
+  return code;
+}
+
 // Calls f(MarkerCount<M>{}) (marker_counts.hpp) for the built M equal to markers and returns its
 // exit code: every command reaches its instantiation for the rig's number of markers through here.
 // A count not built fails, saying which are and how to build another (exit code 2).

@@ -134,11 +134,13 @@ bool check_stage_options(const Options& o, const FrameMode& frames, std::string&
 }  // namespace
 
 int cmd_sim(int argc, char** argv) {
-  std::vector<std::string>
-      with_value = {"scenario",          "seed",    "out",       "format",     "pixel-sigma",
-                    "spot-noise",        "passes",  "timeshift", "distortion", "line-delay",
-                    "filter-line-delay", "markers", "duration"},
-      flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
+  std::vector<std::string> with_value = {"scenario",   "seed",        "out",
+                                         "format",     "pixel-sigma", "imu-model",
+                                         "spot-noise", "passes",      "timeshift",
+                                         "distortion", "line-delay",  "filter-line-delay",
+                                         "markers",    "duration"},
+                           flags = {"no-plots",  "frames",    "intrinsics",
+                                    "hold-skew", "one-stage", "estimate-distortion"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   Options o;
@@ -163,6 +165,12 @@ int cmd_sim(int argc, char** argv) {
   if (!passes_option(o, passes, error)) fail(error);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
+  ImuModel imu_model = kDefaultImuModel;
+  if (!imu_model_option(o, imu_model, error)) fail(error);
+  if (imu_model != ImuModel::kCalibrated && (intrinsics || frames.enabled))
+    fail(std::string("--imu-model ") + to_string(imu_model) +
+         ": the IMU's intrinsics are estimated in stage 1 from listed markers only (without "
+         "--intrinsics and --frames)");
   std::string dir;
   if (!make_out_dir(o, "out/sim", dir, error)) fail(error, 1);
   firmware::SteadyClock clock;  // the simulation's own clock is simulated time
@@ -207,8 +215,12 @@ int cmd_sim(int argc, char** argv) {
                                      : run_two_stage_simulation<M, 5>(s, seed, progress),
                            report, err);
     else
-      written = report_run(run_simulation<M>(s, seed, progress, frames, profiler.get(), passes),
-                           report, err);
+      with_imu_model_of(imu_model, [&](auto imu) {
+        constexpr int NI = decltype(imu)::value;
+        written = report_run(
+            run_simulation<M, NI>(s, seed, progress, frames, profiler.get(), passes), report, err);
+        return 0;
+      });
     if (!written) fail(err, 1);
     return 0;
   });

@@ -21,9 +21,13 @@ const std::vector<Command>& commands() {
   static const std::vector<Command> table = {
       {"sim",
        "  sim         calibrate a simulated rig in front of a mirror\n"
-       "              [--scenario paper|random] [--seed N] [--out DIR] [--no-plots]\n"
+       "              [--scenario paper|random|mems] [--seed N] [--out DIR] [--no-plots]\n"
+       "              (mems: a random rig whose IMU has a MEMS part's scale factors and\n"
+       "              non-orthogonal axes)\n"
        "              [--markers M]  (the random rig's number of markers, a count this build\n"
        "              has; default 3, the paper's rig has 3)\n"
+       "              [--imu-model calibrated|scale-misalignment|...]  (the IMU's intrinsics\n"
+       "              the calibration estimates; docs/estimator.md)\n"
        "              [--timeshift S]  (the camera's stamps S seconds before the IMU's clock:\n"
        "              t_imu = t_cam + S; default 0, the random family draws one in +-30 ms)\n"
        "              [--distortion radtan|equidistant]  (the camera's lens: EuRoC cam0's\n"

@@ -54,9 +54,9 @@ double euclidean_value(const State& x, int j) {
 
 }  // namespace
 
-template <int M, int NK>
-ReportData report_data(const CalibrationRun<M, NK>& run, const std::string& title) {
-  using State = typename CalibrationRun<M, NK>::State;
+template <int M, int NK, int NI>
+ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& title) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
   ReportData d = report_data_without_history(run.result, title);
   d.pixel_sigma = run.pixel_sigma;
@@ -78,7 +78,7 @@ ReportData report_data(const CalibrationRun<M, NK>& run, const std::string& titl
   const State last = run.history.back().state;
   const Eigen::Quaterniond q0 = run.history.front().state.q_n_b;
   for (std::size_t k = 0; k < run.history.size(); ++k) {
-    const HistoryRow<typename CalibrationRun<M, NK>::Filter> row = run.history[k];
+    const HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> row = run.history[k];
     ReportRow out;
     out.t_s = double(row.t_ns) * 1e-9;
     const Eigen::Matrix<double, L, 1> from_last = row.state.template boxminus_block<B, L>(last);
@@ -106,12 +106,18 @@ ReportData report_data(const CalibrationRun<M, NK>& run, const std::string& titl
   return d;
 }
 
-#define MIRRORCAL_REPORT_DATA_(M)                                                         \
-  template ReportData report_data<M, 0>(const CalibrationRun<M, 0>&, const std::string&); \
-  template ReportData report_data<M, 4>(const CalibrationRun<M, 4>&, const std::string&); \
-  template ReportData report_data<M, 5>(const CalibrationRun<M, 5>&, const std::string&); \
-  template ReportData report_data<M, 8>(const CalibrationRun<M, 8>&, const std::string&);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_REPORT_DATA_)
+#define MIRRORCAL_REPORT_DATA_(M, NK, NI) \
+  template ReportData report_data<M, NK, NI>(const CalibrationRun<M, NK, NI>&, const std::string&);
+#define MIRRORCAL_REPORT_DATA_CAMERAS_(M) \
+  MIRRORCAL_REPORT_DATA_(M, 0, 0)         \
+  MIRRORCAL_REPORT_DATA_(M, 4, 0)         \
+  MIRRORCAL_REPORT_DATA_(M, 5, 0)         \
+  MIRRORCAL_REPORT_DATA_(M, 8, 0)
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_REPORT_DATA_CAMERAS_)
+#define MIRRORCAL_REPORT_DATA_IMU_(M, NI) MIRRORCAL_REPORT_DATA_(M, 0, NI)
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_REPORT_DATA_IMU_)
+#undef MIRRORCAL_REPORT_DATA_IMU_
+#undef MIRRORCAL_REPORT_DATA_CAMERAS_
 #undef MIRRORCAL_REPORT_DATA_
 
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title) {
@@ -338,6 +344,39 @@ void add_calibration(std::string& t, const ReportData& d) {
   t += "\n";
 }
 
+// The IMU's intrinsics, each with its sigma against the prior's: one the motion left near its
+// prior is weak (kept near the prior's guess; what the data did not see).
+void add_imu(std::string& t, const ReportData& d) {
+  const ImuResult& imu = d.result.imu;
+  t += format("IMU (model %s", to_string(imu.model));
+  if (!imu.estimated()) {
+    t += ": an ideal IMU assumed, its scale factors and axes taken as exact)\n\n";
+    return;
+  }
+  t += "; its frame is the accelerometer's; measured = T true + bias)\n";
+  t += format("%-19s %14s %12s %12s %12s\n", "intrinsic (T)", "estimate", "1-sigma", "prior sigma",
+              "sigma/prior");
+  const std::vector<std::string> names = imu_intrinsic_names(imu.model);
+  const std::vector<double> values = imu_intrinsic_values(imu);
+  int weak = 0;
+  for (std::size_t j = 0; j < names.size() && j < imu.sigma.size(); ++j) {
+    const double prior = j < imu.prior_sigma.size() ? imu.prior_sigma[j] : 0.0;
+    const double ratio = prior > 0.0 ? imu.sigma[j] / prior : 0.0;
+    const bool is_weak = ratio > kWeakImuIntrinsic;
+    weak += is_weak ? 1 : 0;
+    t += format("%-19s %14.6f %12.6f %12.6f %12.3f%s\n", names[j].c_str(), values[j], imu.sigma[j],
+                prior, ratio, is_weak ? "  weak" : "");
+  }
+  t += "(scale factors as T(i, i) - 1; the axes' angles in rad; kalibr_imu_chain.yaml has them as "
+       "OpenVINS reads them)\n";
+  if (weak > 0)
+    t += format(
+        "%d of %zu intrinsics weak (sigma above %.0f %% of the prior's): the motion did not "
+        "excite them and they stay near the prior's guess\n",
+        weak, names.size(), 100.0 * kWeakImuIntrinsic);
+  t += "\n";
+}
+
 void add_residual_row(std::string& t, const char* label, const SampleStats& s, double sigma) {
   t += format("%-10s %8zu %9.3f %9.3f %9.3f %9.3f   %9.3f %9.3f %9.3f %9.3f\n", label, s.n, s.mean,
               s.median, s.std, s.max, s.mean / sigma, s.median / sigma, s.std / sigma,
@@ -501,6 +540,7 @@ std::string report_text(const ReportData& d) {
   std::string t = "mirrorcal calibration report: " + d.title + "\n\n";
   add_verdict(t, d);
   add_calibration(t, d);
+  add_imu(t, d);
   if (d.rows.empty()) {
     t += "No frame was calibrated from: no residuals, innovations or excitation to report.\n";
     return t;

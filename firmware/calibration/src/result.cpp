@@ -52,13 +52,22 @@ std::vector<ParamInfo> calibration_params(int markers, int intrinsics, Distortio
   return p;
 }
 
-namespace {
-
-void write_matrix_rows(std::FILE* f, const Eigen::Matrix4d& t, const char* indent) {
-  for (int i = 0; i < 4; ++i)
-    std::fprintf(f, "%s- [%.12f, %.12f, %.12f, %.12f]\n", indent, t(i, 0), t(i, 1), t(i, 2),
-                 t(i, 3));
+void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent) {
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    std::fprintf(f, "%s- [", indent);
+    for (Eigen::Index j = 0; j < m.cols(); ++j)
+      std::fprintf(f, "%s%.12f", j > 0 ? ", " : "", m(i, j));
+    std::fprintf(f, "]\n");
+  }
 }
+
+// First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
+// refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
+void write_yaml_header(std::FILE* o, const char* what) {
+  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n", what);
+}
+
+namespace {
 
 // The camera's pose in the IMU frame: maps camera coordinates into the IMU's.
 Eigen::Matrix4d t_imu_cam(const CalibrationResult& r) {
@@ -74,12 +83,6 @@ Eigen::Matrix4d t_cam_imu(const CalibrationResult& r) {
   t.topLeftCorner<3, 3>() = r_c_b;
   t.topRightCorner<3, 1>() = -r_c_b * r.p_b_c;
   return t;
-}
-
-// First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
-// refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
-void write_yaml_header(std::FILE* o, const char* what) {
-  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n", what);
 }
 
 // Skew is where a tool has no slot for it: said in a comment rather than silently dropped.
@@ -407,6 +410,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                "(--from) that said false: do not trust it\n",
                consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit,
                kLooseMarkerScale);
+  write_imu_result_yaml(o, r.imu);
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
@@ -600,18 +604,22 @@ bool write_features_csv(files::OutputSet& out, const std::string& path,
 }
 
 // For every filter the product instantiates (run.hpp).
-#define MIRRORCAL_RESULT_CSV_(M, NK)                                                   \
-  template bool write_features_csv(                                                    \
-      files::OutputSet&, const std::string&,                                           \
-      const RecordStore<HistoryRow<CalibrationFilter<double, M, NK>>>&, std::string&); \
-  template bool write_estimates_csv(                                                   \
-      files::OutputSet&, const std::string&,                                           \
-      const RecordStore<HistoryRow<CalibrationFilter<double, M, NK>>>&, Distortion, std::string&);
-#define MIRRORCAL_RESULT_CSVS_(M) \
-  MIRRORCAL_RESULT_CSV_(M, 0)     \
-  MIRRORCAL_RESULT_CSV_(M, 4) MIRRORCAL_RESULT_CSV_(M, 5) MIRRORCAL_RESULT_CSV_(M, 8)
+#define MIRRORCAL_RESULT_CSV_(M, NK, NI)                                                   \
+  template bool write_features_csv(                                                        \
+      files::OutputSet&, const std::string&,                                               \
+      const RecordStore<HistoryRow<CalibrationFilter<double, M, NK, NI>>>&, std::string&); \
+  template bool write_estimates_csv(                                                       \
+      files::OutputSet&, const std::string&,                                               \
+      const RecordStore<HistoryRow<CalibrationFilter<double, M, NK, NI>>>&, Distortion,    \
+      std::string&);
+#define MIRRORCAL_RESULT_CSVS_(M)                                                  \
+  MIRRORCAL_RESULT_CSV_(M, 0, 0)                                                   \
+  MIRRORCAL_RESULT_CSV_(M, 4, 0) MIRRORCAL_RESULT_CSV_(M, 5, 0) MIRRORCAL_RESULT_CSV_(M, 8, 0)
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_RESULT_CSVS_)
 #undef MIRRORCAL_RESULT_CSVS_
+#define MIRRORCAL_RESULT_IMU_CSV_(M, NI) MIRRORCAL_RESULT_CSV_(M, 0, NI)
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_RESULT_IMU_CSV_)
+#undef MIRRORCAL_RESULT_IMU_CSV_
 #undef MIRRORCAL_RESULT_CSV_
 
 }  // namespace mirrorcal::calibration

@@ -505,6 +505,9 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
   if (!run.history.empty()) record_prior_offset<M, NK, NI>(x0, p0, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
     run.prior_sigma.push_back(std::sqrt(p0(i, i)));
+  for (int i = State::kImu; i < State::kImu + NI; ++i)
+    run.result.imu.prior_sigma.push_back(std::sqrt(p0(i, i)));
+  run.result.imu.rate_hz = 1e9 / double(data.imu_period_ns);
   run.pixel_sigma = config.pixel_sigma;
   run.gate_after_frames = config.gate_after_frames;
   return run;

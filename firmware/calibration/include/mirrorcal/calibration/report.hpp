@@ -81,8 +81,8 @@ struct ReportData {
   std::vector<std::string> input_warnings;
 };
 
-template <int M, int NK>
-ReportData report_data(const CalibrationRun<M, NK>& run, const std::string& title);
+template <int M, int NK, int NI>
+ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& title);
 
 // A sample visited value by value: sample(f) calls f with each of its values (not NaN), in the
 // same order each time it is called (one pass over a file-backed store, or over a vector).
@@ -138,8 +138,8 @@ ReportData report_data_without_history(const CalibrationResult& r, const std::st
 
 // camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv (add_run_outputs) and the report of
 // a run, in dir, written as one set; input_warnings: ReportData's.
-template <int M, int NK>
-bool write_run_outputs_and_report(const std::string& dir, const CalibrationRun<M, NK>& run,
+template <int M, int NK, int NI>
+bool write_run_outputs_and_report(const std::string& dir, const CalibrationRun<M, NK, NI>& run,
                                   const std::string& title, bool from_earlier,
                                   const ReportPlots& plots, std::string& error,
                                   const std::vector<std::string>& input_warnings = {}) {

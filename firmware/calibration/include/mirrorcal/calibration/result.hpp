@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include "mirrorcal/calibration/history.hpp"
+#include "mirrorcal/calibration/imu_result.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
@@ -55,6 +56,8 @@ struct CalibrationResult {
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
+  // The IMU: its model and, when estimated, its intrinsics (outside the calibration block).
+  ImuResult imu;
 
   // Where sigma's and covariance's groups lie.
   CalibrationLayout layout() const {
@@ -176,8 +179,21 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.markers_gated = f.counters().markers_gated;
   r.markers_invalid = f.counters().markers_invalid;
   r.filter_failures = f.counters().failures;
+  r.imu.model = State::kImuModel;
+  r.imu.noise = f.config().imu;
+  if constexpr (State::kImuIntrinsics > 0) {
+    r.imu.intrinsics = x.imu.template cast<double>();
+    for (int j = State::kImu; j < State::kImu + State::kImuIntrinsics; ++j)
+      r.imu.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
+  }
   return r;
 }
+
+// The YAML files' first lines, which PyYAML, OpenCV's FileStorage and yaml-cpp all read (a %YAML
+// directive, a document start and a comment saying what the file is), and a matrix as a list of
+// its rows (as Kalibr writes T_cam_imu and OpenVINS reads it).
+void write_yaml_header(std::FILE* o, const char* what);
+void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent);
 
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's. Read unmodified
 // by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike.

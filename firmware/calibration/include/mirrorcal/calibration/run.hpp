@@ -252,6 +252,8 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir,
                      const CalibrationRun<M, NK, NI>& run, std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
+         (!run.result.imu.estimated() ||
+          write_openvins_imu_chain(out, dir + "/kalibr_imu_chain.yaml", run.result.imu, error)) &&
          write_estimates_csv(out, dir + "/estimates.csv", run.history,
                              run.result.intrinsics.distortion, error) &&
          (!run.features_found ||
