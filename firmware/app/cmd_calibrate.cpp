@@ -17,9 +17,12 @@ using namespace calibration;
 
 namespace {
 
-template <int M, int NK>
+template <int M, int NK, int NI = 0>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
               const sim::CalibrationStart* from) {
+  if constexpr (NI > 0)
+    std::printf("mirrorcal calibrate: the IMU's intrinsics estimated too (model %s)\n",
+                to_string(imu_model_of_dim(NI)));
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
               std::size_t(rec.stats.imu_samples), rec.sensors.imu_rate_hz,
               std::size_t(rec.stats.frames),
@@ -35,9 +38,9 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
                  "the calibration will hardly have converged\n",
                  std::size_t(rec.stats.frames), static_cast<unsigned long long>(burn_in));
   std::string err;
-  CalibrationRun<M, NK> run;
+  CalibrationRun<M, NK, NI> run;
   const auto t0 = std::chrono::steady_clock::now();
-  if (!calibrate_recording<M, NK>(
+  if (!calibrate_recording<M, NK, NI>(
           rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -50,7 +53,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const Eigen::Vector3d angles_first = display_angles(first.state.q_b_c);
   std::printf("\n%-17s %-5s %20s %20s%s\n", "param", "unit", "after 1st frame +-1s",
               "final +-1sigma", rec.has_truth ? "  error/sig (truth.yaml)" : "");
-  constexpr CalibrationLayout kLayout = CalibrationRun<M, NK>::State::kCalibration;
+  constexpr CalibrationLayout kLayout = CalibrationRun<M, NK, NI>::State::kCalibration;
   for (std::size_t j = 0; j < r.params.size(); ++j) {
     const ParamInfo& p = r.params[j];
     const int i = int(j) - kLayout[p.group].begin;  // within its group
@@ -121,8 +124,9 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv%s\n",
-      out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "");
+      "report.html, residuals.csv%s%s\n",
+      out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "",
+      NI > 0 ? ", kalibr_imu_chain.yaml (the IMU's intrinsics, as OpenVINS reads them)" : "");
   return 0;
 }
 
@@ -131,7 +135,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
 int cmd_calibrate(int argc, char** argv) {
   Options o;
   std::string err;
-  if (!parse(argc, argv, 2, {"out", "from"},
+  if (!parse(argc, argv, 2, {"out", "from", "imu-model"},
              {"intrinsics", "hold-skew", "from-same-data", "from-images"}, o, err, 1))
     fail(err);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
@@ -192,10 +196,32 @@ int cmd_calibrate(int argc, char** argv) {
           in.c_str());
     // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
     // the lens's coefficients too, skew held.
+    // The IMU model: --imu-model, else imu.yaml's imu_model, else the default.
+    ImuModel imu_model = kDefaultImuModel;
+    if (o.flag("imu-model")) {
+      if (!imu_model_option(o, imu_model, err)) fail(err);
+    } else if (rec.sensors.imu_model) {
+      imu_model = *rec.sensors.imu_model;
+      if (!imu_model_built(imu_intrinsics_dim(imu_model)))
+        fail(in + "/imu.yaml: imu_model: " + imu_model_not_built(imu_model));
+    }
+    if (imu_model != ImuModel::kCalibrated && rec.sensors.imu_tolerances_defaulted)
+      std::fprintf(stderr,
+                   "mirrorcal: note: %s/imu.yaml: not every tolerance of the IMU's intrinsics is "
+                   "given; using 1-sigma defaults that cover common MEMS parts (scale 2 %%, "
+                   "cross-axis 1.2 %%, g-sensitivity 5e-4 (rad/s)/(m/s^2)) for those missing "
+                   "(docs/recordings.md, imu.yaml)\n",
+                   in.c_str());
+    if (imu_model != ImuModel::kCalibrated && intrinsics)
+      fail(std::string("the IMU model ") + to_string(imu_model) +
+           " is estimated in stage 1 (without the camera's intrinsics); calibrate stage 2 with "
+           "imu_model: calibrated, from the stage-1 result (--from)");
     if (intrinsics && rec.priors.estimate_distortion) return calibrate<M, 8>(rec, in, out, from);
     if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from);
     if (intrinsics) return calibrate<M, 5>(rec, in, out, from);
-    return calibrate<M, 0>(rec, in, out, from);
+    return with_imu_model_of(imu_model, [&](auto imu) {
+      return calibrate<M, 0, decltype(imu)::value>(rec, in, out, from);
+    });
   });
 }
 

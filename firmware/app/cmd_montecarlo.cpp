@@ -281,6 +281,7 @@ struct Campaign {
   std::optional<std::uint64_t> rig;  // --rig: the family's one rig for every run, by its seed
   FrameMode frames;
   Passes passes;
+  ImuModel imu_model = kDefaultImuModel;  // --imu-model: the IMU's intrinsics estimated
   std::uint64_t seed = 0, runs = 0, jobs = 0;
   sim::Scenario scenario;                // the campaign's (the seed's draw, for a family)
   std::vector<sim::Scenario> scenarios;  // each run's rig
@@ -319,10 +320,10 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   };
   if (!parse_count(o, "seed", 1, 0, c.seed, error) || !scenario_for(c.seed, c.scenario))
     return false;
-  c.family = c.scenario.name == "random";
+  c.family = c.scenario.name == "random" || c.scenario.name == "mems";
   // --rig SEED: one rig of the family for every run; each run draws its own noise and guesses.
   if (o.flag("rig")) {
-    if (!c.family) return refuse("--rig applies with --scenario random");
+    if (!c.family) return refuse("--rig applies with --scenario random or mems");
     std::uint64_t rig = 0;
     if (!parse_count(o, "rig", 0, 0, rig, error)) return false;
     c.rig = rig;
@@ -341,14 +342,22 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if (!passes_option(o, c.passes, error)) return false;
   if (c.intrinsics && o.flag("passes"))
     return refuse("--passes applies to stage 1 only (without --intrinsics)");
+  if (!imu_model_option(o, c.imu_model, error)) return false;
+  if (c.imu_model != ImuModel::kCalibrated && (c.intrinsics || c.frames.enabled))
+    return refuse(
+        "--imu-model: the IMU's intrinsics are estimated in stage 1 from listed markers "
+        "(without --intrinsics and --frames)");
   return true;
 }
 
 void print_campaign_title(const Campaign& c) {
   const std::string rig = c.rig ? ", every run rig " + std::to_string(*c.rig) : "";
   std::printf(
-      "mirrorcal montecarlo: scenario '%s'%s%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
+      "mirrorcal montecarlo: scenario '%s'%s%s%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
       c.scenario.name.c_str(), rig.c_str(), markers_note(c.scenario).c_str(),
+      c.imu_model != ImuModel::kCalibrated
+          ? (std::string(", IMU model ") + to_string(c.imu_model)).c_str()
+          : "",
       c.lens ? ", the lens's coefficients estimated in stage 2" : "",
       !c.intrinsics ? ""
       : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"
@@ -409,7 +418,11 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
       record(c.one_stage ? run_one_stage_simulation<M, 5>(rs, run_seed)
                          : run_two_stage_simulation<M, 5>(rs, run_seed));
     else
-      record(run_simulation<M>(rs, run_seed, {}, c.frames, nullptr, c.passes));
+      with_imu_model_of(c.imu_model, [&](auto imu) {
+        record(
+            run_simulation<M, decltype(imu)::value>(rs, run_seed, {}, c.frames, nullptr, c.passes));
+        return 0;
+      });
     return 0;
   });
 }
@@ -660,7 +673,7 @@ int cmd_montecarlo(int argc, char** argv) {
   if (!parse(argc, argv, 2,
              {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
-              "rig"},
+              "rig", "imu-model"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"},
              o, error) ||
       !campaign_options(o, c, error))

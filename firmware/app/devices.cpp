@@ -141,7 +141,8 @@ bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error)
   std::string text;
   const std::string imu = dir + "/imu.yaml", cam = dir + "/camchain.yaml",
                     priors = dir + "/mirrorcal.yaml";
-  return files::read_file(imu, text, error) && sim::parse_imu_yaml(text, imu, r.sensors, error) &&
+  return files::read_file(imu, text, error) &&
+         sim::parse_imu_yaml(text, imu, r.sensors, r.notes, error) &&
          files::read_file(cam, text, error) &&
          sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) &&
          files::read_file(priors, text, error) &&

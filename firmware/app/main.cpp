@@ -49,7 +49,7 @@ const std::vector<Command>& commands() {
        cmd_sim},
       {"montecarlo",
        "  montecarlo  N independent simulated calibrations, statistics against the paper\n"
-       "              --runs N [--jobs J] [--seed S] [--scenario paper|random] [--out DIR]\n"
+       "              --runs N [--jobs J] [--seed S] [--scenario paper|random|mems] [--out DIR]\n"
        "              [--no-plots] [--markers M] [--timeshift S] [--distortion MODEL]\n"
        "              [--line-delay S]\n"
        "              (as sim) [--filter-line-delay S]  (the line delay the filter is told;\n"
@@ -59,7 +59,8 @@ const std::vector<Command>& commands() {
        "              [--passes N] [--frames [--format grey|yuyv]] [--spot-noise PX]\n"
        "              [--pixel-sigma PX]  (as sim)\n"
        "              [--rig SEED]  (random: every run the rig sim --seed SEED draws, with\n"
-       "              noise and prior guesses of its own: how well that one rig calibrates)\n",
+       "              noise and prior guesses of its own: how well that one rig calibrates)\n"
+       "              [--imu-model MODEL]  (as sim; --scenario mems for MEMS IMUs)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
@@ -93,7 +94,10 @@ const std::vector<Command>& commands() {
        "              (--from: start the camera pose and markers from an earlier calibration's\n"
        "              mirrorcal-result.yaml, or its folder: stage 2 after a stage 1; one of\n"
        "              this same recording is refused unless --from-same-data)\n"
-       "              (--hold-skew: skew stays at camchain.yaml's intrinsics_skew, 0 if absent)\n",
+       "              (--hold-skew: skew stays at camchain.yaml's intrinsics_skew, 0 if absent)\n"
+       "              [--imu-model calibrated|scale-misalignment|...]  (the IMU's intrinsics\n"
+       "              estimated with stage 1; default imu.yaml's imu_model, else calibrated;\n"
+       "              its tolerances from imu.yaml: docs/recordings.md)\n",
        cmd_calibrate},
       {"run",
        "  run         calibrate on the board's devices\n"

@@ -165,7 +165,7 @@ bool read_checked(const std::string& dir, int markers, Recording& out,
   const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
   const std::string priors_yaml = dir + "/mirrorcal.yaml";
   if (!files::read_file(imu_yaml, text, error) ||
-      !parse_imu_yaml(text, imu_yaml, out.sensors, error))
+      !parse_imu_yaml(text, imu_yaml, out.sensors, out.notes, error))
     return false;
   if (!files::read_file(cam_yaml, text, error) ||
       !parse_camchain_yaml(text, cam_yaml, out.sensors, out.notes, error))

@@ -245,14 +245,58 @@ std::array<double, 5> as_array(const Pinhole<double>& k) {
 
 }  // namespace
 
+namespace {
+
+// imu.yaml's IMU model and tolerances (mirrorcal's keys), each optional. A tolerance is the
+// datasheet's 1-sigma, relative for scale factors and cross-axis sensitivity (1 % = 0.01, about
+// 0.57 deg for an axis's tilt), (rad/s)/(m/s^2) for the g-sensitivity; one of 20 % or more is no
+// trimmed part's (or a percentage given as a number).
+bool parse_imu_model_keys(const YamlMap& y, SensorInfo& out) {
+  if (y.has("imu_model")) {
+    std::string name;
+    ImuModel model = ImuModel::kCalibrated;
+    if (!y.string("imu_model", name)) return false;
+    if (!imu_model_from_string(name, model))
+      return y.fail(y.node("imu_model"), "imu_model",
+                    text::quoted(name) +
+                        " is not an IMU model (calibrated, scale-misalignment, "
+                        "scale-misalignment-rotation, scale-misalignment-rotation-g-sensitivity)");
+    out.imu_model = model;
+  }
+  ImuIntrinsicsSigma& t = out.imu_tolerances;
+  const std::pair<const char*, double*> keys[] = {
+      {"accelerometer_scale_tolerance", &t.accel_scale},
+      {"accelerometer_cross_axis_tolerance", &t.accel_misalignment},
+      {"gyroscope_scale_tolerance", &t.gyro_scale},
+      {"gyroscope_cross_axis_tolerance", &t.gyro_misalignment},
+      {"gyroscope_g_sensitivity", &t.g_sensitivity}};
+  bool any_default = false;
+  for (const auto& [key, value] : keys) {
+    if (!y.has(key)) {
+      any_default = true;
+      continue;
+    }
+    if (!y.positive(key, *value)) return false;
+    if (*value >= 0.2)
+      return y.fail(y.node(key), key,
+                    "a 1-sigma of 20 % or more is no MEMS part's (0.01 is 1 %: a fraction, not a "
+                    "percentage)");
+  }
+  out.imu_tolerances_defaulted = any_default;
+  return true;
+}
+
+}  // namespace
+
 bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& out,
-                    std::string& error) {
-  YamlMap y(file, error);
+                    std::vector<std::string>& notes, std::string& error) {
+  YamlMap y(file, error, &notes);
   return y.load(text) && y.positive("accelerometer_noise_density", out.imu.accel_noise_density) &&
          y.positive("accelerometer_random_walk", out.imu.accel_random_walk) &&
          y.positive("gyroscope_noise_density", out.imu.gyro_noise_density) &&
          y.positive("gyroscope_random_walk", out.imu.gyro_random_walk) &&
-         y.within("update_rate", kMinImuRateHz, kMaxImuRateHz, "Hz", out.imu_rate_hz);
+         y.within("update_rate", kMinImuRateHz, kMaxImuRateHz, "Hz", out.imu_rate_hz) &&
+         parse_imu_model_keys(y, out);
 }
 
 namespace {
@@ -492,6 +536,18 @@ std::string imu_yaml_text(const SensorInfo& s) {
   imu += "gyroscope_noise_density: " + number(s.imu.gyro_noise_density) + "  # rad/s/sqrt(Hz)\n";
   imu += "gyroscope_random_walk: " + number(s.imu.gyro_random_walk) + "  # rad/s^2/sqrt(Hz)\n";
   imu += "update_rate: " + number(s.imu_rate_hz) + "  # Hz\n";
+  if (s.imu_model) {
+    const ImuIntrinsicsSigma& t = s.imu_tolerances;
+    imu += std::string(
+               "# mirrorcal's: the IMU model to estimate and the datasheet's tolerances "
+               "(1-sigma; relative, g-sensitivity in (rad/s)/(m/s^2))\nimu_model: ") +
+           to_string(*s.imu_model) + "\n";
+    imu += "accelerometer_scale_tolerance: " + number(t.accel_scale) + "\n";
+    imu += "accelerometer_cross_axis_tolerance: " + number(t.accel_misalignment) + "\n";
+    imu += "gyroscope_scale_tolerance: " + number(t.gyro_scale) + "\n";
+    imu += "gyroscope_cross_axis_tolerance: " + number(t.gyro_misalignment) + "\n";
+    imu += "gyroscope_g_sensitivity: " + number(t.g_sensitivity) + "\n";
+  }
   return imu;
 }
 

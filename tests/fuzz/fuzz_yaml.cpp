@@ -29,7 +29,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   sim::SensorInfo sensors;
   error.clear();
-  ok = sim::parse_imu_yaml(text, "imu.yaml", sensors, error);
+  ok = sim::parse_imu_yaml(text, "imu.yaml", sensors, notes, error);
   if (ok != error.empty()) std::abort();
   error.clear();
   ok = sim::parse_camchain_yaml(text, "camchain.yaml", sensors, notes, error);

@@ -367,12 +367,50 @@ TEST_F(BadInput, UpdateRateOutsideAnyImusIsRefused) {
     set_key(imu_yaml, "update_rate", std::string("update_rate: ") + rate);
     mc::sim::SensorInfo sensors;
     std::string err;
-    EXPECT_TRUE(mc::sim::parse_imu_yaml(slurp(imu_yaml), imu_yaml, sensors, err)) << err;
+    std::vector<std::string> notes;
+    EXPECT_TRUE(mc::sim::parse_imu_yaml(slurp(imu_yaml), imu_yaml, sensors, notes, err)) << err;
   }
   // Within them, a rate the data do not have is refused too, naming both.
   set_key(imu_yaml, "update_rate", "update_rate: 100");
   expect_error({imu() + ": its timestamps step by 5e+06 ns (median), 200 Hz, but " + imu_yaml +
                 "'s update_rate is 100 Hz"});
+}
+
+// imu.yaml's IMU model and tolerances (mirrorcal's keys): a tolerance of 0, a negative one, a
+// percentage given as a number and a model no one knows are refused, naming the file and the key;
+// good ones read back as written, and imu_yaml_text writes them as parse_imu_yaml reads them.
+TEST_F(BadInput, ImuToleranceOrModelThatIsWrongIsRefused) {
+  const std::string imu_yaml = dir() + "/imu.yaml";
+  const std::string text = slurp(imu_yaml);
+  const auto with = [&](const std::string& extra) { spit(imu_yaml, text + extra); };
+  for (const char* bad : {"0", "-0.01", "0.0"}) {
+    with(std::string("gyroscope_scale_tolerance: ") + bad + "\n");
+    expect_error({imu_yaml + ":", "gyroscope_scale_tolerance: must be > 0"});
+  }
+  with("accelerometer_cross_axis_tolerance: 2\n");
+  expect_error({imu_yaml + ":", "accelerometer_cross_axis_tolerance:", "a fraction"});
+  with("imu_model: scale-and-whatever\n");
+  expect_error({imu_yaml + ":", "imu_model:", "'scale-and-whatever' is not an IMU model"});
+
+  with("imu_model: scale-misalignment\ngyroscope_scale_tolerance: 0.005\n");
+  mc::sim::SensorInfo sensors;
+  std::vector<std::string> notes;
+  std::string err;
+  ASSERT_TRUE(mc::sim::parse_imu_yaml(slurp(imu_yaml), imu_yaml, sensors, notes, err)) << err;
+  ASSERT_TRUE(sensors.imu_model.has_value());
+  EXPECT_EQ(*sensors.imu_model, mc::ImuModel::kScaleMisalignment);
+  EXPECT_EQ(sensors.imu_tolerances.gyro_scale, 0.005);
+  EXPECT_EQ(sensors.imu_tolerances.accel_scale, mc::ImuIntrinsicsSigma{}.accel_scale);
+  EXPECT_TRUE(sensors.imu_tolerances_defaulted);
+
+  sensors.imu_tolerances.g_sensitivity = 1.5e-4;
+  mc::sim::SensorInfo back;
+  ASSERT_TRUE(mc::sim::parse_imu_yaml(mc::sim::imu_yaml_text(sensors), "written", back, notes, err))
+      << err;
+  EXPECT_EQ(*back.imu_model, mc::ImuModel::kScaleMisalignment);
+  EXPECT_EQ(back.imu_tolerances.gyro_scale, 0.005);
+  EXPECT_EQ(back.imu_tolerances.g_sensitivity, 1.5e-4);
+  EXPECT_FALSE(back.imu_tolerances_defaulted);
 }
 
 // Only regular files are read: a FIFO would block the read for ever, /dev/zero would fill the

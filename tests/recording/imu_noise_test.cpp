@@ -230,7 +230,8 @@ TEST(ImuNoise, WithoutARandomWalkItIsAnUpperBoundWithTheLengthItWouldTake) {
   // imu.yaml still gets a figure for every key (the bound), marked as one.
   const std::string yaml = cal::imu_noise_yaml(a);
   mc::sim::SensorInfo back;
-  ASSERT_TRUE(mc::sim::parse_imu_yaml(yaml, "imu.yaml", back, err)) << err << "\n" << yaml;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(mc::sim::parse_imu_yaml(yaml, "imu.yaml", back, notes, err)) << err << "\n" << yaml;
   EXPECT_EQ(back.imu.gyro_random_walk, a.gyro.random_walk.value);
   EXPECT_TRUE(contains(yaml, "# gyroscope_random_walk: not resolved")) << yaml;
 }
@@ -315,7 +316,9 @@ TEST(ImuNoiseCli, WritesImuYamlThatReadsBackWithTheEstimatedFigures) {
   ASSERT_TRUE(cal::analyse_imu_noise(read, file, a, err)) << err;
   mc::sim::SensorInfo back;
   const std::string yaml = slurp(out + "/imu.yaml");
-  ASSERT_TRUE(mc::sim::parse_imu_yaml(yaml, out + "/imu.yaml", back, err)) << err << "\n" << yaml;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(mc::sim::parse_imu_yaml(yaml, out + "/imu.yaml", back, notes, err)) << err << "\n"
+                                                                                  << yaml;
   EXPECT_EQ(back.imu.gyro_noise_density, a.gyro.white.value);
   EXPECT_EQ(back.imu.accel_noise_density, a.accel.white.value);
   EXPECT_EQ(back.imu.gyro_random_walk, a.gyro.random_walk.value);

@@ -4,7 +4,8 @@ python3-yaml and python3-opencv) the way each tool reads them:
   - camchain-imucam.yaml as Kalibr's ConfigReader (CameraChainParameters, PyYAML) and as OpenVINS's
     YamlParser (OpenCV's FileStorage, T_imu_cam or else T_cam_imu inverted);
   - `export --format openvins` as OpenVINS, `vins-fusion` as VINS-Fusion and camodocal (FileStorage,
-    body_T_cam0 an opencv-matrix), `ros-camera-info` as a ROS camera_info YAML (PyYAML).
+    body_T_cam0 an opencv-matrix), `ros-camera-info` as a ROS camera_info YAML (PyYAML);
+  - kalibr_imu_chain.yaml (the IMU's intrinsics) as OpenVINS reads it (FileStorage).
 Each transform, camera and time offset read is checked against mirrorcal-result.yaml. Exit 0 when
 all agree. Usage: tools_read_outputs.py MIRRORCAL"""
 import os
@@ -198,6 +199,41 @@ def check_exports(folder, result):
         reader(path, result)
 
 
+def read_imu_like_openvins(folder):
+    """kalibr_imu_chain.yaml as OpenVINS's VioManagerOptions reads it (cv::FileStorage through its
+    YamlParser: imu0's Tw, R_IMUtoGYRO, Ta, R_IMUtoACC, Tg as nested sequences), against the
+    sensor mirrorcal-result.yaml's imu section describes (T_g = Tw R_IMUtoGYRO, T_a = Ta, T_s = Tg);
+    and that section's Kalibr matrices as PyYAML reads them."""
+    path = os.path.join(folder, "kalibr_imu_chain.yaml")
+    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    check(fs.isOpened(), f"{path}: OpenCV cannot open it")
+    imu = fs.getNode("imu0")
+    check(not imu.empty(), f"{path}: OpenVINS finds no imu0")
+
+    def mat(key):
+        node = imu.getNode(key)
+        return np.array([[node.at(r).at(c).real() for c in range(3)] for r in range(3)])
+
+    with open(os.path.join(folder, "mirrorcal-result.yaml")) as f:
+        section = yaml.safe_load(f)["imu"]
+    tw, r_gyro, ta, tg = mat("Tw"), mat("R_IMUtoGYRO"), mat("Ta"), mat("Tg")
+    close(tw @ r_gyro, np.array(section["T_g"]), 1e-9, f"{path}: Tw R_IMUtoGYRO against T_g")
+    close(ta, np.array(section["T_a"]), 1e-9, f"{path}: Ta against T_a")
+    close(tg, np.array(section["T_s"]), 1e-9, f"{path}: Tg against T_s")
+    close(mat("R_IMUtoACC"), np.eye(3), 0, f"{path}: R_IMUtoACC")
+    close(r_gyro @ r_gyro.T, np.eye(3), 1e-9, f"{path}: R_IMUtoGYRO a rotation")
+    close(np.triu(tw, 1), np.zeros((3, 3)), 0, f"{path}: Tw lower triangular (OpenVINS's kalibr)")
+    check(imu.getNode("model").string() == "kalibr", f"{path}: model")
+    for key in ["accelerometer_noise_density", "gyroscope_noise_density",
+                "accelerometer_random_walk", "gyroscope_random_walk", "update_rate"]:
+        check(imu.getNode(key).real() > 0, f"{path}: {key}")
+    # OpenVINS's Dw and Da are the inverses; Kalibr's M_gyro C_gyro_i is T_g.
+    close(np.linalg.inv(tw) @ tw, np.eye(3), 1e-12, f"{path}: Tw invertible")
+    close(np.array(section["M_gyro"]) @ np.array(section["C_gyro_i"]), np.array(section["T_g"]),
+          1e-9, "Kalibr's M_gyro C_gyro_i against T_g")
+    check(section["model"] == "scale-misalignment", f"imu model {section['model']}")
+
+
 def check_the_parsers_are_strict(d):
     """The failures the files avoid are real with these parsers: OpenCV refuses a file without a
     %YAML directive and rows as deep as their key; PyYAML refuses OpenCV's "%YAML:1.0"."""
@@ -246,6 +282,12 @@ def main():
         check(result.rostopic == "/cam0/image_raw", f"default rostopic {result.rostopic}")
         check(result.lens == "equidistant", f"fisheye lens {result.lens}")
         check_exports(fish, result)
+        # A MEMS IMU's intrinsics estimated: OpenVINS's IMU file beside the result.
+        mems = os.path.join(d, "mems")
+        mirrorcal("sim", "--scenario", "mems", "--seed", "3", "--imu-model", "scale-misalignment",
+                  "--no-plots", "--out", mems)
+        read_imu_like_openvins(mems)
+        check_exports(mems, Result(mems))
     print("every file read as its tool reads it, and agreed with mirrorcal-result.yaml"
           if not failures else f"{len(failures)} failures")
     sys.exit(1 if failures else 0)

@@ -24,18 +24,19 @@ LoopData recording_loop_data(const sim::Recording& r) {
   return d;
 }
 
-template <int M, int NK>
-bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, std::string& error,
-                         const std::function<void(double)>& progress,
+template <int M, int NK, int NI>
+bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run,
+                         std::string& error, const std::function<void(double)>& progress,
                          const sim::CalibrationStart* from) {
   Prior<M> prior;
   if (!sim::to_prior(r.priors, prior, error)) return false;
-  typename CalibrationRun<M, NK>::State x0;
-  typename CalibrationRun<M, NK>::Filter::Covariance p0;
+  prior.sigma_imu_intrinsics = r.sensors.imu_tolerances;
+  typename CalibrationRun<M, NK, NI>::State x0;
+  typename CalibrationRun<M, NK, NI>::Filter::Covariance p0;
   initialise(prior, x0, p0);
   if (from != nullptr) start_from(*from, x0, p0);  // read_calibration_start checked its M
   // A simulated recording's truth: each history row gets the error and NEES against it.
-  typename CalibrationRun<M, NK>::State truth;
+  typename CalibrationRun<M, NK, NI>::State truth;
   if (r.has_truth) {
     if (r.truth.features_c.size() != static_cast<std::size_t>(M)) {
       error = "truth.yaml lists " + std::to_string(r.truth.features_c.size()) +
@@ -57,8 +58,8 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, st
     }
   }
   const LoopData data = recording_loop_data(r);
-  run =
-      run_loop<M, NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
+  run = run_loop<M, NK, NI>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr,
+                            progress);
   run.result.from_untrusted = from != nullptr && !from->trusted;
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();
@@ -74,12 +75,15 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, st
   return true;
 }
 
-#define MIRRORCAL_CALIBRATE_RECORDING_(M)       \
-  template MIRRORCAL_CALIBRATE_RECORDING(M, 0); \
-  template MIRRORCAL_CALIBRATE_RECORDING(M, 4); \
-  template MIRRORCAL_CALIBRATE_RECORDING(M, 5); \
-  template MIRRORCAL_CALIBRATE_RECORDING(M, 8);
+#define MIRRORCAL_CALIBRATE_RECORDING_(M)          \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 0, 0); \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 4, 0); \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 5, 0); \
+  template MIRRORCAL_CALIBRATE_RECORDING(M, 8, 0);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_CALIBRATE_RECORDING_)
 #undef MIRRORCAL_CALIBRATE_RECORDING_
+#define MIRRORCAL_IMU_CALIBRATE_RECORDING_(M, NI) template MIRRORCAL_CALIBRATE_RECORDING(M, 0, NI);
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_IMU_CALIBRATE_RECORDING_)
+#undef MIRRORCAL_IMU_CALIBRATE_RECORDING_
 
 }  // namespace mirrorcal::calibration

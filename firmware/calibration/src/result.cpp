@@ -612,8 +612,8 @@ bool write_features_csv(files::OutputSet& out, const std::string& path,
       files::OutputSet&, const std::string&,                                               \
       const RecordStore<HistoryRow<CalibrationFilter<double, M, NK, NI>>>&, Distortion,    \
       std::string&);
-#define MIRRORCAL_RESULT_CSVS_(M)                                                  \
-  MIRRORCAL_RESULT_CSV_(M, 0, 0)                                                   \
+#define MIRRORCAL_RESULT_CSVS_(M) \
+  MIRRORCAL_RESULT_CSV_(M, 0, 0)  \
   MIRRORCAL_RESULT_CSV_(M, 4, 0) MIRRORCAL_RESULT_CSV_(M, 5, 0) MIRRORCAL_RESULT_CSV_(M, 8, 0)
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_RESULT_CSVS_)
 #undef MIRRORCAL_RESULT_CSVS_

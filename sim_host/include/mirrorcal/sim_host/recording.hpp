@@ -56,6 +56,12 @@ constexpr double kMinImuRateHz = 1.0, kMaxImuRateHz = 10000.0;
 struct SensorInfo : CameraInfo {
   ImuNoise imu{};
   double imu_rate_hz = 200.0;
+  // mirrorcal's own imu.yaml keys (docs/recordings.md): the IMU model the calibration estimates
+  // (imu_model; none: the program's default) and the datasheet's tolerances, 1-sigma (defaults
+  // that cover common MEMS parts where not given).
+  std::optional<ImuModel> imu_model;
+  ImuIntrinsicsSigma imu_tolerances{};
+  bool imu_tolerances_defaulted = true;  // some not given (the calibration notes it)
 };
 
 // What mirrorcal.yaml says is known before calibrating. SI units, rotations in rad; quaternions
@@ -228,7 +234,7 @@ bool parse_frames_csv(std::string_view text, const std::string& file,
 bool parse_features_csv(std::string_view text, const std::string& file, int markers,
                         std::vector<ObservedFrame>& frames, std::string& error);
 bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& out,
-                    std::string& error);
+                    std::vector<std::string>& notes, std::string& error);
 bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorInfo& out,
                          std::vector<std::string>& notes, std::string& error);
 // camera: the intrinsics camchain.yaml gave (the default guess when intrinsics are estimated).

@@ -43,6 +43,8 @@ struct Priors {
   double attitude = 1.0 * M_PI / 180.0;  // per axis (rad)
   double accel_bias = 0.03;  // m/s^2; the true bias of each run is drawn with this sigma too
   double gyro_bias = 0.002;  // rad/s; likewise
+  // The IMU's intrinsics (when the calibration estimates them): the datasheet's tolerances.
+  ImuIntrinsicsSigma imu_intrinsics{};
 };
 
 // One sine term A sin(2 pi f t + phase).

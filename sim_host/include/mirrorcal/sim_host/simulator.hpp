@@ -86,6 +86,7 @@ Prior<M> draw_prior(const Scenario& s, const SimData& data, std::uint64_t seed) 
   for (std::size_t j = 0; j < 4; ++j)
     pr.intrinsics.coeffs[j] = t.coeffs[j] + ps.distortion[j] * n01(rng);
   pr.sigma_distortion = ps.distortion;
+  pr.sigma_imu_intrinsics = ps.imu_intrinsics;  // the guess is the ideal IMU's
   (void)data;
   return pr;
 }

@@ -20,21 +20,25 @@ LoopData recording_loop_data(const sim::Recording& r);
 // estimate_distortion) on a recording from its priors. False, with a message, if the priors do not
 // fit this build (e.g. another number of markers). With from, the camera pose and markers start
 // from that earlier calibration (start_from).
-template <int M, int NK>
-bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, std::string& error,
-                         const std::function<void(double)>& progress = {},
+template <int M, int NK, int NI = 0>
+bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run,
+                         std::string& error, const std::function<void(double)>& progress = {},
                          const sim::CalibrationStart* from = nullptr);
 
-#define MIRRORCAL_CALIBRATE_RECORDING(M, NK)                                                   \
-  bool calibrate_recording<M, NK>(const sim::Recording&, CalibrationRun<M, NK>&, std::string&, \
-                                  const std::function<void(double)>&,                          \
-                                  const sim::CalibrationStart*)
-#define MIRRORCAL_EXTERN_CALIBRATE_RECORDING_(M)       \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0); \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 4); \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 5); \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 8);
+#define MIRRORCAL_CALIBRATE_RECORDING(M, NK, NI)                                         \
+  bool calibrate_recording<M, NK, NI>(const sim::Recording&, CalibrationRun<M, NK, NI>&, \
+                                      std::string&, const std::function<void(double)>&,  \
+                                      const sim::CalibrationStart*)
+#define MIRRORCAL_EXTERN_CALIBRATE_RECORDING_(M)          \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0, 0); \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 4, 0); \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 5, 0); \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 8, 0);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_CALIBRATE_RECORDING_)
 #undef MIRRORCAL_EXTERN_CALIBRATE_RECORDING_
+#define MIRRORCAL_EXTERN_IMU_CALIBRATE_RECORDING_(M, NI) \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0, NI);
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_CALIBRATE_RECORDING_)
+#undef MIRRORCAL_EXTERN_IMU_CALIBRATE_RECORDING_
 
 }  // namespace mirrorcal::calibration
