@@ -112,6 +112,10 @@ void write_imu_result_yaml(std::FILE* o, const ImuResult& r) {
   write_matrix(o, "  ", "M_gyro", kalibr.m_gyro);
   write_matrix(o, "  ", "C_gyro_i", kalibr.c_gyro_i);
   write_matrix(o, "  ", "A", kalibr.a);
+  std::fprintf(o,
+               "  prior_offset: %.2f  # tolerance sigmas from the ideal IMU, at the furthest: "
+               "%s (the self-check: at most 5)\n",
+               r.prior_offset_sigmas, r.prior_offset_name.c_str());
   const std::vector<std::string> names = imu_intrinsic_names(r.model);
   const std::vector<double> values = imu_intrinsic_values(r);
   std::fprintf(

@@ -173,6 +173,10 @@ bool prior_contradicted(const CalibrationResult& r) {
   return r.prior_offset_sigmas > kPriorContradictedSigmas;
 }
 
+bool imu_contradicted(const CalibrationResult& r) {
+  return r.imu.estimated() && r.imu.prior_offset_sigmas > kPriorContradictedSigmas;
+}
+
 bool scale_unresolved(const CalibrationResult& r) {
   return marker_scale_sigma(r) > kLooseMarkerScale;
 }
@@ -257,6 +261,20 @@ std::string prior_warning(const CalibrationResult& r) {
   return text;
 }
 
+std::string imu_warning(const CalibrationResult& r) {
+  if (!imu_contradicted(r)) return {};
+  char text[520];
+  std::snprintf(text, sizeof text,
+                "the IMU's %s lies %.1f of its tolerance's sigmas from an ideal IMU (more than "
+                "%.0f; model %s): no part is off that far, so the calibration has traded the "
+                "markers' scale or the camera's pose against the IMU's scale factors and axes. "
+                "Check imu.yaml's tolerances (1-sigma, 0.01 is 1 %%), move the rig through wider "
+                "tilts, and calibrate again.",
+                r.imu.prior_offset_name.c_str(), r.imu.prior_offset_sigmas,
+                kPriorContradictedSigmas, to_string(r.imu.model));
+  return text;
+}
+
 std::string scale_warning(const CalibrationResult& r) {
   if (!scale_unresolved(r)) return {};
   char text[480];
@@ -283,8 +301,8 @@ std::string start_warning(const CalibrationResult& r) {
 }  // namespace
 
 std::string convergence_warning(const CalibrationResult& r) {
-  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r), scale_warning(r),
-                        start_warning(r)})
+  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r), imu_warning(r),
+                        scale_warning(r), start_warning(r)})
     if (!w.empty()) return w;
   return {};
 }
@@ -324,8 +342,8 @@ std::string skew_warning(const CalibrationResult& r) {
 
 std::vector<std::string> result_warnings(const CalibrationResult& r) {
   std::vector<std::string> w;
-  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), scale_warning(r),
-                        start_warning(r), skew_warning(r)})
+  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), imu_warning(r),
+                        scale_warning(r), start_warning(r), skew_warning(r)})
     if (!s.empty()) w.push_back(std::move(s));
   return w;
 }
@@ -406,7 +424,8 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
                "above 1, sigma_ratio below %g, refinement_step above %g, under half the markers "
-               "used, a prior contradicted by 5 sigma, marker_scale_sigma above %g or a start "
+               "used, a prior or the IMU's tolerances contradicted by 5 sigma, marker_scale_sigma "
+               "above %g or a start "
                "(--from) that said false: do not trust it\n",
                consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit,
                kLooseMarkerScale);

@@ -303,6 +303,18 @@ void record_prior_offset(const typename CalibrationRun<M, NK, NI>::State& x0,
       r.prior_offset_state = r.params[std::size_t(j)].name;
     }
   }
+  if constexpr (NI > 0) {  // and the IMU's intrinsics, from the ideal IMU in their tolerances
+    const auto di = run.history.back().state.template boxminus_block<State::kImu, NI>(x0);
+    const std::vector<std::string> names = imu_intrinsic_names(State::kImuModel);
+    for (int j = 0; j < NI; ++j) {
+      const double sigmas =
+          std::abs(double(di(j))) / std::sqrt(double(p0(State::kImu + j, State::kImu + j)));
+      if (!(sigmas <= r.imu.prior_offset_sigmas)) {
+        r.imu.prior_offset_sigmas = sigmas;
+        r.imu.prior_offset_name = names[std::size_t(j)];
+      }
+    }
+  }
 }
 
 // How far a refinement step moved the calibration from the estimate it started at, in the step's

@@ -23,6 +23,10 @@ struct ImuResult {
   ImuNoise noise{};  // imu.yaml's, or the simulation's
   double rate_hz = 200.0;
   std::string rostopic = "/imu0";
+  // The intrinsic the estimate lies furthest from the ideal IMU in its tolerance's sigmas: for
+  // the self-check (result.hpp, imu_contradicted).
+  double prior_offset_sigmas = 0.0;
+  std::string prior_offset_name;
 
   bool estimated() const { return model != ImuModel::kCalibrated; }
 };

@@ -128,6 +128,11 @@ bool used_too_few(const CalibrationResult& r);
 // 99.7 % of its markers.
 constexpr double kPriorContradictedSigmas = 5.0;
 bool prior_contradicted(const CalibrationResult& r);
+// The IMU's intrinsics lie beyond kPriorContradictedSigmas of their tolerances from the ideal IMU:
+// the estimate has traded the markers' scale or the camera's pose against an IMU no part is (a
+// mems rig of 200 locked onto accelerometer scale factors of 5.7 with the markers shrunk to
+// match: NEES 1.1e5, every other check passed), or imu.yaml's tolerances are far too tight.
+bool imu_contradicted(const CalibrationResult& r);
 // The markers' common scale (marker_scale_sigma) known only to worse than kLooseMarkerScale: the
 // motion hardly accelerated the rig, and the estimate is neither as good as the data nor as its
 // sigmas say. 20 rigs of the random family beyond it (seeds 9, 10 and 12; 40 runs of each with
