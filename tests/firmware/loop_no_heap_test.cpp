@@ -81,3 +81,33 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   EXPECT_EQ(c.news, 0);
   EXPECT_EQ(c.mallocs, 0);
 }
+
+// The same with the IMU's intrinsics estimated (scale-misalignment) on a MEMS rig: their
+// propagation and the exposure's reading of the samples allocate nothing either.
+TEST(LoopNoHeap, LoopWithTheImuIntrinsicsDoesNotAllocate) {
+  constexpr int NI = mc::imu_intrinsics_dim(mc::ImuModel::kScaleMisalignment);
+  using Filter = mc::CalibrationFilter<double, 3, 0, NI>;
+  const mc::sim::Scenario s = mc::sim::mems_scenario(4);
+  const mc::sim::SimData data = mc::sim::simulate(s, 4);
+  Filter filter(mc::evaluation::scenario_config(s));
+  Filter::State x0;
+  Filter::Covariance p0;
+  mc::initialise(mc::sim::draw_prior<3>(s, data, 4), x0, p0);
+  filter.reset(x0, p0);
+  mc::sim::VectorImuSource imu(data.imu);
+  mc::sim::VectorMarkerSource<3> listed(data.frames);
+  mc::calibration::FrameTap<3> markers(listed, nullptr);
+  mc::calibration::HistorySink<Filter> sink(data.frames.size() + 1, nullptr, &markers);
+  filter.keep_motion_steps(true);  // the smoother's steps too
+  sink.keep_motion();
+  mc::firmware::CalibrationLoop<double, 3, 0, NI> loop(filter, imu, markers, {}, &sink);
+
+  mc::test::AllocCounter counting;
+  const auto end = loop.run();
+  const auto c = counting.stop();
+  EXPECT_EQ(end, mc::firmware::LoopEnd::kEndOfStream);
+  EXPECT_GT(filter.counters().markers_used, 2000u);
+  EXPECT_EQ(filter.counters().failures, 0u);
+  EXPECT_EQ(c.news, 0);
+  EXPECT_EQ(c.mallocs, 0);
+}
