@@ -138,7 +138,9 @@ int cmd_sim(int argc, char** argv) {
       with_value = {"scenario",          "seed",    "out",       "format",     "pixel-sigma",
                     "spot-noise",        "passes",  "timeshift", "distortion", "line-delay",
                     "filter-line-delay", "markers", "duration"},
-      flags = {"no-plots", "frames", "intrinsics", "hold-skew", "one-stage", "estimate-distortion"};
+      flags = {"no-plots",      "frames",    "intrinsics",
+               "hold-skew",     "one-stage", "estimate-distortion",
+               "estimate-noise"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   Options o;
@@ -163,6 +165,10 @@ int cmd_sim(int argc, char** argv) {
   if (!passes_option(o, passes, error)) fail(error);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
+  // --estimate-noise: the noise levels from the data, the calibration made again with them.
+  passes.estimate_noise = o.flag("estimate-noise");
+  if (intrinsics && passes.estimate_noise)
+    fail("--estimate-noise applies to stage 1 only (without --intrinsics)");
   std::string dir;
   if (!make_out_dir(o, "out/sim", dir, error)) fail(error, 1);
   firmware::SteadyClock clock;  // the simulation's own clock is simulated time

@@ -40,6 +40,8 @@ const std::vector<Command>& commands() {
        "              into the frames and the one the filter assumes; default the scenario's)\n"
        "              [--passes N]  (exactly N passes over the data; default 2, up to 4 while the\n"
        "              last gates over 0.5 % of the markers; the last pass is reported)\n"
+       "              [--estimate-noise]  (the IMU's noise densities and the pixel noise from\n"
+       "              the data, not imu.yaml's; writes imu.yaml with them)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},

@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include "mirrorcal/calibration/history.hpp"
+#include "mirrorcal/calibration/noise_estimate.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
@@ -55,6 +56,8 @@ struct CalibrationResult {
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
+  // The noise levels estimated from the data, when asked (Passes::estimate_noise).
+  NoiseEstimate noise;
 
   // Where sigma's and covariance's groups lie.
   CalibrationLayout layout() const {
