@@ -19,7 +19,7 @@ namespace {
 
 template <int M, int NK>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
-              const sim::CalibrationStart* from) {
+              const sim::CalibrationStart* from, const Passes& passes) {
   std::printf("mirrorcal calibrate: %s: %zu IMU samples (%.0f Hz), %zu frames, %s\n", in.c_str(),
               std::size_t(rec.stats.imu_samples), rec.sensors.imu_rate_hz,
               std::size_t(rec.stats.frames),
@@ -38,7 +38,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   CalibrationRun<M, NK> run;
   const auto t0 = std::chrono::steady_clock::now();
   if (!calibrate_recording<M, NK>(
-          rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
+          rec, run, err, [](double f) { print_progress("calibrating", f); }, from, passes))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   end_progress("calibrating done");
@@ -132,7 +132,8 @@ int cmd_calibrate(int argc, char** argv) {
   Options o;
   std::string err;
   if (!parse(argc, argv, 2, {"out", "from"},
-             {"intrinsics", "hold-skew", "from-same-data", "from-images"}, o, err, 1))
+             {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise"}, o, err,
+             1))
     fail(err);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
@@ -192,10 +193,15 @@ int cmd_calibrate(int argc, char** argv) {
           in.c_str());
     // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
     // the lens's coefficients too, skew held.
-    if (intrinsics && rec.priors.estimate_distortion) return calibrate<M, 8>(rec, in, out, from);
-    if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from);
-    if (intrinsics) return calibrate<M, 5>(rec, in, out, from);
-    return calibrate<M, 0>(rec, in, out, from);
+    // --estimate-noise: the noise densities and the pixel noise from the data, not imu.yaml's and
+    // mirrorcal.yaml's (noise_estimate.hpp).
+    Passes passes;
+    passes.estimate_noise = o.flag("estimate-noise");
+    if (intrinsics && rec.priors.estimate_distortion)
+      return calibrate<M, 8>(rec, in, out, from, passes);
+    if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from, passes);
+    if (intrinsics) return calibrate<M, 5>(rec, in, out, from, passes);
+    return calibrate<M, 0>(rec, in, out, from, passes);
   });
 }
 

@@ -27,7 +27,7 @@ LoopData recording_loop_data(const sim::Recording& r) {
 template <int M, int NK>
 bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, std::string& error,
                          const std::function<void(double)>& progress,
-                         const sim::CalibrationStart* from) {
+                         const sim::CalibrationStart* from, Passes passes) {
   Prior<M> prior;
   if (!sim::to_prior(r.priors, prior, error)) return false;
   typename CalibrationRun<M, NK>::State x0;
@@ -57,8 +57,8 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK>& run, st
     }
   }
   const LoopData data = recording_loop_data(r);
-  run =
-      run_loop<M, NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress);
+  run = run_loop<M, NK>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr, progress,
+                        {}, passes);
   run.result.from_untrusted = from != nullptr && !from->trusted;
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();

@@ -384,9 +384,18 @@ UpdateResult CalibrationFilter<S, M, NK, NI>::update(const MarkerFrame<M>& frame
     counters_.nis_sum += res.nis;
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);
   }
-  if (res.status == FilterStatus::kOk) {
+  if (res.status == FilterStatus::kOk && config_.sigma_points.noise_statistics) {
+    // Once the gate is on, the markers it let through are those whose innovation fell inside it:
+    // a 2-dof chi-square cut at c keeps 1 - (c/2) e^(-c/2) / (1 - e^(-c/2)) of its mean (0.993
+    // at 99.9 %), and so of the quadratic's expectation (exactly so where the pixel noise
+    // dominates S); uncorrected, the estimate read 0.35 % low, 1.2 of its sigmas RMS off.
+    double kept = 1.0;
+    if (gate_on && std::isfinite(config_.gate_chi2) && config_.gate_chi2 > 0.0) {
+      const double tail = std::exp(-0.5 * config_.gate_chi2);
+      kept = 1.0 - 0.5 * config_.gate_chi2 * tail / (1.0 - tail);
+    }
     counters_.pixel_noise_quadratic += res.noise_quadratic;
-    counters_.pixel_noise_redundancy += res.noise_redundancy;
+    counters_.pixel_noise_redundancy += kept * res.noise_redundancy;
   }
   ++counters_.updates;
   counters_.markers_used += static_cast<std::uint64_t>(res.used);
