@@ -121,8 +121,9 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv%s\n",
-      out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "");
+      "report.html, residuals.csv%s%s\n",
+      out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "",
+      run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
   return 0;
 }
 

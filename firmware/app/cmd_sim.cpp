@@ -106,8 +106,9 @@ bool report_run(const Run& run, const SimReport& r, std::string& err) {
   if (!write_run_outputs_and_report(r.dir, run, r.title, r.two_stage, figures, err)) return false;
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv\n",
-      r.dir.c_str());
+      "report.html, residuals.csv%s\n",
+      r.dir.c_str(),
+      run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
   return !r.profiler ||
          report_profile(*r.profiler,
                         "this host's monotonic clock, simulated data fed as fast as it is taken",

@@ -230,6 +230,22 @@ TEST(NoiseEstimationCampaign, DISABLED_MemsRigsToldTwiceTheDensities) {
   survey<kScaleMisalignment>(rigs(8), first_seed(101), Told::kTwiceTheDensities, true);
 }
 
+// A measurement: how a rig's self-check moves with the pixel noise told, near the truth
+// (MIRRORCAL_NOISE_SEED).
+TEST(NoiseEstimationCampaign, DISABLED_PixelNoiseSensitivity) {
+  for (const double f : {0.97, 0.99, 1.0, 1.01, 1.03}) {
+    sim::Scenario s = sim::random_scenario(first_seed(30));
+    s.told_pixel_sigma = s.pixel_sigma * f;
+    const auto run = evaluation::run_simulation<3>(s, first_seed(30));
+    std::printf(
+        "pixel noise told %.2f x: NEES %.2f, %s, passes %d (restarted %d), sigma_ratio %.3f\n", f,
+        run.history.back().nees, calibration::consistent(run.result) ? "consistent" : "flagged",
+        run.result.passes, run.result.restarted_pass, run.result.sigma_ratio);
+    for (const std::string& w : calibration::result_warnings(run.result))
+      std::printf("    (%s)\n", w.substr(0, 120).c_str());
+  }
+}
+
 #endif
 
 }  // namespace
