@@ -39,32 +39,47 @@ void mean_and_sigma(const std::vector<double>& values, double& mean, double& sig
 }  // namespace
 
 bool imu_white_noise(hal::ImuSource& imu, std::int64_t nominal_period_ns, ImuWhiteNoise& out) {
-  std::array<ImuSample, 5> window{};
+  // The last nine samples of a run of equally spaced ones: the fourth difference of the last five,
+  // and of every other one of the nine (stride 2).
+  std::array<ImuSample, 9> window{};
   int filled = 0;
   // Each difference's squared norm over 3 axes and the weights, per sample: the sample's
   // variance (per axis) on average.
   std::vector<double> gyro, accel;
+  double stride2_g = 0.0, stride2_a = 0.0;
+  std::uint64_t stride2_n = 0;
   ImuSample s;
   const std::int64_t slack = nominal_period_ns / 10;
+  const auto difference = [&](int last, int stride, Eigen::Vector3d& g, Eigen::Vector3d& a) {
+    g.setZero();
+    a.setZero();
+    for (int i = 0; i < 5; ++i) {
+      const ImuSample& x = window[std::size_t(last - stride * (4 - i))];
+      g += kWeights[std::size_t(i)] * x.gyro;
+      a += kWeights[std::size_t(i)] * x.accel;
+    }
+  };
   while (imu.next(s) == hal::SourceStatus::kOk) {
     if (filled > 0 &&
         std::llabs(s.t_ns - window[std::size_t(filled - 1)].t_ns - nominal_period_ns) > slack)
       filled = 0;  // a gap or a jitter: start a new run
-    if (filled == 5) {
-      for (std::size_t i = 0; i + 1 < 5; ++i) window[i] = window[i + 1];
-      filled = 4;
+    if (filled == 9) {
+      for (std::size_t i = 0; i + 1 < 9; ++i) window[i] = window[i + 1];
+      filled = 8;
     }
     window[std::size_t(filled++)] = s;
     if (filled < 5) continue;
-    Eigen::Vector3d g = Eigen::Vector3d::Zero(), a = Eigen::Vector3d::Zero();
-    for (std::size_t i = 0; i < 5; ++i) {
-      g += kWeights[i] * window[i].gyro;
-      a += kWeights[i] * window[i].accel;
-    }
+    Eigen::Vector3d g, a;
+    difference(filled - 1, 1, g, a);
     gyro.push_back(g.squaredNorm() / (3.0 * kWeightSquares));
     accel.push_back(a.squaredNorm() / (3.0 * kWeightSquares));
+    if (filled < 9) continue;
+    difference(8, 2, g, a);
+    stride2_g += g.squaredNorm() / (3.0 * kWeightSquares);
+    stride2_a += a.squaredNorm() / (3.0 * kWeightSquares);
+    ++stride2_n;
   }
-  if (gyro.size() < 200) return false;
+  if (gyro.size() < 200 || stride2_n == 0) return false;
   const double dt = static_cast<double>(nominal_period_ns) * 1e-9;
   const auto density = [dt](const std::vector<double>& v, double& d, double& sigma) {
     double var = 0.0, var_sigma = 0.0;
@@ -74,8 +89,17 @@ bool imu_white_noise(hal::ImuSource& imu, std::int64_t nominal_period_ns, ImuWhi
   };
   density(gyro, out.gyro_density, out.gyro_sigma);
   density(accel, out.accel_density, out.accel_sigma);
+  const auto ratio = [&](double sum, double d) {
+    return d > 0.0 ? std::sqrt(sum / double(stride2_n) * dt) / d : 0.0;
+  };
+  out.gyro_stride2_ratio = ratio(stride2_g, out.gyro_density);
+  out.accel_stride2_ratio = ratio(stride2_a, out.accel_density);
   out.differences = gyro.size();
   return true;
+}
+
+bool ImuWhiteNoise::white(double stride2_ratio) {
+  return std::abs(stride2_ratio - 1.0) <= kWhiteTolerance;
 }
 
 bool pixel_noise_estimate(double quadratic, double redundancy, double told_pixel_sigma,

@@ -299,10 +299,25 @@ void add_noise(std::string& t, const ReportData& d) {
     t += format("  %-28s %11.4g +- %-9.2g %s  (stated %.4g: %.2f times the estimate)\n", name, est,
                 sigma, unit, told, est > 0.0 ? told / est : 0.0);
   };
-  row("gyroscope_noise_density", n.imu.gyro_noise_density, n.gyro_density_sigma,
-      n.told.gyro_noise_density, "rad/s/sqrt(Hz)");
-  row("accelerometer_noise_density", n.imu.accel_noise_density, n.accel_density_sigma,
-      n.told.accel_noise_density, "m/s^2/sqrt(Hz)");
+  const auto kept = [&t](const char* name, double told, double ratio, const char* unit) {
+    t += format(
+        "  %-28s %11.4g %s as stated: NOT estimated, the samples' noise is not white from sample "
+        "to sample (it reads %.2f times more over every other sample, "
+        "white noise 1: a low-pass filter in the part?); measure it with imu-noise\n",
+        name, told, unit, ratio);
+  };
+  if (n.gyro_estimated)
+    row("gyroscope_noise_density", n.imu.gyro_noise_density, n.gyro_density_sigma,
+        n.told.gyro_noise_density, "rad/s/sqrt(Hz)");
+  else
+    kept("gyroscope_noise_density", n.imu.gyro_noise_density, n.gyro_stride2_ratio,
+         "rad/s/sqrt(Hz)");
+  if (n.accel_estimated)
+    row("accelerometer_noise_density", n.imu.accel_noise_density, n.accel_density_sigma,
+        n.told.accel_noise_density, "m/s^2/sqrt(Hz)");
+  else
+    kept("accelerometer_noise_density", n.imu.accel_noise_density, n.accel_stride2_ratio,
+         "m/s^2/sqrt(Hz)");
   row("pixel_sigma", n.pixel_sigma, n.pixel_sigma_sigma, n.told_pixel_sigma, "px");
   t += format(
       "  the densities from %llu fourth differences of the IMU's samples, the pixel noise from "

@@ -339,6 +339,15 @@ static void write_noise_estimate(std::FILE* o, const NoiseEstimate& n) {
                n.imu.accel_noise_density);
   std::fprintf(o, "  accelerometer_noise_density_sigma: %.3g\n", n.accel_density_sigma);
   std::fprintf(o, "  accelerometer_noise_density_stated: %.9g\n", n.told.accel_noise_density);
+  std::fprintf(
+      o,
+      "  densities_estimated: [%s, %s]  # gyroscope, accelerometer; false: the samples' "
+      "noise is not white from sample to sample (a low-pass filter in the part?), the "
+      "stated density kept\n"
+      "  stride2_ratio: [%.3f, %.3f]  # the test: the density over every other sample over "
+      "the one from sample to sample, 1 for white noise (within 5 %%)\n",
+      n.gyro_estimated ? "true" : "false", n.accel_estimated ? "true" : "false",
+      n.gyro_stride2_ratio, n.accel_stride2_ratio);
   std::fprintf(o, "  pixel_sigma: %.6g  # px\n", n.pixel_sigma);
   std::fprintf(o, "  pixel_sigma_sigma: %.3g\n", n.pixel_sigma_sigma);
   std::fprintf(o, "  pixel_sigma_stated: %.6g\n", n.told_pixel_sigma);

@@ -519,11 +519,19 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
     noise.imu_rate_hz = 1e9 / static_cast<double>(data.imu_period_ns);
     ImuWhiteNoise white;
     if (imu_white_noise(*data.open_imu(), data.imu_period_ns, white)) {
-      noise.imu.gyro_noise_density = white.gyro_density;
-      noise.imu.accel_noise_density = white.accel_density;
-      noise.gyro_density_sigma = white.gyro_sigma;
-      noise.accel_density_sigma = white.accel_sigma;
       noise.imu_differences = white.differences;
+      noise.gyro_stride2_ratio = white.gyro_stride2_ratio;
+      noise.accel_stride2_ratio = white.accel_stride2_ratio;
+      noise.gyro_estimated = ImuWhiteNoise::white(white.gyro_stride2_ratio);
+      noise.accel_estimated = ImuWhiteNoise::white(white.accel_stride2_ratio);
+      if (noise.gyro_estimated) {
+        noise.imu.gyro_noise_density = white.gyro_density;
+        noise.gyro_density_sigma = white.gyro_sigma;
+      }
+      if (noise.accel_estimated) {
+        noise.imu.accel_noise_density = white.accel_density;
+        noise.accel_density_sigma = white.accel_sigma;
+      }
     }
     used.imu = noise.imu;
     used.sigma_points.noise_statistics = true;
