@@ -6,7 +6,6 @@
 #include <optional>
 
 #include "mirrorcal/calibration/image_markers.hpp"
-#include "mirrorcal/calibration/noise_estimate.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -175,36 +174,27 @@ void smoothed_trajectory(const CalibrationRun<M, NK, NI>& track, Trajectory<M, N
     s.imu = final_estimate.imu;
     return s;
   };
-  // The rows and matrices a step holds, on the heap: with the IMU's intrinsics (a motion block of
-  // 27 states) they took 76 KB of stack at 3 markers.
-  using Filter = typename CalibrationRun<M, NK, NI>::Filter;
-  struct Step {
-    HistoryRow<Filter> next_row, row;
-    MotionRow<Filter> next, row_motion;
-    MotionMatrix f_p, gain_t;
-  };
-  const std::unique_ptr<Step> w(new Step);
-  w->next_row = track.history[n - 1];
-  w->next = motion[n - 1];
+  HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> next_row = track.history[n - 1];
+  MotionRow<typename CalibrationRun<M, NK, NI>::Filter> next = motion[n - 1], row_motion;
   State next_smoothed = final_estimate;
-  out.set(n - 1, held(final_estimate), w->next_row.t_ns);
+  out.set(n - 1, held(final_estimate), next_row.t_ns);
   for (std::size_t k = n - 1; k-- > 0;) {
-    w->row = track.history[k];
-    w->row_motion = motion[k];
-    State smoothed = w->row.state;
+    const HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> row = track.history[k];
+    row_motion = motion[k];
+    State smoothed = row.state;
     // A row that followed no update (the final one) says nothing new about the one before it.
-    if (w->next.step.update != w->row_motion.step.update) {
+    if (next.step.update != row_motion.step.update) {
       // C = P_k F^T P_{k+1|k}^-1, so C^T = P_{k+1|k}^-1 F P_k (both covariances symmetric).
-      w->f_p = w->next.step.transition * w->row_motion.covariance;
-      w->gain_t = w->next.step.predicted_covariance.ldlt().solve(w->f_p);
+      const MotionMatrix f_p = next.step.transition * row_motion.covariance;
+      const MotionMatrix gain_t = next.step.predicted_covariance.ldlt().solve(f_p);
       const Eigen::Matrix<double, D, 1> d =
-          next_smoothed.template boxminus_block<0, D>(w->next_row.predicted);
-      if (w->gain_t.allFinite()) smoothed.template boxplus_block<0, D>(w->gain_t.transpose() * d);
+          next_smoothed.template boxminus_block<0, D>(next_row.predicted);
+      if (gain_t.allFinite()) smoothed.template boxplus_block<0, D>(gain_t.transpose() * d);
     }
-    out.set(k, held(smoothed), w->row.t_ns);
+    out.set(k, held(smoothed), row.t_ns);
     next_smoothed = smoothed;
-    w->next_row = w->row;
-    w->next = w->row_motion;
+    next_row = row;
+    next = row_motion;
   }
   out.set_rates();
 }
@@ -518,65 +508,11 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
                                    const std::function<LoopHooks<M>(int pass)>& hooks,
                                    Passes passes) {
   using State = typename CalibrationRun<M, NK, NI>::State;
-  const auto calibrate = [&](const CalibrationConfig& c) {
-    State start = x0;
-    CalibrationRun<M, NK, NI> run =
-        free_passes<M, NK, NI>(c, p0, data, truth, progress, hooks, passes, start);
-    if (passes.refine && !run.history.empty())
-      refine<M, NK, NI>(c, x0, p0, data, truth, hooks, start, run);
-    return run;
-  };
-  CalibrationRun<M, NK, NI> run;
-  CalibrationConfig used = config;
-  if (passes.estimate_noise && passes.refine) {
-    // The noise levels from the data (noise_estimate.hpp): the IMU's white-noise densities from
-    // its samples, once; the pixel noise by Foerstner's estimate from the refinement's last pass,
-    // and the calibration made again with it until it settles.
-    NoiseEstimate noise;
-    noise.estimated = true;
-    noise.told = config.imu;
-    noise.told_pixel_sigma = config.pixel_sigma;
-    noise.imu = config.imu;
-    noise.imu_rate_hz = 1e9 / static_cast<double>(data.imu_period_ns);
-    ImuWhiteNoise white;
-    if (imu_white_noise(*data.open_imu(), data.imu_period_ns, white)) {
-      noise.imu_differences = white.differences;
-      noise.gyro_stride2_ratio = white.gyro_stride2_ratio;
-      noise.accel_stride2_ratio = white.accel_stride2_ratio;
-      noise.gyro_estimated = ImuWhiteNoise::white(white.gyro_stride2_ratio);
-      noise.accel_estimated = ImuWhiteNoise::white(white.accel_stride2_ratio);
-      if (noise.gyro_estimated) {
-        noise.imu.gyro_noise_density = white.gyro_density;
-        noise.gyro_density_sigma = white.gyro_sigma;
-      }
-      if (noise.accel_estimated) {
-        noise.imu.accel_noise_density = white.accel_density;
-        noise.accel_density_sigma = white.accel_sigma;
-      }
-    }
-    used.imu = noise.imu;
-    used.sigma_points.noise_statistics = true;
-    used.pixel_sigma = kNoiseStartScale * config.pixel_sigma;
-    for (int k = 0; k < kMaxNoiseRuns; ++k) {
-      run = calibrate(used);
-      noise.refinements = k + 1;
-      if (run.history.empty()) break;
-      double estimate = 0.0, sigma = 0.0;
-      const FilterCounters& c = run.filter_counters;
-      if (!pixel_noise_estimate(c.pixel_noise_quadratic, c.pixel_noise_redundancy, used.pixel_sigma,
-                                estimate, sigma))
-        break;
-      noise.pixel_sigma = estimate;
-      noise.pixel_sigma_sigma = sigma;
-      noise.pixel_redundancy = c.pixel_noise_redundancy;
-      noise.converged = std::abs(estimate / used.pixel_sigma - 1.0) < kNoiseConvergedFraction;
-      if (noise.converged) break;
-      if (k + 1 < kMaxNoiseRuns) used.pixel_sigma = estimate;
-    }
-    run.result.noise = noise;
-  } else {
-    run = calibrate(config);
-  }
+  State start = x0;
+  CalibrationRun<M, NK, NI> run =
+      free_passes<M, NK, NI>(config, p0, data, truth, progress, hooks, passes, start);
+  if (passes.refine && !run.history.empty())
+    refine<M, NK, NI>(config, x0, p0, data, truth, hooks, start, run);
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<M, NK, NI>(x0, p0, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
@@ -584,7 +520,7 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
   for (int i = State::kImu; i < State::kImu + NI; ++i)
     run.result.imu.prior_sigma.push_back(std::sqrt(p0(i, i)));
   run.result.imu.rate_hz = 1e9 / double(data.imu_period_ns);
-  run.pixel_sigma = used.pixel_sigma;
+  run.pixel_sigma = config.pixel_sigma;
   run.gate_after_frames = config.gate_after_frames;
   return run;
 }
