@@ -174,27 +174,36 @@ void smoothed_trajectory(const CalibrationRun<M, NK, NI>& track, Trajectory<M, N
     s.imu = final_estimate.imu;
     return s;
   };
-  HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> next_row = track.history[n - 1];
-  MotionRow<typename CalibrationRun<M, NK, NI>::Filter> next = motion[n - 1], row_motion;
+  // The rows and matrices a step holds, on the heap: with the IMU's intrinsics (a motion block of
+  // 27 states) they took 76 KB of stack at 3 markers.
+  using Filter = typename CalibrationRun<M, NK, NI>::Filter;
+  struct Step {
+    HistoryRow<Filter> next_row, row;
+    MotionRow<Filter> next, row_motion;
+    MotionMatrix f_p, gain_t;
+  };
+  const std::unique_ptr<Step> w(new Step);
+  w->next_row = track.history[n - 1];
+  w->next = motion[n - 1];
   State next_smoothed = final_estimate;
-  out.set(n - 1, held(final_estimate), next_row.t_ns);
+  out.set(n - 1, held(final_estimate), w->next_row.t_ns);
   for (std::size_t k = n - 1; k-- > 0;) {
-    const HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> row = track.history[k];
-    row_motion = motion[k];
-    State smoothed = row.state;
+    w->row = track.history[k];
+    w->row_motion = motion[k];
+    State smoothed = w->row.state;
     // A row that followed no update (the final one) says nothing new about the one before it.
-    if (next.step.update != row_motion.step.update) {
+    if (w->next.step.update != w->row_motion.step.update) {
       // C = P_k F^T P_{k+1|k}^-1, so C^T = P_{k+1|k}^-1 F P_k (both covariances symmetric).
-      const MotionMatrix f_p = next.step.transition * row_motion.covariance;
-      const MotionMatrix gain_t = next.step.predicted_covariance.ldlt().solve(f_p);
+      w->f_p = w->next.step.transition * w->row_motion.covariance;
+      w->gain_t = w->next.step.predicted_covariance.ldlt().solve(w->f_p);
       const Eigen::Matrix<double, D, 1> d =
-          next_smoothed.template boxminus_block<0, D>(next_row.predicted);
-      if (gain_t.allFinite()) smoothed.template boxplus_block<0, D>(gain_t.transpose() * d);
+          next_smoothed.template boxminus_block<0, D>(w->next_row.predicted);
+      if (w->gain_t.allFinite()) smoothed.template boxplus_block<0, D>(w->gain_t.transpose() * d);
     }
-    out.set(k, held(smoothed), row.t_ns);
+    out.set(k, held(smoothed), w->row.t_ns);
     next_smoothed = smoothed;
-    next_row = row;
-    next = row_motion;
+    w->next_row = w->row;
+    w->next = w->row_motion;
   }
   out.set_rates();
 }
