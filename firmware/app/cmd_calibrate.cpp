@@ -19,7 +19,7 @@ namespace {
 
 template <int M, int NK, int NI = 0>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
-              const sim::CalibrationStart* from) {
+              const sim::CalibrationStart* from, const Passes& passes) {
   if constexpr (NI > 0)
     std::printf("mirrorcal calibrate: the IMU's intrinsics estimated too (model %s)\n",
                 to_string(imu_model_of_dim(NI)));
@@ -41,7 +41,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   CalibrationRun<M, NK, NI> run;
   const auto t0 = std::chrono::steady_clock::now();
   if (!calibrate_recording<M, NK, NI>(
-          rec, run, err, [](double f) { print_progress("calibrating", f); }, from))
+          rec, run, err, [](double f) { print_progress("calibrating", f); }, from, passes))
     fail(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   end_progress("calibrating done");
@@ -124,9 +124,10 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv%s%s\n",
+      "report.html, residuals.csv%s%s%s\n",
       out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "",
-      NI > 0 ? ", kalibr_imu_chain.yaml (the IMU's intrinsics, as OpenVINS reads them)" : "");
+      NI > 0 ? ", kalibr_imu_chain.yaml (the IMU's intrinsics, as OpenVINS reads them)" : "",
+      run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
   return 0;
 }
 
@@ -136,7 +137,8 @@ int cmd_calibrate(int argc, char** argv) {
   Options o;
   std::string err;
   if (!parse(argc, argv, 2, {"out", "from", "imu-model"},
-             {"intrinsics", "hold-skew", "from-same-data", "from-images"}, o, err, 1))
+             {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise"}, o, err,
+             1))
     fail(err);
   if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
   const std::string in = o.positional[0];
@@ -216,11 +218,16 @@ int cmd_calibrate(int argc, char** argv) {
       fail(std::string("the IMU model ") + to_string(imu_model) +
            " is estimated in stage 1 (without the camera's intrinsics); calibrate stage 2 with "
            "imu_model: calibrated, from the stage-1 result (--from)");
-    if (intrinsics && rec.priors.estimate_distortion) return calibrate<M, 8>(rec, in, out, from);
-    if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from);
-    if (intrinsics) return calibrate<M, 5>(rec, in, out, from);
+    // --estimate-noise: the noise densities and the pixel noise from the data, not imu.yaml's and
+    // mirrorcal.yaml's (noise_estimate.hpp).
+    Passes passes;
+    passes.estimate_noise = o.flag("estimate-noise");
+    if (intrinsics && rec.priors.estimate_distortion)
+      return calibrate<M, 8>(rec, in, out, from, passes);
+    if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from, passes);
+    if (intrinsics) return calibrate<M, 5>(rec, in, out, from, passes);
     return with_imu_model_of(imu_model, [&](auto imu) {
-      return calibrate<M, 0, decltype(imu)::value>(rec, in, out, from);
+      return calibrate<M, 0, decltype(imu)::value>(rec, in, out, from, passes);
     });
   });
 }

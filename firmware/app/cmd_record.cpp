@@ -210,7 +210,7 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   if (!writer.close(err)) return false;
 
   sim::SensorInfo sensors;
-  sensors.imu = s.imu;
+  sensors.imu = s.told_imu.value_or(s.imu);  // what imu.yaml says (the mems family's told noise)
   sensors.imu_rate_hz = s.imu_rate_hz;
   sensors.intrinsics = s.truth.intrinsics;  // stage 1 calibrates with a calibrated camera
   if (lens) sensors.intrinsics.coeffs = prior.intrinsics.coeffs;
@@ -219,7 +219,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   // intrinsics: calibrate estimates them too, from the prior's guess (the paper's Table III
   // errors) rather than camchain.yaml's calibrated camera.
   sim::RecordingPriors priors =
-      sim::from_prior(prior, s.gravity_n, s.pixel_sigma, intrinsics, hold_skew || lens);
+      sim::from_prior(prior, s.gravity_n, s.told_pixel_sigma.value_or(s.pixel_sigma), intrinsics,
+                      hold_skew || lens);
   priors.estimate_distortion = lens;
   sim::RecordingTruth truth;
   truth.p_b_c = s.truth.p_b_c;

@@ -106,8 +106,9 @@ bool report_run(const Run& run, const SimReport& r, std::string& err) {
   if (!write_run_outputs_and_report(r.dir, run, r.title, r.two_stage, figures, err)) return false;
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv\n",
-      r.dir.c_str());
+      "report.html, residuals.csv%s\n",
+      r.dir.c_str(),
+      run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
   return !r.profiler ||
          report_profile(*r.profiler,
                         "this host's monotonic clock, simulated data fed as fast as it is taken",
@@ -139,8 +140,9 @@ int cmd_sim(int argc, char** argv) {
                                          "spot-noise", "passes",      "timeshift",
                                          "distortion", "line-delay",  "filter-line-delay",
                                          "markers",    "duration"},
-                           flags = {"no-plots",  "frames",    "intrinsics",
-                                    "hold-skew", "one-stage", "estimate-distortion"};
+                           flags = {"no-plots",      "frames",    "intrinsics",
+                                    "hold-skew",     "one-stage", "estimate-distortion",
+                                    "estimate-noise"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   Options o;
@@ -171,6 +173,10 @@ int cmd_sim(int argc, char** argv) {
     fail(std::string("--imu-model ") + to_string(imu_model) +
          ": the IMU's intrinsics are estimated in stage 1 from listed markers only (without "
          "--intrinsics and --frames)");
+  // --estimate-noise: the noise levels from the data, the calibration made again with them.
+  passes.estimate_noise = o.flag("estimate-noise");
+  if (intrinsics && passes.estimate_noise)
+    fail("--estimate-noise applies to stage 1 only (without --intrinsics)");
   std::string dir;
   if (!make_out_dir(o, "out/sim", dir, error)) fail(error, 1);
   firmware::SteadyClock clock;  // the simulation's own clock is simulated time

@@ -44,6 +44,8 @@ const std::vector<Command>& commands() {
        "              into the frames and the one the filter assumes; default the scenario's)\n"
        "              [--passes N]  (exactly N passes over the data; default 2, up to 4 while the\n"
        "              last gates over 0.5 % of the markers; the last pass is reported)\n"
+       "              [--estimate-noise]  (the IMU's noise densities and the pixel noise from\n"
+       "              the data, not imu.yaml's; writes imu.yaml with them)\n"
        "              [--profile [--budget-imu-us N] [--budget-frame-us N]]\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_sim},
@@ -85,7 +87,8 @@ const std::vector<Command>& commands() {
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
        "mirrorcal.yaml)\n"
        "              DIR [--intrinsics [--hold-skew]] [--from RESULT [--from-same-data]]\n"
-       "              [--out OUT] [--from-images]\n"
+       "              [--out OUT] [--from-images] [--estimate-noise]  (the IMU's noise\n"
+       "              densities and the pixel noise from the data; writes imu.yaml with them)\n"
        "              (the markers: mav0/cam0/features.csv; a recording without it, whose\n"
        "              images are in mav0/cam0/data/ (8-bit PNG or PGM, as cam0/data.csv names\n"
        "              them), has them detected in its images by the board's detection and\n"

@@ -528,29 +528,6 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
   return true;
 }
 
-std::string imu_yaml_text(const SensorInfo& s) {
-  std::string imu = "# Kalibr IMU description (continuous-time noise densities)\nrostopic: /imu0\n";
-  imu +=
-      "accelerometer_noise_density: " + number(s.imu.accel_noise_density) + "  # m/s^2/sqrt(Hz)\n";
-  imu += "accelerometer_random_walk: " + number(s.imu.accel_random_walk) + "  # m/s^3/sqrt(Hz)\n";
-  imu += "gyroscope_noise_density: " + number(s.imu.gyro_noise_density) + "  # rad/s/sqrt(Hz)\n";
-  imu += "gyroscope_random_walk: " + number(s.imu.gyro_random_walk) + "  # rad/s^2/sqrt(Hz)\n";
-  imu += "update_rate: " + number(s.imu_rate_hz) + "  # Hz\n";
-  if (s.imu_model) {
-    const ImuIntrinsicsSigma& t = s.imu_tolerances;
-    imu += std::string(
-               "# mirrorcal's: the IMU model to estimate and the datasheet's tolerances "
-               "(1-sigma; relative, g-sensitivity in (rad/s)/(m/s^2))\nimu_model: ") +
-           to_string(*s.imu_model) + "\n";
-    imu += "accelerometer_scale_tolerance: " + number(t.accel_scale) + "\n";
-    imu += "accelerometer_cross_axis_tolerance: " + number(t.accel_misalignment) + "\n";
-    imu += "gyroscope_scale_tolerance: " + number(t.gyro_scale) + "\n";
-    imu += "gyroscope_cross_axis_tolerance: " + number(t.gyro_misalignment) + "\n";
-    imu += "gyroscope_g_sensitivity: " + number(t.g_sensitivity) + "\n";
-  }
-  return imu;
-}
-
 bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string& error) {
   const std::string imu = imu_yaml_text(s);
   const auto k = as_array(s.intrinsics);

@@ -254,10 +254,24 @@ void add_mems_imperfections(Scenario& s, std::uint64_t seed) {
   for (int i = 0; i < 9; ++i) k.t_s.data()[i] = d.uniform(-g_sensitivity, g_sensitivity);
 }
 
+void add_told_noise(Scenario& s, std::uint64_t seed) {
+  Draw d(seed ^ 0x544F4C44ull);  // "TOLD": a stream of its own
+  const auto factor = [&d] { return std::exp(d.uniform(std::log(0.5), std::log(5.0))); };
+  const double gyro = factor(), accel = factor(), pixel = factor();
+  ImuNoise told = s.imu;
+  told.gyro_noise_density *= gyro;
+  told.gyro_random_walk *= gyro;
+  told.accel_noise_density *= accel;
+  told.accel_random_walk *= accel;
+  s.told_imu = told;
+  s.told_pixel_sigma = s.pixel_sigma * pixel;
+}
+
 Scenario mems_scenario(std::uint64_t seed, int markers) {
   Scenario s = random_scenario(seed, markers);
   s.name = "mems";
   add_mems_imperfections(s, seed);
+  add_told_noise(s, seed);
   return s;
 }
 

@@ -1,6 +1,6 @@
-// The random scenario family: every draw is a rig docs/scenarios.md's "The `random` family" describes,
-// its motion's body rate is the derivative of its attitude, and the camera sees the markers. A
-// rolling shutter: the simulator's reflections and the estimator's model of them agree.
+// The random scenario family: every draw is a rig docs/scenarios.md's "The `random` family"
+// describes, its motion's body rate is the derivative of its attitude, and the camera sees the
+// markers. A rolling shutter: the simulator's reflections and the estimator's model of them agree.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -164,6 +164,38 @@ TEST(RollingShutter, TheModelPredictsEachMarkerAtItsRowAsTheSimulatorReadsIt) {
     EXPECT_LT(worst_modelled, 0.02) << "seed " << seed;
     EXPECT_LT(worst_modelled, 0.1 * worst_global) << "seed " << seed;
   }
+}
+
+// The mems family's stated noise (docs/scenarios.md): each of the three factors 0.5-5 times the
+// truth, log-uniform (about half below 1.58, the range's geometric middle), the truth untouched and
+// every other draw the random family's.
+TEST(MemsFamily, TheStatedNoiseIsHalfToFiveTimesTheTruthAndChangesNoOtherDraw) {
+  constexpr int kRigs = 200;
+  int below_middle = 0;
+  for (std::uint64_t seed = 1; seed <= kRigs; ++seed) {
+    const Scenario r = random_scenario(seed), m = mems_scenario(seed);
+    ASSERT_FALSE(r.told_imu.has_value());
+    ASSERT_TRUE(m.told_imu.has_value() && m.told_pixel_sigma.has_value());
+    EXPECT_EQ(m.imu.gyro_noise_density, r.imu.gyro_noise_density);
+    EXPECT_EQ(m.imu.accel_noise_density, r.imu.accel_noise_density);
+    EXPECT_EQ(m.pixel_sigma, r.pixel_sigma);
+    EXPECT_EQ(m.truth.p_b_c, r.truth.p_b_c);
+    EXPECT_EQ(m.truth.t_d, r.truth.t_d);
+    EXPECT_EQ(m.camera_rate_hz, r.camera_rate_hz);
+    const double g = m.told_imu->gyro_noise_density / m.imu.gyro_noise_density;
+    const double a = m.told_imu->accel_noise_density / m.imu.accel_noise_density;
+    const double p = *m.told_pixel_sigma / m.pixel_sigma;
+    for (const double f : {g, a, p}) {
+      EXPECT_GE(f, 0.5);
+      EXPECT_LE(f, 5.0);
+      below_middle += f < std::sqrt(0.5 * 5.0) ? 1 : 0;
+    }
+    // Each random walk goes with its density.
+    EXPECT_NEAR(m.told_imu->gyro_random_walk / m.imu.gyro_random_walk, g, 1e-12);
+    EXPECT_NEAR(m.told_imu->accel_random_walk / m.imu.accel_random_walk, a, 1e-12);
+  }
+  EXPECT_GT(below_middle, 3 * kRigs / 2 - 60);  // binomial(600, 1/2): 300 +- 12
+  EXPECT_LT(below_middle, 3 * kRigs / 2 + 60);
 }
 
 }  // namespace

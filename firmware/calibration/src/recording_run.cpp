@@ -27,7 +27,7 @@ LoopData recording_loop_data(const sim::Recording& r) {
 template <int M, int NK, int NI>
 bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run,
                          std::string& error, const std::function<void(double)>& progress,
-                         const sim::CalibrationStart* from) {
+                         const sim::CalibrationStart* from, Passes passes) {
   Prior<M> prior;
   if (!sim::to_prior(r.priors, prior, error)) return false;
   prior.sigma_imu_intrinsics = r.sensors.imu_tolerances;
@@ -59,7 +59,7 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   }
   const LoopData data = recording_loop_data(r);
   run = run_loop<M, NK, NI>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr,
-                            progress);
+                            progress, {}, passes);
   run.result.from_untrusted = from != nullptr && !from->trusted;
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();

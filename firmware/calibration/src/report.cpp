@@ -296,6 +296,44 @@ void add_verdict(std::string& t, const ReportData& d) {
   t += "\n\n";
 }
 
+// The noise levels estimated from the data (Passes::estimate_noise), against those stated.
+void add_noise(std::string& t, const ReportData& d) {
+  const NoiseEstimate& n = d.result.noise;
+  if (!n.estimated) return;
+  t += "NOISE (estimated from the data and used; the stated levels beside them)\n";
+  const auto row = [&t](const char* name, double est, double sigma, double told, const char* unit) {
+    t += format("  %-28s %11.4g +- %-9.2g %s  (stated %.4g: %.2f times the estimate)\n", name, est,
+                sigma, unit, told, est > 0.0 ? told / est : 0.0);
+  };
+  const auto kept = [&t](const char* name, double told, double ratio, const char* unit) {
+    t += format(
+        "  %-28s %11.4g %s as stated: NOT estimated, the samples' noise is not white from sample "
+        "to sample (it reads %.2f times more over every other sample, "
+        "white noise 1: a low-pass filter in the part?); measure it with imu-noise\n",
+        name, told, unit, ratio);
+  };
+  if (n.gyro_estimated)
+    row("gyroscope_noise_density", n.imu.gyro_noise_density, n.gyro_density_sigma,
+        n.told.gyro_noise_density, "rad/s/sqrt(Hz)");
+  else
+    kept("gyroscope_noise_density", n.imu.gyro_noise_density, n.gyro_stride2_ratio,
+         "rad/s/sqrt(Hz)");
+  if (n.accel_estimated)
+    row("accelerometer_noise_density", n.imu.accel_noise_density, n.accel_density_sigma,
+        n.told.accel_noise_density, "m/s^2/sqrt(Hz)");
+  else
+    kept("accelerometer_noise_density", n.imu.accel_noise_density, n.accel_stride2_ratio,
+         "m/s^2/sqrt(Hz)");
+  row("pixel_sigma", n.pixel_sigma, n.pixel_sigma_sigma, n.told_pixel_sigma, "px");
+  t += format(
+      "  the densities from %llu fourth differences of the IMU's samples, the pixel noise from "
+      "the refinement's last pass (%.0f dof); %d calibration(s) with the estimates, %s; the "
+      "random walks as stated (60 s hardly see them); imu.yaml beside this report has the "
+      "estimated densities\n\n",
+      static_cast<unsigned long long>(n.imu_differences), n.pixel_redundancy, n.refinements,
+      n.converged ? "converged" : "NOT converged");
+}
+
 void add_calibration(std::string& t, const ReportData& d) {
   const CalibrationResult& r = d.result;
   const Eigen::Matrix3d r_c_b = r.q_b_c.toRotationMatrix().transpose();
@@ -539,6 +577,7 @@ void add_excitation(std::string& t, const ReportData& d) {
 std::string report_text(const ReportData& d) {
   std::string t = "mirrorcal calibration report: " + d.title + "\n\n";
   add_verdict(t, d);
+  add_noise(t, d);
   add_calibration(t, d);
   add_imu(t, d);
   if (d.rows.empty()) {

@@ -348,6 +348,40 @@ std::vector<std::string> result_warnings(const CalibrationResult& r) {
   return w;
 }
 
+static void write_noise_estimate(std::FILE* o, const NoiseEstimate& n) {
+  if (!n.estimated) return;
+  std::fprintf(o,
+               "noise_estimate:  # from the data (noise_estimate.hpp) and used by the calibration; "
+               "each with its 1-sigma, beside what imu.yaml and mirrorcal.yaml stated\n");
+  std::fprintf(o, "  gyroscope_noise_density: %.9g  # rad/s/sqrt(Hz)\n", n.imu.gyro_noise_density);
+  std::fprintf(o, "  gyroscope_noise_density_sigma: %.3g\n", n.gyro_density_sigma);
+  std::fprintf(o, "  gyroscope_noise_density_stated: %.9g\n", n.told.gyro_noise_density);
+  std::fprintf(o, "  accelerometer_noise_density: %.9g  # m/s^2/sqrt(Hz)\n",
+               n.imu.accel_noise_density);
+  std::fprintf(o, "  accelerometer_noise_density_sigma: %.3g\n", n.accel_density_sigma);
+  std::fprintf(o, "  accelerometer_noise_density_stated: %.9g\n", n.told.accel_noise_density);
+  std::fprintf(
+      o,
+      "  densities_estimated: [%s, %s]  # gyroscope, accelerometer; false: the samples' "
+      "noise is not white from sample to sample (a low-pass filter in the part?), the "
+      "stated density kept\n"
+      "  stride2_ratio: [%.3f, %.3f]  # the test: the density over every other sample over "
+      "the one from sample to sample, 1 for white noise (within 5 %%)\n",
+      n.gyro_estimated ? "true" : "false", n.accel_estimated ? "true" : "false",
+      n.gyro_stride2_ratio, n.accel_stride2_ratio);
+  std::fprintf(o, "  pixel_sigma: %.6g  # px\n", n.pixel_sigma);
+  std::fprintf(o, "  pixel_sigma_sigma: %.3g\n", n.pixel_sigma_sigma);
+  std::fprintf(o, "  pixel_sigma_stated: %.6g\n", n.told_pixel_sigma);
+  std::fprintf(o,
+               "  random_walks: stated  # 60 s hardly see them: imu.yaml's, as given\n"
+               "  imu_differences: %llu  # fourth differences of the samples the densities rest "
+               "on\n  pixel_redundancy: %.1f  # degrees of freedom of the pixel noise's estimate\n"
+               "  calibrations: %d  # made with the estimates until the pixel noise settled\n"
+               "  converged: %s\n",
+               static_cast<unsigned long long>(n.imu_differences), n.pixel_redundancy,
+               n.refinements, n.converged ? "true" : "false");
+}
+
 bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
                        std::string& error) {
   std::FILE* o = out.add(path, error);
@@ -430,6 +464,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit,
                kLooseMarkerScale);
   write_imu_result_yaml(o, r.imu);
+  write_noise_estimate(o, r.noise);
   std::fprintf(o, "sigma:\n");
   for (std::size_t j = 0; j < r.params.size(); ++j)
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);

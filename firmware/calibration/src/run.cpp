@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "mirrorcal/calibration/image_markers.hpp"
+#include "mirrorcal/calibration/noise_estimate.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -517,11 +518,65 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
                                    const std::function<LoopHooks<M>(int pass)>& hooks,
                                    Passes passes) {
   using State = typename CalibrationRun<M, NK, NI>::State;
-  State start = x0;
-  CalibrationRun<M, NK, NI> run =
-      free_passes<M, NK, NI>(config, p0, data, truth, progress, hooks, passes, start);
-  if (passes.refine && !run.history.empty())
-    refine<M, NK, NI>(config, x0, p0, data, truth, hooks, start, run);
+  const auto calibrate = [&](const CalibrationConfig& c) {
+    State start = x0;
+    CalibrationRun<M, NK, NI> run =
+        free_passes<M, NK, NI>(c, p0, data, truth, progress, hooks, passes, start);
+    if (passes.refine && !run.history.empty())
+      refine<M, NK, NI>(c, x0, p0, data, truth, hooks, start, run);
+    return run;
+  };
+  CalibrationRun<M, NK, NI> run;
+  CalibrationConfig used = config;
+  if (passes.estimate_noise && passes.refine) {
+    // The noise levels from the data (noise_estimate.hpp): the IMU's white-noise densities from
+    // its samples, once; the pixel noise by Foerstner's estimate from the refinement's last pass,
+    // and the calibration made again with it until it settles.
+    NoiseEstimate noise;
+    noise.estimated = true;
+    noise.told = config.imu;
+    noise.told_pixel_sigma = config.pixel_sigma;
+    noise.imu = config.imu;
+    noise.imu_rate_hz = 1e9 / static_cast<double>(data.imu_period_ns);
+    ImuWhiteNoise white;
+    if (imu_white_noise(*data.open_imu(), data.imu_period_ns, white)) {
+      noise.imu_differences = white.differences;
+      noise.gyro_stride2_ratio = white.gyro_stride2_ratio;
+      noise.accel_stride2_ratio = white.accel_stride2_ratio;
+      noise.gyro_estimated = ImuWhiteNoise::white(white.gyro_stride2_ratio);
+      noise.accel_estimated = ImuWhiteNoise::white(white.accel_stride2_ratio);
+      if (noise.gyro_estimated) {
+        noise.imu.gyro_noise_density = white.gyro_density;
+        noise.gyro_density_sigma = white.gyro_sigma;
+      }
+      if (noise.accel_estimated) {
+        noise.imu.accel_noise_density = white.accel_density;
+        noise.accel_density_sigma = white.accel_sigma;
+      }
+    }
+    used.imu = noise.imu;
+    used.sigma_points.noise_statistics = true;
+    used.pixel_sigma = kNoiseStartScale * config.pixel_sigma;
+    for (int k = 0; k < kMaxNoiseRuns; ++k) {
+      run = calibrate(used);
+      noise.refinements = k + 1;
+      if (run.history.empty()) break;
+      double estimate = 0.0, sigma = 0.0;
+      const FilterCounters& c = run.filter_counters;
+      if (!pixel_noise_estimate(c.pixel_noise_quadratic, c.pixel_noise_redundancy, used.pixel_sigma,
+                                estimate, sigma))
+        break;
+      noise.pixel_sigma = estimate;
+      noise.pixel_sigma_sigma = sigma;
+      noise.pixel_redundancy = c.pixel_noise_redundancy;
+      noise.converged = std::abs(estimate / used.pixel_sigma - 1.0) < kNoiseConvergedFraction;
+      if (noise.converged) break;
+      if (k + 1 < kMaxNoiseRuns) used.pixel_sigma = estimate;
+    }
+    run.result.noise = noise;
+  } else {
+    run = calibrate(config);
+  }
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<M, NK, NI>(x0, p0, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
@@ -529,7 +584,7 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
   for (int i = State::kImu; i < State::kImu + NI; ++i)
     run.result.imu.prior_sigma.push_back(std::sqrt(p0(i, i)));
   run.result.imu.rate_hz = 1e9 / double(data.imu_period_ns);
-  run.pixel_sigma = config.pixel_sigma;
+  run.pixel_sigma = used.pixel_sigma;
   run.gate_after_frames = config.gate_after_frames;
   return run;
 }

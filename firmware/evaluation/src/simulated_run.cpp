@@ -11,8 +11,8 @@ using namespace calibration;
 CalibrationConfig scenario_config(const sim::Scenario& s) {
   CalibrationConfig c;
   c.gravity_n = s.gravity_n;
-  c.imu = s.imu;
-  c.pixel_sigma = s.pixel_sigma;
+  c.imu = s.told_imu.value_or(s.imu);
+  c.pixel_sigma = s.told_pixel_sigma.value_or(s.pixel_sigma);
   c.intrinsics = s.truth.intrinsics;
   if (s.told_line_delay_s) c.intrinsics.line_delay_s = *s.told_line_delay_s;
   return c;

@@ -45,6 +45,11 @@ struct FilterCounters {
   // near 1 (a little below: the gate cuts the tail).
   double nis_sum = 0.0;
   std::uint64_t nis_dof = 0;
+  // With SigmaPointParams::noise_statistics, over every update (gate on or not): the sums of
+  // UpdateResult's noise_quadratic and noise_redundancy, whose ratio times the pixel noise's
+  // variance is Foerstner's estimate of that variance (calibration's noise_estimate.hpp).
+  double pixel_noise_quadratic = 0.0;
+  double pixel_noise_redundancy = 0.0;
 };
 
 template <typename S, int M, int NK, int NI = 0>
@@ -378,6 +383,19 @@ UpdateResult CalibrationFilter<S, M, NK, NI>::update(const MarkerFrame<M>& frame
   if (gate_on && res.status == FilterStatus::kOk) {
     counters_.nis_sum += res.nis;
     counters_.nis_dof += 2 * static_cast<std::uint64_t>(res.used);
+  }
+  if (res.status == FilterStatus::kOk && config_.sigma_points.noise_statistics) {
+    // Once the gate is on, the markers it let through are those whose innovation fell inside it:
+    // a 2-dof chi-square cut at c keeps 1 - (c/2) e^(-c/2) / (1 - e^(-c/2)) of its mean (0.993
+    // at 99.9 %), and so of the quadratic's expectation (exactly so where the pixel noise
+    // dominates S); uncorrected, the estimate read 0.35 % low, 1.2 of its sigmas RMS off.
+    double kept = 1.0;
+    if (gate_on && std::isfinite(config_.gate_chi2) && config_.gate_chi2 > 0.0) {
+      const double tail = std::exp(-0.5 * config_.gate_chi2);
+      kept = 1.0 - 0.5 * config_.gate_chi2 * tail / (1.0 - tail);
+    }
+    counters_.pixel_noise_quadratic += res.noise_quadratic;
+    counters_.pixel_noise_redundancy += kept * res.noise_redundancy;
   }
   ++counters_.updates;
   counters_.markers_used += static_cast<std::uint64_t>(res.used);

@@ -163,6 +163,11 @@ struct SigmaPointParams {
   // slopes at the reference, its Jacobian, which the iteration's last step needs (calibration's
   // run.hpp, kTangentAlphaScale).
   double linearised_alpha_scale = 1.0;
+  // Whether an update also reports what a variance-component estimate of the measurement noise
+  // needs (UpdateResult::noise_quadratic and noise_redundancy): one triangular solve per row of
+  // the innovation covariance. Off by default: the board's loop does not pay for it; the host's
+  // refinement asks for it when it estimates the noise (calibration's noise_estimate.hpp).
+  bool noise_statistics = false;
 };
 
 enum class FilterStatus : std::uint8_t {
@@ -202,6 +207,13 @@ struct UpdateResult {
   int steps = 0;    // progressive sub-updates applied (1 for an ordinary update)
   bool cross_terms = false;  // whether the second-order cross terms were added
   double nis = 0.0;          // normalised innovation squared of the blocks used
+  // With SigmaPointParams::noise_statistics, over the blocks used, with R the measurement noise
+  // (diagonal) and S the innovation covariance: nu^T S^-1 R S^-1 nu (the squared residual R S^-1
+  // nu weighted by R^-1, times R's scale) and tr(R S^-1), the update's redundancy in the noise. A
+  // model and noise right give E[noise_quadratic] = noise_redundancy (Foerstner's variance
+  // component estimate: the noise's variance times their ratio).
+  double noise_quadratic = 0.0;
+  double noise_redundancy = 0.0;
 };
 
 // A Euclidean state R^N: the simplest manifold, used for linear models and in tests.
@@ -433,6 +445,21 @@ class SigmaPointFilter {
         return result;
       }
       result.nis = static_cast<double>(nu_used.dot(llt_s.solve(nu_used)));  // inert blocks add 0
+      if (params_.noise_statistics) {
+        // Inert rows have zero innovation and an identity in S: they add nothing below.
+        const ZVec w = llt_s.solve(nu_used);
+        ZVec unit = ZVec::Zero();
+        for (int b = 0; b < kBlocks; ++b) {
+          if (!ok[b]) continue;
+          for (int i = b * kRows; i < (b + 1) * kRows; ++i) {
+            result.noise_quadratic += static_cast<double>(r_diag(i) * w(i) * w(i));
+            unit(i) = Scalar(1);  // (S^-1)_ii = |L^-1 e_i|^2
+            llt_s.matrixL().solveInPlace(unit);
+            result.noise_redundancy += static_cast<double>(r_diag(i) * unit.squaredNorm());
+            unit.setZero();
+          }
+        }
+      }
     }
 
     // A step that fails after others were applied must not leave them applied. A failed step

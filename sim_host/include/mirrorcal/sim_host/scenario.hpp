@@ -75,7 +75,11 @@ struct Scenario {
   std::string motion_kind = "paper";  // "slow" hand-held sweeps or "fast" (the paper's pace)
   double imu_noise_scale = 1.0;       // the IMU noise densities against the ADIS16448's
   Eigen::Vector3d gravity_n{0.0, -9.81, 0.0};
-  ImuNoise imu{};  // the true noise; the filter is told the same
+  ImuNoise imu{};  // the true noise; the filter is told told_imu if set, else the same
+  // The IMU noise and pixel noise the filter is told (imu.yaml's, mirrorcal.yaml's), when not the
+  // true ones: a datasheet's figures copied for the part's (add_told_noise).
+  std::optional<ImuNoise> told_imu;
+  std::optional<double> told_pixel_sigma;
   // The IMU's true intrinsics (imu_intrinsics.hpp: its samples read T_a a + b_a and
   // T_g w + T_s a + b_g); the identity, an ideal IMU, but in the mems family.
   ImuIntrinsics<double> imu_intrinsics{};
@@ -115,6 +119,11 @@ Scenario random_scenario(std::uint64_t seed, int markers = kPaperMarkers);
 Scenario mems_scenario(std::uint64_t seed, int markers = kPaperMarkers);
 // The same draws, on any scenario.
 void add_mems_imperfections(Scenario& s, std::uint64_t seed);
+// The noise a user states for the rig (docs/scenarios.md, "The mems family"): each of the gyro's
+// and accelerometer's white-noise densities (with its random walk) and the pixel noise told
+// 0.5-5 times the truth, log-uniform and independently. Drawn from a stream of their own, so that
+// the rig and its MEMS errors are those without it.
+void add_told_noise(Scenario& s, std::uint64_t seed);
 // Whether the scenario's IMU has intrinsics other than the identity.
 bool has_imu_intrinsics(const Scenario& s);
 

@@ -19,16 +19,16 @@ LoopData recording_loop_data(const sim::Recording& r);
 // skew held at camchain.yaml's; 8: fu fv cu cv and the lens's coefficients, skew held:
 // estimate_distortion) on a recording from its priors. False, with a message, if the priors do not
 // fit this build (e.g. another number of markers). With from, the camera pose and markers start
-// from that earlier calibration (start_from).
+// from that earlier calibration (start_from). passes: as run_loop's (estimate_noise).
 template <int M, int NK, int NI = 0>
 bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run,
                          std::string& error, const std::function<void(double)>& progress = {},
-                         const sim::CalibrationStart* from = nullptr);
+                         const sim::CalibrationStart* from = nullptr, Passes passes = {});
 
 #define MIRRORCAL_CALIBRATE_RECORDING(M, NK, NI)                                         \
   bool calibrate_recording<M, NK, NI>(const sim::Recording&, CalibrationRun<M, NK, NI>&, \
                                       std::string&, const std::function<void(double)>&,  \
-                                      const sim::CalibrationStart*)
+                                      const sim::CalibrationStart*, Passes)
 #define MIRRORCAL_EXTERN_CALIBRATE_RECORDING_(M)          \
   extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0, 0); \
   extern template MIRRORCAL_CALIBRATE_RECORDING(M, 4, 0); \

@@ -11,6 +11,7 @@
 
 #include "mirrorcal/calibration/history.hpp"
 #include "mirrorcal/calibration/imu_result.hpp"
+#include "mirrorcal/calibration/noise_estimate.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
@@ -58,6 +59,8 @@ struct CalibrationResult {
   std::string prior_offset_state;
   // The IMU: its model and, when estimated, its intrinsics (outside the calibration block).
   ImuResult imu;
+  // The noise levels estimated from the data, when asked (Passes::estimate_noise).
+  NoiseEstimate noise;
 
   // Where sigma's and covariance's groups lie.
   CalibrationLayout layout() const {

@@ -159,6 +159,14 @@ constexpr double kConvergedStepSigmas = 1.0;
 // (3 of 600 runs ended 4.3-6.8 sigma off, 2 of them unflagged). That last step's length is the
 // self-check's refinement_step (result.hpp, kRefinementStepLimit).
 constexpr double kTangentAlphaScale = 1.0 / 64.0;
+// Noise estimation (Passes::estimate_noise): the calibrations it makes at most, and the change
+// of the pixel noise's estimate under which it stops. The first starts from kNoiseStartScale
+// times the stated pixel noise: a noise stated too small makes the gate reject the markers that
+// would show it (told half the truth, a fifth of them), and the estimate from those let through
+// reads low; from above, the gate rejects nothing and the estimate comes down in a step or two.
+constexpr int kMaxNoiseRuns = 4;
+constexpr double kNoiseConvergedFraction = 0.03;
+constexpr double kNoiseStartScale = 2.0;
 constexpr int kImuStartFrames = 10;
 constexpr double kImuStartMaxS = 2.0;
 
@@ -168,6 +176,11 @@ struct Passes {
   // Whether the Gauss-Newton refinement passes follow (run_loop): they replay the data twice more,
   // which a source that delivers its data once (a camera) cannot.
   bool refine = true;
+  // Whether the noise levels are estimated from the data and the calibration made again with them
+  // (noise_estimate.hpp, run_loop): the IMU's white-noise densities from its samples before the
+  // passes, the pixel noise from the refinement's last linearised pass, until it moves by less
+  // than kNoiseConvergedFraction (at most kMaxNoiseRuns calibrations). Needs the refinement.
+  bool estimate_noise = false;
   static Passes exactly(int n) { return {n, n, true}; }
   static Passes once() { return {1, 1, false}; }
 };
@@ -245,12 +258,14 @@ void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0)
   p0.block(B, B, l, l) = earlier.covariance;
 }
 
-// camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir: added to out, or
-// written.
+// camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir, and imu.yaml when
+// it estimated the noise: added to out, or written.
 template <int M, int NK, int NI>
 bool add_run_outputs(files::OutputSet& out, const std::string& dir,
                      const CalibrationRun<M, NK, NI>& run, std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
+         (!run.result.noise.estimated ||
+          add_estimated_imu_yaml(out, dir + "/imu.yaml", run.result.noise, error)) &&
          write_result_yaml(out, dir + "/mirrorcal-result.yaml", run.result, error) &&
          (!run.result.imu.estimated() ||
           write_openvins_imu_chain(out, dir + "/kalibr_imu_chain.yaml", run.result.imu, error)) &&
