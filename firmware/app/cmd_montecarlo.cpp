@@ -37,6 +37,8 @@ struct Outcome {
   std::uint64_t gated = 0, failures = 0;
   int passes = 0;  // passes over the data (more than the default after a bad one)
   double nis_per_dof = 0, sigma_ratio = 1, refinement_step = 0;
+  // The ideal-IMU check's statistic over its bound (IdealImuCheck; 0 when not made).
+  double imu_check = 0;
   bool suspect = false;  // convergence_warning() would warn a user of this run
   ErrorSeries series;
   DetectionReport detection;  // --frames only
@@ -347,17 +349,22 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
     return refuse(
         "--imu-model: the IMU's intrinsics are estimated in stage 1 from listed markers "
         "(without --intrinsics and --frames)");
+  // --estimate-noise: as sim (the mems family states noise levels 0.5-5x the true ones).
+  c.passes.estimate_noise = o.flag("estimate-noise");
+  if (c.intrinsics && c.passes.estimate_noise)
+    return refuse("--estimate-noise applies to stage 1 only (without --intrinsics)");
   return true;
 }
 
 void print_campaign_title(const Campaign& c) {
   const std::string rig = c.rig ? ", every run rig " + std::to_string(*c.rig) : "";
   std::printf(
-      "mirrorcal montecarlo: scenario '%s'%s%s%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
+      "mirrorcal montecarlo: scenario '%s'%s%s%s%s%s%s%s%s, %llu runs on %llu jobs, seed %llu\n",
       c.scenario.name.c_str(), rig.c_str(), markers_note(c.scenario).c_str(),
       c.imu_model != ImuModel::kCalibrated
           ? (std::string(", IMU model ") + to_string(c.imu_model)).c_str()
           : "",
+      c.passes.estimate_noise ? ", the noise levels estimated" : "",
       c.lens ? ", the lens's coefficients estimated in stage 2" : "",
       !c.intrinsics ? ""
       : c.one_stage ? (c.hold_skew ? " in one stage with the intrinsics (skew held at 0)"
@@ -393,6 +400,8 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
     oc.nis_per_dof = r.result.nis_per_dof;
     oc.sigma_ratio = r.result.sigma_ratio;
     oc.refinement_step = r.result.refinement_step_sigmas;
+    const IdealImuCheck& check = r.result.imu.ideal_check;
+    oc.imu_check = check.made ? check.statistic / check.bound : 0.0;
     oc.failures = r.filter_counters.failures;
     oc.series = error_series(r.history, r.result.params);
     if (c.family && !c.intrinsics) {  // stage 1's limit (stage 2's is not computed yet)
@@ -634,7 +643,7 @@ void write_runs_csv(std::FILE* f, const std::vector<Outcome>& out,
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
   std::fprintf(f,
                ",nees,markers_gated,filter_failures,wall_s,passes,nis_per_dof,sigma_ratio,"
-               "refinement_step");
+               "refinement_step,imu_check");
   std::fprintf(f,
                ",mirror,motion,camera_hz,pixel_sigma,imu_noise_scale,prior_marker [cm],"
                "prior_p_b_c [cm],prior_rot_b_c [deg]");
@@ -645,10 +654,10 @@ void write_runs_csv(std::FILE* f, const std::vector<Outcome>& out,
     std::fprintf(f, "%zu,%llu", i, (unsigned long long)out[i].seed);
     for (double e : out[i].error) std::fprintf(f, ",%.6g", e);
     for (double e : out[i].sigma) std::fprintf(f, ",%.6g", e);
-    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d,%.4f,%.4f,%.4f", out[i].nees,
+    std::fprintf(f, ",%.4f,%llu,%llu,%.3f,%d,%.4f,%.4f,%.4f,%.4f", out[i].nees,
                  (unsigned long long)out[i].gated, (unsigned long long)out[i].failures,
                  out[i].wall_s, out[i].passes, out[i].nis_per_dof, out[i].sigma_ratio,
-                 out[i].refinement_step);
+                 out[i].refinement_step, out[i].imu_check);
     const sim::Scenario& rs = out[i].scenario;
     std::fprintf(f, ",%s,%s,%.2f,%.3f,%.2f,%.2f,%.2f,%.2f", rs.mirror.c_str(),
                  rs.motion_kind.c_str(), rs.camera_rate_hz, rs.pixel_sigma, rs.imu_noise_scale,
@@ -674,7 +683,8 @@ int cmd_montecarlo(int argc, char** argv) {
              {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
               "rig", "imu-model"},
-             {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion"},
+             {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion",
+              "estimate-noise"},
              o, error) ||
       !campaign_options(o, c, error))
     fail(error);

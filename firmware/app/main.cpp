@@ -62,7 +62,8 @@ const std::vector<Command>& commands() {
        "              [--pixel-sigma PX]  (as sim)\n"
        "              [--rig SEED]  (random: every run the rig sim --seed SEED draws, with\n"
        "              noise and prior guesses of its own: how well that one rig calibrates)\n"
-       "              [--imu-model MODEL]  (as sim; --scenario mems for MEMS IMUs)\n",
+       "              [--imu-model MODEL]  (as sim; --scenario mems for MEMS IMUs)\n"
+       "              [--estimate-noise]  (as sim)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
