@@ -125,13 +125,23 @@ TEST(MemsImu, TheScaleMisalignmentModelIsConsistentWhereTheIdealOneIsNot) {
 TEST(MemsImu, ThePipelineFromTheGuessesIsConsistent) {
   constexpr int kRigs = 10;
   double nees_sum = 0.0;
-  int unflagged = 0;
+  int unflagged = 0, checked = 0;
   for (std::uint64_t seed = 1; seed <= kRigs; ++seed) {
     const sim::Scenario s = mems_told_the_truth(seed);
     const auto with = evaluation::run_simulation<3, kScaleMisalignment>(s, seed);
     const auto without = evaluation::run_simulation<3, 0>(s, seed);
     const double nees = with.history.back().nees;
     const bool trusted = calibration::consistent(with.result);
+    // The ideal IMU's model on the same data: its result is off by more than its sigmas say, and
+    // the self-check must say so wherever it is; its ideal-IMU check says why (where its step
+    // kept the markers: a result that lost them is flagged for that).
+    if (without.history.back().nees > 40.0) {
+      EXPECT_FALSE(calibration::consistent(without.result)) << "rig " << seed;
+      if (without.result.imu.ideal_check.made) {
+        ++checked;
+        EXPECT_TRUE(calibration::imu_not_ideal(without.result)) << "rig " << seed;
+      }
+    }
     std::printf("rig %d: NEES %.2f (%s) with the IMU's intrinsics, %.2f (%s) without\n", int(seed),
                 nees, trusted ? "consistent" : "flagged", without.history.back().nees,
                 calibration::consistent(without.result) ? "consistent" : "flagged");
@@ -140,9 +150,30 @@ TEST(MemsImu, ThePipelineFromTheGuessesIsConsistent) {
     nees_sum += nees;
     EXPECT_LT(nees, 40.0) << "rig " << seed;  // chi-square(16) beyond 99.9 %
   }
+  EXPECT_GE(checked, kRigs - 2);
   ASSERT_GE(unflagged, kRigs / 2);
   std::printf("unflagged %d, average NEES %.2f\n", unflagged, nees_sum / unflagged);
   EXPECT_LT(nees_sum / unflagged, 24.0);
+}
+
+// The ideal-IMU check on rigs whose IMU is ideal (the random family): it passes, and its statistic
+// is the chi-square it claims to be. 5 rigs of about 12 dof each: the sum over the dof within
+// chi-square(60)'s 99.9 % interval, 0.52..1.65.
+TEST(MemsImu, TheIdealImuCheckPassesAnIdealImu) {
+  double statistic = 0.0;
+  int dof = 0;
+  for (std::uint64_t seed = 1; seed <= 5; ++seed) {
+    const auto run = evaluation::run_simulation<3, 0>(sim::random_scenario(seed), seed);
+    const calibration::IdealImuCheck& c = run.result.imu.ideal_check;
+    ASSERT_TRUE(c.made) << "rig " << seed;
+    EXPECT_FALSE(calibration::imu_not_ideal(run.result)) << "rig " << seed << ": " << c.statistic;
+    std::printf("rig %d: statistic %.2f of %d dof (bound %.1f)\n", int(seed), c.statistic, c.dof,
+                c.bound);
+    statistic += c.statistic;
+    dof += c.dof;
+  }
+  EXPECT_GT(statistic / dof, 0.52);
+  EXPECT_LT(statistic / dof, 1.65);
 }
 
 }  // namespace

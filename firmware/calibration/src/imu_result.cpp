@@ -99,6 +99,15 @@ void write_imu_result_yaml(std::FILE* o, const ImuResult& r) {
                to_string(r.model));
   if (!r.estimated()) {
     std::fprintf(o, "  # an ideal IMU assumed: bias and white noise only\n");
+    const IdealImuCheck& c = r.ideal_check;
+    if (c.made)
+      std::fprintf(o,
+                   "  # the check: one pass with the scale factors and axes estimated; their "
+                   "chi-square from an ideal IMU's over the dof the motion sees (the self-check: "
+                   "at most the bound), and the furthest [value, sigma]\n"
+                   "  ideal_imu_check: {statistic: %.3f, dof: %d, bound: %.3f, %s: [%.6g, %.3g]}\n",
+                   c.statistic, c.dof, c.bound, c.largest_name.c_str(), c.largest_value,
+                   c.largest_sigma);
     return;
   }
   std::fprintf(o, "  # measured = T true + bias: f_m = T_a a + b_a, w_m = T_g w + T_s a + b_g\n");

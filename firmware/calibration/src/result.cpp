@@ -177,6 +177,10 @@ bool imu_contradicted(const CalibrationResult& r) {
   return r.imu.estimated() && r.imu.prior_offset_sigmas > kPriorContradictedSigmas;
 }
 
+bool imu_not_ideal(const CalibrationResult& r) {
+  return !r.imu.estimated() && r.imu.ideal_check.failed();
+}
+
 bool scale_unresolved(const CalibrationResult& r) {
   return marker_scale_sigma(r) > kLooseMarkerScale;
 }
@@ -262,8 +266,20 @@ std::string prior_warning(const CalibrationResult& r) {
 }
 
 std::string imu_warning(const CalibrationResult& r) {
-  if (!imu_contradicted(r)) return {};
   char text[520];
+  if (imu_not_ideal(r)) {
+    const IdealImuCheck& c = r.imu.ideal_check;
+    std::snprintf(text, sizeof text,
+                  "the IMU is not an ideal one, as the calibration assumed (model calibrated): "
+                  "with its scale factors and axes estimated, they lie a chi-square of %.1f from "
+                  "an ideal IMU's (bound %.1f over %d dof), the furthest %s at %.3g +- %.2g. The "
+                  "estimate has absorbed them and is off by more than its sigmas say. Calibrate "
+                  "with --imu-model scale-misalignment (or imu.yaml's imu_model).",
+                  c.statistic, c.bound, c.dof, c.largest_name.c_str(), c.largest_value,
+                  c.largest_sigma);
+    return text;
+  }
+  if (!imu_contradicted(r)) return {};
   std::snprintf(text, sizeof text,
                 "the IMU's %s lies %.1f of its tolerance's sigmas from an ideal IMU (more than "
                 "%.0f; model %s): no part is off that far, so the calibration has traded the "

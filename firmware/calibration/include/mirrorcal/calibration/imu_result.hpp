@@ -13,6 +13,25 @@
 
 namespace mirrorcal::calibration {
 
+// The ideal-IMU check of a calibration that assumed an ideal IMU (run.hpp, Passes::check_imu): one
+// more pass from its final estimate with the scale factors and axes estimated as well
+// (scale-misalignment), and how far those lie from an ideal IMU's. An ideal IMU's estimate d
+// scatters about them with covariance C = P - P P0^-1 P (P0 the prior's, P the posterior), so over
+// the directions the motion sees (where the data took at least kImuCheckMinInformation of the
+// prior's variance) the statistic d^T C^-1 d is chi-square with that many degrees of freedom.
+struct IdealImuCheck {
+  bool made = false;
+  double statistic = 0.0;
+  int dof = 0;
+  double bound = 0.0;  // its 99.9 % quantile (kImuCheckQuantile)
+  // The intrinsic furthest from the ideal IMU in its own sigmas, as imu_intrinsic_names and
+  // imu_intrinsic_values give it.
+  std::string largest_name;
+  double largest_value = 0.0, largest_sigma = 0.0;
+
+  bool failed() const { return made && statistic > bound; }
+};
+
 // A calibration's IMU: the model, the intrinsics and their 1-sigma (the error state's order,
 // imu_intrinsic_names), with what the calibration was told of the sensor.
 struct ImuResult {
@@ -27,6 +46,7 @@ struct ImuResult {
   // the self-check (result.hpp, imu_contradicted).
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_name;
+  IdealImuCheck ideal_check;  // made for the calibrated model only
 
   bool estimated() const { return model != ImuModel::kCalibrated; }
 };

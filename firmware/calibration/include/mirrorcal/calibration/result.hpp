@@ -136,6 +136,10 @@ bool prior_contradicted(const CalibrationResult& r);
 // mems rig of 200 locked onto accelerometer scale factors of 5.7 with the markers shrunk to
 // match: NEES 1.1e5, every other check passed), or imu.yaml's tolerances are far too tight.
 bool imu_contradicted(const CalibrationResult& r);
+// A calibration that assumed an ideal IMU (model calibrated) on data that say otherwise: its
+// ideal-IMU check (imu_result.hpp, IdealImuCheck) found the scale factors and axes beyond an
+// ideal IMU's scatter. The estimate has absorbed them, and is off by more than its sigmas say.
+bool imu_not_ideal(const CalibrationResult& r);
 // The markers' common scale (marker_scale_sigma) known only to worse than kLooseMarkerScale: the
 // motion hardly accelerated the rig, and the estimate is neither as good as the data nor as its
 // sigmas say. 20 rigs of the random family beyond it (seeds 9, 10 and 12; 40 runs of each with

@@ -167,6 +167,13 @@ constexpr double kTangentAlphaScale = 1.0 / 64.0;
 constexpr int kMaxNoiseRuns = 4;
 constexpr double kNoiseConvergedFraction = 0.03;
 constexpr double kNoiseStartScale = 2.0;
+// The ideal-IMU check (Passes::check_imu): the directions of the intrinsics it tests are those
+// whose variance the data cut by at least kImuCheckMinInformation of the prior's (the others
+// would divide by next to nothing), and it fails beyond the kImuCheckQuantile quantile.
+constexpr double kImuCheckMinInformation = 0.1;
+constexpr double kImuCheckQuantile = 0.999;
+// The first pass number the check's passes ask hooks for (run_loop): after every other.
+constexpr int kImuCheckPass = 1000;
 constexpr int kImuStartFrames = 10;
 constexpr double kImuStartMaxS = 2.0;
 
@@ -181,6 +188,12 @@ struct Passes {
   // passes, the pixel noise from the refinement's last linearised pass, until it moves by less
   // than kNoiseConvergedFraction (at most kMaxNoiseRuns calibrations). Needs the refinement.
   bool estimate_noise = false;
+  // Whether a calibration that assumes an ideal IMU (stage 1, NI = 0) checks that assumption with
+  // one more pass, the scale factors and axes estimated from these tolerances (imu_result.hpp,
+  // IdealImuCheck; the self-check's imu_not_ideal). Needs the refinement, and a build with the
+  // scale-misalignment model.
+  bool check_imu = true;
+  ImuIntrinsicsSigma imu_tolerances{};
   static Passes exactly(int n) { return {n, n, true}; }
   static Passes once() { return {1, 1, false}; }
 };
