@@ -58,6 +58,7 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
     }
   }
   const LoopData data = recording_loop_data(r);
+  passes.imu_tolerances = r.sensors.imu_tolerances;  // the ideal-IMU check's prior
   run = run_loop<M, NK, NI>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr,
                             progress, {}, passes);
   run.result.from_untrusted = from != nullptr && !from->trusted;

@@ -60,6 +60,7 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   };
   CalibrationConfig config = scenario_config(s);
   if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
+  passes.imu_tolerances = s.priors.imu_intrinsics;  // the ideal-IMU check's prior
   Run run = run_loop<M, 0, NI>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) {
