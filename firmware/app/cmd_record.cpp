@@ -212,6 +212,9 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   sim::SensorInfo sensors;
   sensors.imu = s.told_imu.value_or(s.imu);  // what imu.yaml says (the mems family's told noise)
   sensors.imu_rate_hz = s.imu_rate_hz;
+  // The datasheet's tolerances the scenario states, which sim's ideal-IMU check uses too.
+  sensors.imu_tolerances = s.priors.imu_intrinsics;
+  sensors.imu_tolerances_defaulted = false;
   sensors.intrinsics = s.truth.intrinsics;  // stage 1 calibrates with a calibrated camera
   if (lens) sensors.intrinsics.coeffs = prior.intrinsics.coeffs;
   sensors.width = s.truth.width;

@@ -24,12 +24,14 @@ std::string imu_yaml_text(const SensorInfo& s) {
   imu += "gyroscope_noise_density: " + number(s.imu.gyro_noise_density) + "  # rad/s/sqrt(Hz)\n";
   imu += "gyroscope_random_walk: " + number(s.imu.gyro_random_walk) + "  # rad/s^2/sqrt(Hz)\n";
   imu += "update_rate: " + number(s.imu_rate_hz) + "  # Hz\n";
-  if (s.imu_model) {
-    const ImuIntrinsicsSigma& t = s.imu_tolerances;
-    imu += std::string(
-               "# mirrorcal's: the IMU model to estimate and the datasheet's tolerances "
-               "(1-sigma; relative, g-sensitivity in (rad/s)/(m/s^2))\nimu_model: ") +
+  if (s.imu_model)
+    imu += std::string("# mirrorcal's: the IMU model to estimate\nimu_model: ") +
            to_string(*s.imu_model) + "\n";
+  if (s.imu_model || !s.imu_tolerances_defaulted) {
+    const ImuIntrinsicsSigma& t = s.imu_tolerances;
+    imu +=
+        "# mirrorcal's: the datasheet's tolerances (1-sigma; relative, g-sensitivity in "
+        "(rad/s)/(m/s^2))\n";
     imu += "accelerometer_scale_tolerance: " + number(t.accel_scale) + "\n";
     imu += "accelerometer_cross_axis_tolerance: " + number(t.accel_misalignment) + "\n";
     imu += "gyroscope_scale_tolerance: " + number(t.gyro_scale) + "\n";
