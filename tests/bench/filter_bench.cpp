@@ -4,7 +4,11 @@
 //   textbook_predict/double/M, textbook_update/double/M the same operations of the textbook
 //                                                       full-state UKF of the same model
 //                                                       (textbook_ukf.hpp), on the same inputs
+//   imu_predict/double/3, imu_update/double/3           the same with the IMU's intrinsics
+//                                                       (scale-misalignment), if built
 //   recording_60s                                       the whole loop over the 60 s recording
+//   recording_60s_shipped                               its calibration as mirrorcal makes it
+//   recording_60s_shipped_imu                           the same with the IMU's intrinsics
 // The counters report the error-state dimension and sizeof the filter.
 #include <benchmark/benchmark.h>
 
@@ -34,10 +38,10 @@ void time_operation(benchmark::State& state, mb::FilterOps* ops) {
   state.counters["filter_bytes"] = double(ops->filter_bytes());
 }
 
-template <bool kAsShipped>
-void recording(benchmark::State& state, const mb::Recording* r) {
+void recording(benchmark::State& state, const mb::Recording* r,
+               std::uint64_t (*calibrate)(const mb::Recording&)) {
   std::uint64_t used = 0;
-  for (auto _ : state) used = kAsShipped ? mb::calibrate_as_shipped(*r) : mb::calibrate(*r);
+  for (auto _ : state) used = calibrate(*r);
   if (used == 0) state.SkipWithError("no marker used");
   state.counters["markers_used"] = double(used);
 }
@@ -68,11 +72,21 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("textbook_update/" + suffix).c_str(), time_operation<true>, ops)
         ->UseManualTime();
   }
+  keep.push_back(mb::make_imu_filter_ops(12));
+  if (mb::FilterOps* ops = keep.back().get()) {
+    benchmark::RegisterBenchmark("imu_predict/double/3", time_operation<false>, ops)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark("imu_update/double/3", time_operation<true>, ops)->UseManualTime();
+  }
   const mb::Recording rec = mb::paper_recording();
-  benchmark::RegisterBenchmark("recording_60s", recording<false>, &rec)
+  benchmark::RegisterBenchmark("recording_60s", recording, &rec, mb::calibrate)
       ->Unit(benchmark::kMillisecond);
-  benchmark::RegisterBenchmark("recording_60s_shipped", recording<true>, &rec)
+  benchmark::RegisterBenchmark("recording_60s_shipped", recording, &rec, mb::calibrate_as_shipped)
       ->Unit(benchmark::kMillisecond);
+  if (keep.back())
+    benchmark::RegisterBenchmark("recording_60s_shipped_imu", recording, &rec,
+                                 mb::calibrate_as_shipped_with_imu_intrinsics)
+        ->Unit(benchmark::kMillisecond);
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;

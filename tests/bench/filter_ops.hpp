@@ -41,6 +41,10 @@ std::unique_ptr<FilterOps> make_textbook_ops(int markers);
 // 8 (and the lens's four coefficients), or nullptr.
 std::unique_ptr<FilterOps> make_stage2_filter_ops(int intrinsics);
 
+// Stage 1 at M = 3, double, with the IMU's intrinsics: 12 (scale-misalignment), or nullptr if
+// that model is not built.
+std::unique_ptr<FilterOps> make_imu_filter_ops(int imu_intrinsics);
+
 // The marker counts built into this program, ascending.
 std::vector<int> built_marker_counts();
 

@@ -12,11 +12,12 @@ namespace mirrorcal::bench {
 
 // NK > 0: stage 2 (double, M = 3: the configurations the product builds) through EuRoC cam0's
 // radtan lens, NK = 4 with the lens known, NK = 8 with its coefficients estimated. kTextbook: the
-// operations are the textbook UKF's (textbook_ukf.hpp) on the same inputs.
-template <typename S, int M, int NK = 0, bool kTextbook = false>
+// operations are the textbook UKF's (textbook_ukf.hpp) on the same inputs. NI > 0: stage 1 with
+// the IMU's intrinsics (an ideal IMU's, known to 1e-4 like the rest).
+template <typename S, int M, int NK = 0, bool kTextbook = false, int NI = 0>
 class FilterOpsOf final : public FilterOps {
  public:
-  using Filter = CalibrationFilter<S, M, NK>;
+  using Filter = CalibrationFilter<S, M, NK, NI>;
   using State = typename Filter::State;
 
   FilterOpsOf() : prepared_(config()), filter_(config()) {

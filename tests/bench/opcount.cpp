@@ -15,9 +15,15 @@
 //   mirrorcal_opcount stage2-update|stage2-restore <NK> <N>
 //                                            stage 2 (M = 3, double, radtan lens) with NK = 4
 //                                            (lens known) or 8 (its coefficients estimated)
+//   mirrorcal_opcount imu-predict|imu-predict2|imu-update|imu-restore <NI> <N>
+//                                            stage 1 (M = 3, double) with the IMU's NI = 12
+//                                            intrinsics (scale-misalignment)
 //   mirrorcal_opcount recording <N>          N runs of the whole loop over the 60 s recording
 //   mirrorcal_opcount shipped <N>            N calibrations of it as mirrorcal runs them
-//                                            (its free passes and the Gauss-Newton refinement)
+//                                            (its free passes, the Gauss-Newton refinement and
+//                                            the ideal-IMU check)
+//   mirrorcal_opcount shipped-imu <N>        the same with the IMU's intrinsics estimated
+//                                            (scale-misalignment)
 //   mirrorcal_opcount sizes                  sizeof the filter of every configuration built,
 //                                            and of its thread-local workspaces
 //   mirrorcal_opcount stack                  peak stack depth of predict and update, measured, of
@@ -41,7 +47,8 @@ int usage() {
       "<N>\n"
       "       mirrorcal_opcount textbook-predict|textbook-update|textbook-restore <M> <N>\n"
       "       mirrorcal_opcount stage2-update|stage2-restore <4|8> <N>\n"
-      "       mirrorcal_opcount recording|shipped <N>\n"
+      "       mirrorcal_opcount imu-predict|imu-predict2|imu-update|imu-restore <12> <N>\n"
+      "       mirrorcal_opcount recording|shipped|shipped-imu <N>\n"
       "       mirrorcal_opcount sizes|stack\n",
       stderr);
   return 2;
@@ -105,14 +112,17 @@ int main(int argc, char** argv) {
       }
     return 0;
   }
-  if ((what == "recording" || what == "shipped") && argc == 3) {
+  if ((what == "recording" || what == "shipped" || what == "shipped-imu") && argc == 3) {
     const long n = std::atol(argv[2]);
     const mb::Recording rec = mb::paper_recording();
     std::printf("imu samples %zu, frames %zu, %.0f s\n", rec.data.imu.size(),
                 rec.data.frames.size(), rec.scenario.duration_s);
     std::uint64_t used = 0;
-    for (long i = 0; i < n; ++i)
-      used += what == "shipped" ? mb::calibrate_as_shipped(rec) : mb::calibrate(rec);
+    for (long i = 0; i < n; ++i) {
+      if (what == "shipped") used += mb::calibrate_as_shipped(rec);
+      if (what == "shipped-imu") used += mb::calibrate_as_shipped_with_imu_intrinsics(rec);
+      if (what == "recording") used += mb::calibrate(rec);
+    }
     std::printf("markers used %llu\n", static_cast<unsigned long long>(used));
     return 0;
   }
@@ -150,6 +160,24 @@ int main(int argc, char** argv) {
       ops->restore();
       if (what == "textbook-predict") failed += ops->predict() ? 0 : 1;
       if (what == "textbook-update") failed += ops->update() ? 0 : 1;
+    }
+    return failed == 0 ? 0 : 1;
+  }
+  if ((what == "imu-predict" || what == "imu-predict2" || what == "imu-update" ||
+       what == "imu-restore") &&
+      argc == 4) {
+    const auto ops = mb::make_imu_filter_ops(std::atoi(argv[2]));
+    if (!ops) {
+      std::fprintf(stderr, "mirrorcal_opcount: NI = %s is not built\n", argv[2]);
+      return 2;
+    }
+    const long n = std::atol(argv[3]);
+    long failed = 0;
+    for (long i = 0; i < n; ++i) {
+      ops->restore();
+      if (what == "imu-update") failed += ops->update() ? 0 : 1;
+      if (what == "imu-predict" || what == "imu-predict2") failed += ops->predict() ? 0 : 1;
+      if (what == "imu-predict2") failed += ops->predict() ? 0 : 1;
     }
     return failed == 0 ? 0 : 1;
   }

@@ -34,15 +34,39 @@ std::uint64_t calibrate(const Recording& r) {
   return filter.counters().markers_used;
 }
 
-std::uint64_t calibrate_as_shipped(const Recording& r) {
+namespace {
+
+template <int NI>
+std::uint64_t shipped(const Recording& r) {
+  using Run = calibration::CalibrationRun<3, 0, NI>;
   const auto prior = sim::draw_prior<3>(r.scenario, r.data, 1);
-  calibration::CalibrationRun<3, 0>::State x0;
-  calibration::CalibrationRun<3, 0>::Filter::Covariance p0;
+  typename Run::State x0;
+  typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  const calibration::CalibrationRun<3, 0> run =
-      calibration::run_loop<3, 0>(evaluation::scenario_config(r.scenario), x0, p0,
-                                  evaluation::loop_data(r.scenario, r.data), nullptr);
+  calibration::Passes passes;
+  passes.imu_tolerances = r.scenario.priors.imu_intrinsics;
+  const Run run = calibration::run_loop<3, 0, NI>(evaluation::scenario_config(r.scenario), x0, p0,
+                                                  evaluation::loop_data(r.scenario, r.data),
+                                                  nullptr, {}, {}, passes);
   return run.filter_counters.markers_used;
+}
+
+// A template, so that a model the build lacks is not asked for.
+template <int NI>
+std::uint64_t shipped_if_built(const Recording& r) {
+  if constexpr (imu_model_built(NI)) return shipped<NI>(r);
+  (void)r;
+  return 0;
+}
+
+}  // namespace
+
+std::uint64_t calibrate_as_shipped(const Recording& r) {
+  return shipped<0>(r);
+}
+
+std::uint64_t calibrate_as_shipped_with_imu_intrinsics(const Recording& r) {
+  return shipped_if_built<12>(r);
 }
 
 }  // namespace mirrorcal::bench

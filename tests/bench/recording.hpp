@@ -23,5 +23,8 @@ std::uint64_t calibrate(const Recording& r);
 // the data (kDefaultPasses at least) and its Gauss-Newton refinement, keeping the history; returns
 // the last pass's markers used.
 std::uint64_t calibrate_as_shipped(const Recording& r);
+// The same with the IMU's intrinsics estimated (scale-misalignment, the scenario's tolerances),
+// or 0 if the build lacks that model.
+std::uint64_t calibrate_as_shipped_with_imu_intrinsics(const Recording& r);
 
 }  // namespace mirrorcal::bench

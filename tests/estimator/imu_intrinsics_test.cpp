@@ -143,6 +143,12 @@ void expect_block_products_and_composition() {
   const Eigen::Matrix<double, 40, D> xt = x.transpose();
   f.right_multiply_transposed(xt, out_t);
   EXPECT_LT((out_t - xt * dense.transpose()).cwiseAbs().maxCoeff(), 1e-14);
+  // F P F^T of a symmetric P, which the predict builds from its motion rows alone: the dense
+  // product's.
+  const Eigen::Matrix<double, D, D> p = x * x.transpose();
+  Eigen::Matrix<double, D, D> fpf;
+  f.sandwich(p, fpf);
+  EXPECT_LT((fpf - dense * p * dense.transpose()).cwiseAbs().maxCoeff(), 1e-13 * p.norm());
 
   ImuTransition<double, NI> composed = ImuTransition<double, NI>::identity();
   EXPECT_EQ(composed.dense(), (Eigen::Matrix<double, D, D>::Identity()));

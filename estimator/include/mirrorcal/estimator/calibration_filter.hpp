@@ -307,9 +307,14 @@ FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const
   State x = filter_.mean();
   propagate_imu(x, s0, s1, gravity_, before);
   // P_dd' = F (P_dd F^T); P_cd' = P_cd F^T waits in unsettled_.
-  Eigen::Matrix<S, D, D> pf_t, p_dd;
-  f.right_multiply_transposed(p.template topLeftCorner<D, D>(), pf_t);
-  f.left_multiply(pf_t, p_dd);
+  Eigen::Matrix<S, D, D> p_dd;
+  if constexpr (NI > 0) {
+    f.sandwich(p.template topLeftCorner<D, D>(), p_dd);
+  } else {  // the published figures' arithmetic, to the last bit (sandwich's differs in it)
+    Eigen::Matrix<S, D, D> pf_t;
+    f.right_multiply_transposed(p.template topLeftCorner<D, D>(), pf_t);
+    f.left_multiply(pf_t, p_dd);
+  }
   const ImuNoise noise =
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
   add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum

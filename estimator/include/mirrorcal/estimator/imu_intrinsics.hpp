@@ -175,7 +175,7 @@ SignalJacobians<S, NI> signal_jacobians(const ImuIntrinsics<S>& k, const so3::Ve
     if (m == K::kTs) j.gyro.col(6 + e) = -k.d_g.col(row) * a(col);
   });
   // Through the specific force (zero without g-sensitivity).
-  j.gyro -= k.d_g * k.t_s * j.accel;
+  j.gyro -= so3::Mat3<S>(k.d_g * k.t_s).lazyProduct(j.accel);
   return j;
 }
 
