@@ -167,6 +167,54 @@ TEST(ImuIntrinsics, TransitionAppliesAndComposesAsItsDenseForm) {
   expect_block_products_and_composition<24>();
 }
 
+// The filter's predicts, whose IMU block waits with its cross-covariance (settle), give the
+// covariance of the dense steps P <- F P F^T + Q, F at each step's estimate.
+template <int NI>
+void expect_predicts_as_the_dense_steps() {
+  using Filter = CalibrationFilter<double, 3, 0, NI>;
+  constexpr int N = Filter::kDim, D = StateI<NI>::kDynamicDim;
+  CalibrationConfig config;
+  config.gravity_n = kGravity;
+  config.imu.accel_noise_density = 0.02;  // large, so that the noise's share shows
+  config.imu.gyro_noise_density = 0.002;
+  Filter filter(config);
+  Step<NI> st = lively_step<NI>(11, 5'000'000);
+  const Eigen::Matrix<double, N, N> a = Eigen::Matrix<double, N, N>::Random();
+  Eigen::Matrix<double, N, N> p =
+      1e-2 * (a * a.transpose()) + 1e-3 * Eigen::Matrix<double, N, N>::Identity();
+  filter.reset(st.x, p);
+  StateI<NI> x = st.x;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> n(0.0, 1.0);
+  ImuSample s0 = st.s0;
+  for (int k = 0; k < 10; ++k) {
+    ImuSample s1 = s0;
+    s1.t_ns += 5'000'000;
+    s1.gyro += 0.5 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    s1.accel += 0.5 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    ASSERT_EQ(filter.predict(s0, s1), FilterStatus::kOk);
+    Eigen::Matrix<double, N, N> f = Eigen::Matrix<double, N, N>::Identity();
+    f.template topLeftCorner<D, D>() = imu_transition(x, s0, s1).dense();
+    p = f * p * f.transpose();
+    p.template topLeftCorner<D, D>() += imu_process_noise<double, D>(config.imu, 0.005);
+    propagate_imu(x, s0, s1, kGravity);
+    s0 = s1;
+  }
+  EXPECT_LT((filter.covariance() - p).cwiseAbs().maxCoeff(), 1e-12 * p.norm()) << "NI " << NI;
+  EXPECT_EQ(filter.state().p, x.p);
+}
+template <int NI>
+bool predicts_as_the_dense_steps_if_built() {
+  if constexpr (imu_model_built(NI)) {
+    expect_predicts_as_the_dense_steps<NI>();
+    return true;
+  }
+  return false;
+}
+TEST(ImuIntrinsics, PredictsGiveTheCovarianceOfTheDenseSteps) {
+  if (!predicts_as_the_dense_steps_if_built<12>()) GTEST_SKIP() << "scale-misalignment not built";
+}
+
 // The ideal IMU is the model with intrinsics at the identity: both integrate a step to the same
 // state, and the Jacobian's common blocks agree.
 TEST(ImuIntrinsics, IdentityIntrinsicsIntegrateAsTheIdealImu) {

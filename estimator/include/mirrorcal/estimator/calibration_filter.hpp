@@ -71,6 +71,7 @@ class CalibrationFilter {
   void reset(const State& x, const Covariance& p) {
     filter_.reset(x, p);
     unsettled_ = Transition::identity();
+    if constexpr (NI > 0) unsettled_noise_.setZero();
     has_unsettled_ = false;
     imu_block_checked_ = false;
   }
@@ -220,11 +221,34 @@ class CalibrationFilter {
   // applied once, per frame instead of per IMU sample: a predict's cost then does not grow with M.
   mutable Transition unsettled_ = Transition::identity();
   mutable bool has_unsettled_ = false;
+  // With the IMU's intrinsics (NI > 0) the IMU block's own covariance waits too. A step's
+  // F P_dd F^T carries the intrinsics' columns (three times the ideal IMU's predict), yet only the
+  // process noise changes from step to step: the steps' F compose in unsettled_ as for P_cd, the
+  // noise they add accumulates on the 15 states it reaches (F Q F^T + Q a step, at the ideal
+  // IMU's cost; the ideal IMU's layout), and settle applies P_dd <- F P_dd F^T + Q once.
+  struct NoNoise {};
+  using MotionNoise = std::conditional_t<(NI > 0), Eigen::Matrix<S, 15, 15>, NoNoise>;
+  mutable MotionNoise unsettled_noise_{};
   void settle() const {
     if (!has_unsettled_) return;
+    if constexpr (NI > 0) settle_imu_block();
     filter_.template move_leading_cross<State::kDynamicDim>(unsettled_);
     unsettled_ = Transition::identity();
     has_unsettled_ = false;
+  }
+  void settle_imu_block() const {
+    if constexpr (NI > 0) {  // (an explicit instantiation makes every member, NI = 0's too)
+      constexpr int D = State::kDynamicDim;
+      Eigen::Matrix<S, D, D> p_dd;
+      unsettled_.sandwich(filter_.covariance().template topLeftCorner<D, D>(), p_dd);
+      // The ideal IMU's [v, b_a, b_g | p, theta] are this block's [v, b_a, b_g | (intrinsics) p,
+      // theta].
+      const auto at = [](int i) { return i < 9 ? i : i + NI; };
+      for (int j = 0; j < 15; ++j)
+        for (int i = 0; i < 15; ++i) p_dd(at(i), at(j)) += unsettled_noise_(i, j);
+      filter_.template reset_leading<D>(filter_.mean(), p_dd);
+      unsettled_noise_.setZero();
+    }
   }
   bool keep_steps_ = false;
   Transition since_update_ = Transition::identity();
@@ -283,10 +307,11 @@ Exposure<S> CalibrationFilter<S, M, NK, NI>::exposure(std::int64_t t_cam_ns) con
 // Only the IMU block [0, 15 + NI) moves: the 6 + 3M (+ NK) calibration states are constants. The
 // mean moves by propagate_imu (Runge-Kutta on the parabola through three samples when `before` is
 // given); the covariance propagates with the Jacobian F of the integration at the estimate
-// (imu_transition.hpp): P_dd <- F P_dd F^T + Q, P_dc <- F P_dc (deferred: settle), P_cc
-// unchanged. To first order this is what the sigma-point transform of the block computes
-// (tests/estimator show both agree, the difference falling as the square of the spread), at a
-// fraction of its 31 integrations; the paper campaigns (docs/campaign) are as consistent with it.
+// (imu_transition.hpp): P_dd <- F P_dd F^T + Q, P_dc <- F P_dc (deferred: settle; with the IMU's
+// intrinsics P_dd too), P_cc unchanged. To first order this is what the sigma-point transform of
+// the block computes (tests/estimator show both agree, the difference falling as the square of the
+// spread), at a fraction of its 31 integrations; the paper campaigns (docs/campaign) are as
+// consistent with it.
 template <typename S, int M, int NK, int NI>
 FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const ImuSample& s1,
                                                       const ImuSample* before, double gap_s) {
@@ -306,26 +331,36 @@ FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const
   const Transition f = imu_transition(filter_.mean(), s0, s1);
   State x = filter_.mean();
   propagate_imu(x, s0, s1, gravity_, before);
-  // P_dd' = F (P_dd F^T); P_cd' = P_cd F^T waits in unsettled_.
-  Eigen::Matrix<S, D, D> p_dd;
-  if constexpr (NI > 0) {
-    f.sandwich(p.template topLeftCorner<D, D>(), p_dd);
-  } else {  // the published figures' arithmetic, to the last bit (sandwich's differs in it)
-    Eigen::Matrix<S, D, D> pf_t;
-    f.right_multiply_transposed(p.template topLeftCorner<D, D>(), pf_t);
-    f.left_multiply(pf_t, p_dd);
-  }
   const ImuNoise noise =
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
-  add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum
-  // P is finite, so a non-finite entry of F shows on the diagonal of F P F^T: every entry of F's
-  // row i enters P_dd'(i, i); the transition P_cd waits for is then finite too.
-  if (!p_dd.diagonal().allFinite() || !x.v.allFinite() || !x.p.allFinite() ||
-      !x.q_n_b.coeffs().allFinite()) {
-    ++counters_.failures;
-    return FilterStatus::kNonFinite;
+  const bool moved_finite = x.v.allFinite() && x.p.allFinite() && x.q_n_b.coeffs().allFinite();
+  if constexpr (NI > 0) {  // P_dd waits with P_cd (settle_imu_block); the noise accumulates
+    Eigen::Matrix<S, 15, 15> q;
+    f.motion_sandwich(unsettled_noise_, q);
+    add_imu_process_noise<S>(noise, dt, q);
+    // Q is positive definite, so every entry of F's motion rows but the intrinsics' columns
+    // shows on q's diagonal from the first step on; those columns are checked themselves.
+    if (!q.diagonal().allFinite() || !f.imu.v.allFinite() || !f.imu.p.allFinite() ||
+        !f.imu.theta.allFinite() || !moved_finite) {
+      ++counters_.failures;
+      return FilterStatus::kNonFinite;
+    }
+    unsettled_noise_ = q;
+    filter_.set_mean(x);
+  } else {
+    // P_dd' = F (P_dd F^T); P_cd' = P_cd F^T waits in unsettled_.
+    Eigen::Matrix<S, D, D> pf_t, p_dd;
+    f.right_multiply_transposed(p.template topLeftCorner<D, D>(), pf_t);
+    f.left_multiply(pf_t, p_dd);
+    add_imu_process_noise<S>(noise, dt, p_dd);  // its seven 3x3 blocks, not a 15x15 sum
+    // P is finite, so a non-finite entry of F shows on the diagonal of F P F^T: every entry of
+    // F's row i enters P_dd'(i, i); the transition P_cd waits for is then finite too.
+    if (!p_dd.diagonal().allFinite() || !moved_finite) {
+      ++counters_.failures;
+      return FilterStatus::kNonFinite;
+    }
+    filter_.template reset_leading<D>(x, p_dd);
   }
-  filter_.template reset_leading<D>(x, p_dd);
   unsettled_ = unsettled_.followed_by(f);
   has_unsettled_ = true;
   if (keep_steps_) since_update_ = since_update_.followed_by(f);

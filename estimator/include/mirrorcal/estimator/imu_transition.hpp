@@ -152,6 +152,38 @@ struct ImuTransition {
     out.template block<6, 6>(kP, kP) = f_motion_cols.template block<6, 6>(kP, 3);
   }
 
+  // F without the intrinsics' columns and rows, in the ideal IMU's layout [v, b_a, b_g, p, theta]:
+  // what the process noise reaches (the intrinsics have none), but for the gyro's g-sensitivity
+  // (theta's b_a columns, imu.theta_ba), which motion_sandwich adds.
+  ImuTransition<S, 0> without_intrinsics() const {
+    ImuTransition<S, 0> m;
+    m.dt = dt;
+    m.v_ba = v_ba;
+    m.v_bg = v_bg;
+    m.v_theta = v_theta;
+    m.p_ba = p_ba;
+    m.p_bg = p_bg;
+    m.p_theta = p_theta;
+    m.theta_bg = theta_bg;
+    m.theta_theta = theta_theta;
+    return m;
+  }
+
+  // F Q F^T for a Q on the 15 states other than the intrinsics, in the ideal IMU's layout (the
+  // process noise a run of steps accumulates): the ideal IMU's products, and the g-sensitivity's.
+  void motion_sandwich(const Eigen::Matrix<S, 15, 15>& q, Eigen::Matrix<S, 15, 15>& out) const {
+    static_assert(NI > 0, "the ideal IMU's F is its own without_intrinsics");
+    using Ideal = ImuTransition<S, 0>;
+    constexpr int kBa = 3, kTheta0 = Ideal::kTheta;
+    const Ideal m = without_intrinsics();
+    Eigen::Matrix<S, 15, 15> qf;  // Q F^T
+    m.right_multiply_transposed(q, qf);
+    for (int r = 0; r < 3; ++r)
+      for (int j = 0; j < 3; ++j) qf.col(kTheta0 + r) += imu.theta_ba(r, j) * q.col(kBa + j);
+    m.left_multiply(qf, out);
+    out.template middleRows<3>(kTheta0) += imu.theta_ba.lazyProduct(qf.template middleRows<3>(kBa));
+  }
+
   // Row r of a 3x3 block applied to three columns, as one expression, so that each sum in
   // right_multiply_transposed is a single pass over the rows. Inlined by force: as a lambda GCC
   // called it out of line at M = 3, 1.1k instructions of an 11.5k predict.

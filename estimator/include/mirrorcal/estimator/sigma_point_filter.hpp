@@ -259,6 +259,8 @@ class SigmaPointFilter {
     for (int j = 0; j < D; ++j)
       for (int i = j; i < D; ++i) cov_(i, j) = cov_(j, i) = Scalar(0.5) * (p_dd(i, j) + p_dd(j, i));
   }
+  // A new mean, the covariance as it is (a predict whose covariance waits: CalibrationFilter).
+  void set_mean(const State& mean) { mean_ = mean; }
   // The cross-covariance of the leading D states with the rest after those states moved by a
   // linear map F: P_cd <- P_cd F^T, where f.right_multiply_transposed(x, out) sets out = x F^T.
   template <int D, class Transition>
