@@ -129,8 +129,8 @@ struct ImuTransition {
   // F P F^T for a symmetric P of the IMU block, into out (not aliasing p). Of F's rows only the
   // motion's (v, p, theta) differ from the identity's, so of F (P F^T) only the motion rows'
   // motion columns need the left product; the sensor's rows are P F^T's, and the motion rows'
-  // sensor columns their transposes (the result is symmetric). A third of the left product's cost,
-  // which at NI = 12 was the predict's largest part.
+  // sensor columns their transposes (the result is symmetric). A third of the left product's cost.
+  // CalibrationFilter's settle applies it once a frame with the IMU's intrinsics.
   template <class In, class Out>
   void sandwich(const Eigen::MatrixBase<In>& p, Eigen::MatrixBase<Out>& out) const {
     constexpr int kSensor = 3, kSensors = 6 + NI;  // b_a, b_g and the intrinsics: F's identity
