@@ -73,6 +73,7 @@ int main(int argc, char** argv) {
         ->UseManualTime();
   }
   keep.push_back(mb::make_imu_filter_ops(12));
+  const bool imu_model_built = keep.back() != nullptr;
   if (mb::FilterOps* ops = keep.back().get()) {
     benchmark::RegisterBenchmark("imu_predict/double/3", time_operation<false>, ops)
         ->UseManualTime();
@@ -83,7 +84,7 @@ int main(int argc, char** argv) {
       ->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("recording_60s_shipped", recording, &rec, mb::calibrate_as_shipped)
       ->Unit(benchmark::kMillisecond);
-  if (keep.back())
+  if (imu_model_built)
     benchmark::RegisterBenchmark("recording_60s_shipped_imu", recording, &rec,
                                  mb::calibrate_as_shipped_with_imu_intrinsics)
         ->Unit(benchmark::kMillisecond);
