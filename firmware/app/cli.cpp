@@ -126,6 +126,36 @@ std::string imu_model_not_built(ImuModel model) {
          "\"";
 }
 
+bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
+                           const std::string& folder, bool camera_intrinsics, ImuModel& model,
+                           std::string& error) {
+  model = kDefaultImuModel;
+  if (o.flag("imu-model")) {
+    if (!imu_model_option(o, model, error)) return false;
+  } else if (sensors.imu_model) {
+    model = *sensors.imu_model;
+    if (!imu_model_built(imu_intrinsics_dim(model))) {
+      error = folder + "/imu.yaml: imu_model: " + imu_model_not_built(model);
+      return false;
+    }
+  }
+  if (model == ImuModel::kCalibrated) return true;
+  if (camera_intrinsics) {
+    error = std::string("the IMU model ") + to_string(model) +
+            " is estimated in stage 1 (without the camera's intrinsics); calibrate stage 2 with "
+            "imu_model: calibrated, from the stage-1 result (--from)";
+    return false;
+  }
+  if (sensors.imu_tolerances_defaulted)
+    std::fprintf(stderr,
+                 "mirrorcal: note: %s/imu.yaml: not every tolerance of the IMU's intrinsics is "
+                 "given; using 1-sigma defaults that cover common MEMS parts (scale 2 %%, "
+                 "cross-axis 1.2 %%, g-sensitivity 5e-4 (rad/s)/(m/s^2)) for those missing "
+                 "(docs/recordings.md, imu.yaml)\n",
+                 folder.c_str());
+  return true;
+}
+
 namespace {
 
 // A rolling shutter's line delay: seconds per row, the whole frame read within

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "mirrorcal/estimator/marker_counts.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 
 namespace mirrorcal::app {
@@ -78,6 +79,13 @@ constexpr ImuModel kDefaultImuModel = ImuModel::kCalibrated;
 bool imu_model_option(const Options& o, ImuModel& model, std::string& error);
 // What a model not built gets told: the models this build has and how to add one.
 std::string imu_model_not_built(ImuModel model);
+// The IMU model a calibration from the sensors folder `folder` (its imu.yaml read into sensors)
+// estimates: --imu-model, else imu.yaml's imu_model, else kDefaultImuModel. Notes on stderr any
+// tolerance imu.yaml leaves to the defaults. Refused: a model not built, and one with intrinsics
+// beside the camera's (camera_intrinsics; stage 2 starts from stage 1's result instead).
+bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
+                           const std::string& folder, bool camera_intrinsics, ImuModel& model,
+                           std::string& error);
 
 // Calls f(ImuIntrinsicsCount<NI>{}) for model's NI (marker_counts.hpp); a model not built fails
 // (exit code 2).

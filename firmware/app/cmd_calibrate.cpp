@@ -196,32 +196,14 @@ int cmd_calibrate(int argc, char** argv) {
           "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
           "not estimated\n",
           in.c_str());
-    // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
-    // the lens's coefficients too, skew held.
-    // The IMU model: --imu-model, else imu.yaml's imu_model, else the default.
     ImuModel imu_model = kDefaultImuModel;
-    if (o.flag("imu-model")) {
-      if (!imu_model_option(o, imu_model, err)) fail(err);
-    } else if (rec.sensors.imu_model) {
-      imu_model = *rec.sensors.imu_model;
-      if (!imu_model_built(imu_intrinsics_dim(imu_model)))
-        fail(in + "/imu.yaml: imu_model: " + imu_model_not_built(imu_model));
-    }
-    if (imu_model != ImuModel::kCalibrated && rec.sensors.imu_tolerances_defaulted)
-      std::fprintf(stderr,
-                   "mirrorcal: note: %s/imu.yaml: not every tolerance of the IMU's intrinsics is "
-                   "given; using 1-sigma defaults that cover common MEMS parts (scale 2 %%, "
-                   "cross-axis 1.2 %%, g-sensitivity 5e-4 (rad/s)/(m/s^2)) for those missing "
-                   "(docs/recordings.md, imu.yaml)\n",
-                   in.c_str());
-    if (imu_model != ImuModel::kCalibrated && intrinsics)
-      fail(std::string("the IMU model ") + to_string(imu_model) +
-           " is estimated in stage 1 (without the camera's intrinsics); calibrate stage 2 with "
-           "imu_model: calibrated, from the stage-1 result (--from)");
+    if (!calibration_imu_model(o, rec.sensors, in, intrinsics, imu_model, err)) fail(err);
     // --estimate-noise: the noise densities and the pixel noise from the data, not imu.yaml's and
     // mirrorcal.yaml's (noise_estimate.hpp).
     Passes passes;
     passes.estimate_noise = o.flag("estimate-noise");
+    // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
+    // the lens's coefficients too, skew held.
     if (intrinsics && rec.priors.estimate_distortion)
       return calibrate<M, 8>(rec, in, out, from, passes);
     if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from, passes);

@@ -151,7 +151,7 @@ class LiveStreams {
 };
 
 bool parse_run_options(int argc, char** argv, Options& o, std::string& error) {
-  std::vector<std::string> with_value = {"config", "from"};
+  std::vector<std::string> with_value = {"config", "from", "imu-model"};
   for (const char* key : kRunKeys) with_value.emplace_back(key);
   std::vector<std::string> flags;
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
@@ -206,7 +206,7 @@ void print_loop_counters(const firmware::LoopCounters& lcount, double seconds) {
 // The calibration after the live pass: what it kept, as a recording with the sensor description
 // and priors, calibrated as `mirrorcal calibrate` calibrates one (from an earlier calibration with
 // from). The result and its report replace the live pass's; false with the error when it fails.
-template <int M>
+template <int M, int NI>
 bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
                    const sim::CalibrationStart* from, const std::string& title,
                    CalibrationResult& result, ReportData& report, std::string& error) {
@@ -218,7 +218,8 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
       log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
   log.to_recording(sensors);
   // The live pass predicted with camchain.yaml's intrinsics; the calibration estimates them too
-  // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew).
+  // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew), or the IMU's as the live pass did
+  // (never both: calibration_imu_model).
   const auto refine = [&](auto run) {
     if (!calibrate_recording(sensors, run, error, {}, from)) return false;
     result = run.result;
@@ -231,7 +232,7 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
   if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
     return refine(CalibrationRun<M, 4>{});
   if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<M, 5>{});
-  return refine(CalibrationRun<M, 0>{});
+  return refine(CalibrationRun<M, 0, NI>{});
 }
 
 // The result's warnings on stderr, and its files in dir.
@@ -253,12 +254,14 @@ bool write_run_result(const std::string& dir, const CalibrationResult& result,
 
 }  // namespace
 
-// The live loop of M markers on the devices, then the calibration of what it kept.
-template <int M>
+// The live loop of M markers (and NI of the IMU's intrinsics) on the devices, then the calibration
+// of what it kept.
+template <int M, int NI>
 int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& sensors) {
   std::string error;
   Prior<M> prior;
   if (!run_prior(s, sensors, prior, error)) fail(error, 2);
+  prior.sigma_imu_intrinsics = sensors.sensors.imu_tolerances;
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
   // one (stage 2 after stage 1, as calibrate --from).
   sim::CalibrationStart start;
@@ -276,7 +279,7 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
     fail(error, exit_code);
   if (!create_out_dir(s.out, error)) fail(error, 1);
 
-  using Filter = CalibrationFilter<double, M, 0>;
+  using Filter = CalibrationFilter<double, M, 0, NI>;
   Filter filter(recording_config(sensors));
   typename Filter::State x0;
   typename Filter::Covariance p0;
@@ -295,11 +298,14 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   lc.profiler = profiler.get();
   // While the user moves the rig: what is still uncertain, what motion helps, when it converged.
   // On a terminal a line every window; in a log only when the verdict changes.
-  LiveFeedback<M> feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
-  firmware::CalibrationLoop<double, M, 0> loop(filter, streams.imu(), streams.markers(), lc,
-                                               devices.camera ? &feedback : nullptr);
+  LiveFeedback<M, NI> feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
+  firmware::CalibrationLoop<double, M, 0, NI> loop(filter, streams.imu(), streams.markers(), lc,
+                                                   devices.camera ? &feedback : nullptr);
   if (devices.camera) loop.set_identifier(streams.identifier());
   print_run_start(s, devices, sensors.sensors.imu_rate_hz);
+  if constexpr (NI > 0)
+    std::printf("mirrorcal run: the IMU's intrinsics estimated too (model %s)\n",
+                to_string(imu_model_of_dim(NI)));
   const firmware::LoopEnd end = run_until_signal(loop);
   StopOnSignal::report("writing the calibration so far");
 
@@ -310,7 +316,7 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   const std::string title = "mirrorcal run, IMU " + s.imu;
   ReportData report = report_data_without_history(result, title);
   if (!streams.log().frames.empty() &&
-      !calibrate_log(streams.log(), sensors, from, title, result, report, error))
+      !calibrate_log<M, NI>(streams.log(), sensors, from, title, result, report, error))
     fail(error, 1);
   // The camera's stamps against the IMU's clock (a V4L2 driver stamping the end of the frame, the
   // bus's latency): what the calibration found.
@@ -330,13 +336,19 @@ int cmd_run(int argc, char** argv) {
   std::string error;
   if (!parse_run_options(argc, argv, o, error)) fail(error);
   // The settings (--config, then the command line) and the sensor description (--sensors), whose
-  // mirrorcal.yaml says how many markers the camera's frames hold.
+  // mirrorcal.yaml says how many markers the camera's frames hold and imu.yaml which IMU model
+  // the calibration estimates (or --imu-model).
   RunSettings s;
   sim::Recording sensors;
-  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error))
+  ImuModel imu_model = kDefaultImuModel;
+  if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error) ||
+      !calibration_imu_model(o, sensors.sensors, s.sensors, sensors.priors.estimate_intrinsics,
+                             imu_model, error))
     fail(error, 2);
   return with_markers(int(sensors.priors.features_c.size()), [&](auto markers) {
-    return run_on_devices<decltype(markers)::value>(o, s, sensors);
+    return with_imu_model_of(imu_model, [&](auto imu) {
+      return run_on_devices<decltype(markers)::value, decltype(imu)::value>(o, s, sensors);
+    });
   });
 }
 

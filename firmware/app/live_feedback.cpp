@@ -14,9 +14,9 @@ namespace {
 GroupUncertainty worst_direction(const Eigen::Matrix3d& p, const Eigen::Matrix3d& p0) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p);
   GroupUncertainty g;
-  g.direction_c = eig.eigenvectors().col(2);  // eigenvalues ascend
+  g.direction = eig.eigenvectors().col(2);  // eigenvalues ascend
   g.sigma = std::sqrt(std::max(0.0, eig.eigenvalues()(2)));
-  g.prior_sigma = std::sqrt(std::max(0.0, g.direction_c.dot(p0 * g.direction_c)));
+  g.prior_sigma = std::sqrt(std::max(0.0, g.direction.dot(p0 * g.direction)));
   return g;
 }
 
@@ -34,15 +34,29 @@ int most_perpendicular_axis(const Eigen::Vector3d& d) {
   return axis;
 }
 
+int largest_axis(const Eigen::Vector3d& d) {
+  int axis = 0;
+  d.cwiseAbs().maxCoeff(&axis);
+  return axis;
+}
+
 }  // namespace
 
-template <int M>
+// The IMU group of an intrinsic: D_a's entries the accelerometer's, D_g's the gyroscope's, T_s's
+// the g-sensitivity's.
+FeedbackGroup imu_group(ImuIntrinsics<double>::Matrix m) {
+  return m == ImuIntrinsics<double>::kDa   ? FeedbackGroup::kAccelerometer
+         : m == ImuIntrinsics<double>::kDg ? FeedbackGroup::kGyroscope
+                                           : FeedbackGroup::kGSensitivity;
+}
+
+template <int M, int NI>
 CalibrationUncertainty calibration_uncertainty(
-    const typename CalibrationFilter<double, M, 0>::Covariance& p,
-    const typename CalibrationFilter<double, M, 0>::Covariance& p0,
+    const typename CalibrationFilter<double, M, 0, NI>::Covariance& p,
+    const typename CalibrationFilter<double, M, 0, NI>::Covariance& p0,
     const Eigen::Quaterniond& q_b_c) {
-  using State = typename CalibrationFilter<double, M, 0>::State;
-  using Covariance = typename CalibrationFilter<double, M, 0>::Covariance;
+  using State = typename CalibrationFilter<double, M, 0, NI>::State;
+  using Covariance = typename CalibrationFilter<double, M, 0, NI>::Covariance;
   CalibrationUncertainty u;
   // p_b_c is in the IMU frame; the advice speaks of the camera's axes.
   const Eigen::Matrix3d r_c_b = q_b_c.toRotationMatrix().transpose();
@@ -61,55 +75,87 @@ CalibrationUncertainty calibration_uncertainty(
   }
   u[3].sigma = std::sqrt(std::max(0.0, p(State::kTd, State::kTd)));
   u[3].prior_sigma = std::sqrt(std::max(0.0, p0(State::kTd, State::kTd)));
+  if constexpr (NI > 0) {
+    // Each intrinsic against its own prior (scale factors and axis angles differ by tenfold).
+    std::array<double, kMaxFeedbackGroups> worst{};
+    ImuIntrinsics<double>::for_each_entry<NI>(
+        [&](ImuIntrinsics<double>::Matrix m, int, int column, int j) {
+          const int at = State::kImu + j;
+          const double sigma = std::sqrt(std::max(0.0, p(at, at)));
+          const double prior = std::sqrt(std::max(0.0, p0(at, at)));
+          const auto g = static_cast<std::size_t>(imu_group(m));
+          const double ratio = sigma / std::max(prior, 1e-300);
+          if (ratio < worst[g]) return;
+          worst[g] = ratio;
+          u[g] = {sigma, prior, Eigen::Vector3d::Unit(column)};
+        });
+  }
   return u;
 }
 
-const char* motion_advice(CalibrationGroup group, const Eigen::Vector3d& direction_c) {
+const char* motion_advice(FeedbackGroup group, const Eigen::Vector3d& direction) {
   static constexpr const char* kRotateAbout[3] = {
       "tilt the rig up and down (about the camera's x axis)",
       "turn the rig left and right (about the camera's y axis)",
       "roll the rig about the camera's optical axis"};
+  static constexpr const char* kImuRate[3] = {"rotate the rig briskly about the IMU's x axis",
+                                              "rotate the rig briskly about the IMU's y axis",
+                                              "rotate the rig briskly about the IMU's z axis"};
+  static constexpr const char* kImuUpDown[3] = {
+      "hold the rig with the IMU's x axis pointing up, then down, a few seconds each",
+      "hold the rig with the IMU's y axis pointing up, then down, a few seconds each",
+      "hold the rig with the IMU's z axis pointing up, then down, a few seconds each"};
+  static constexpr const char* kImuRateUpDown[3] = {
+      "rotate the rig briskly with the IMU's x axis pointing up, then down",
+      "rotate the rig briskly with the IMU's y axis pointing up, then down",
+      "rotate the rig briskly with the IMU's z axis pointing up, then down"};
   switch (group) {
-    case CalibrationGroup::kCameraPosition:
-    case CalibrationGroup::kCameraRotation:
-      return kRotateAbout[most_perpendicular_axis(direction_c)];
-    case CalibrationGroup::kMarkers:
-      return std::abs(direction_c.z()) > std::sqrt(0.5)
+    case FeedbackGroup::kCameraPosition:
+    case FeedbackGroup::kCameraRotation:
+      return kRotateAbout[most_perpendicular_axis(direction)];
+    case FeedbackGroup::kMarkers:
+      return std::abs(direction.z()) > std::sqrt(0.5)
                  ? "move the rig towards and away from the mirror"
                  : "tilt the rig so that the markers sweep across the image";
-    case CalibrationGroup::kTimeOffset:
+    case FeedbackGroup::kTimeOffset:
       return "rotate the rig briskly back and forth";
-    case CalibrationGroup::kIntrinsics:
-    case CalibrationGroup::kLens:
-      break;
+    case FeedbackGroup::kGyroscope:
+      return kImuRate[largest_axis(direction)];
+    case FeedbackGroup::kAccelerometer:
+      return kImuUpDown[largest_axis(direction)];
+    case FeedbackGroup::kGSensitivity:
+      return kImuRateUpDown[largest_axis(direction)];
   }
   return "";
 }
 
-const char* group_name(CalibrationGroup group) {
+const char* group_name(FeedbackGroup group) {
   switch (group) {
-    case CalibrationGroup::kCameraPosition:
+    case FeedbackGroup::kCameraPosition:
       return "camera position";
-    case CalibrationGroup::kCameraRotation:
+    case FeedbackGroup::kCameraRotation:
       return "camera rotation";
-    case CalibrationGroup::kMarkers:
+    case FeedbackGroup::kMarkers:
       return "markers";
-    case CalibrationGroup::kTimeOffset:
+    case FeedbackGroup::kTimeOffset:
       return "time offset";
-    case CalibrationGroup::kIntrinsics:
-    case CalibrationGroup::kLens:
-      break;
+    case FeedbackGroup::kGyroscope:
+      return "gyroscope's intrinsics";
+    case FeedbackGroup::kAccelerometer:
+      return "accelerometer's intrinsics";
+    case FeedbackGroup::kGSensitivity:
+      return "gyroscope's g-sensitivity";
   }
   return "";
 }
 
-template <int M>
-LiveFeedback<M>::LiveFeedback(const typename Filter::Covariance& p0, std::FILE* out,
-                              bool every_window)
+template <int M, int NI>
+LiveFeedback<M, NI>::LiveFeedback(const typename Filter::Covariance& p0, std::FILE* out,
+                                  bool every_window)
     : p0_(p0), out_(out), every_window_(every_window) {}
 
-template <int M>
-void LiveFeedback<M>::publish(std::int64_t t_ns, const Filter& filter) {
+template <int M, int NI>
+void LiveFeedback<M, NI>::publish(std::int64_t t_ns, const Filter& filter) {
   const Eigen::Quaterniond q = filter.state().q_n_b;
   if (!started_) {
     started_ = true;
@@ -131,23 +177,29 @@ void LiveFeedback<M>::publish(std::int64_t t_ns, const Filter& filter) {
   depth_low_ = depth_high_ = filter.state().p.z();
 }
 
-template <int M>
-void LiveFeedback<M>::close_window(double t_s, const Filter& filter) {
+template <int M, int NI>
+void LiveFeedback<M, NI>::close_window(double t_s, const Filter& filter) {
   const CalibrationUncertainty u =
-      calibration_uncertainty<M>(filter.covariance(), p0_, filter.state().q_b_c);
-  std::array<bool, kFeedbackGroups> settled{};
+      calibration_uncertainty<M, NI>(filter.covariance(), p0_, filter.state().q_b_c);
+  std::array<bool, kMaxFeedbackGroups> settled{};
   // Once converged, a group must fall by twice as much to unsettle it again: sigmas that fall as
   // 1/sqrt(t) cross the threshold slowly, and the verdict should not flicker as they do.
   const double fall = verdict_ == Verdict::kConverged ? 2.0 * kSettledFall : kSettledFall;
-  int advised = -1;
-  double worst = 0.0;
-  for (int g = 0; g < kFeedbackGroups; ++g) {
+  int advised = -1, weak = -1;
+  double worst = 0.0, weakest = 0.0;
+  for (int g = 0; g < kGroups; ++g) {
     const auto k = static_cast<std::size_t>(g);
     const double ratio = u[k].sigma / std::max(u[k].prior_sigma, 1e-300);
+    const bool stopped = have_previous_ && u[k].sigma > (1.0 - fall) * previous_[k].sigma;
     // A direction the motion never excited does not fall either: settled also needs the data to
-    // have told at least half of what the prior did not know.
-    settled[k] =
-        have_previous_ && u[k].sigma > (1.0 - fall) * previous_[k].sigma && ratio < kSettledRatio;
+    // have told at least half of what the prior did not know. The IMU's intrinsics are the
+    // exception: one the mirror's motion hardly sees settles near its prior, as weak.
+    const bool imu = is_imu_group(static_cast<FeedbackGroup>(g));
+    settled[k] = stopped && (ratio < kSettledRatio || imu);
+    if (settled[k] && imu && ratio >= kSettledRatio && ratio >= weakest) {
+      weakest = ratio;
+      weak = g;
+    }
     if (!settled[k] && ratio >= worst) {
       worst = ratio;
       advised = g;
@@ -161,32 +213,38 @@ void LiveFeedback<M>::close_window(double t_s, const Filter& filter) {
   else if (advised < 0)
     verdict = Verdict::kConverged;
   const bool changed = verdict != verdict_ || advised != advised_;
-  if (changed || every_window_) print(t_s, verdict, advised, u, settled);
+  if (changed || every_window_) print(t_s, verdict, advised, weak, u, settled);
   verdict_ = verdict;
   advised_ = advised;
   previous_ = u;
   have_previous_ = true;
 }
 
-template <int M>
-void LiveFeedback<M>::print(double t_s, Verdict verdict, int advised,
-                            const CalibrationUncertainty& u,
-                            const std::array<bool, kFeedbackGroups>& settled) {
+template <int M, int NI>
+void LiveFeedback<M, NI>::print(double t_s, Verdict verdict, int advised, int weak,
+                                const CalibrationUncertainty& u,
+                                const std::array<bool, kMaxFeedbackGroups>& settled) {
   if (out_ == nullptr) return;
   std::fprintf(out_, "live %.0f s: ", t_s);
-  // Each group's sigma in the unit a user reads it in, and its share of the prior's.
+  // Each group's sigma in the unit a user reads it in (the IMU's intrinsics in per cent), and its
+  // share of the prior's.
   const auto figures = [&](bool only_unsettled) {
-    static constexpr double kScale[kFeedbackGroups] = {1e3, 180.0 / M_PI, 1e3, 1e3};
-    static constexpr const char* kUnit[kFeedbackGroups] = {"mm", "deg", "mm", "ms"};
+    static constexpr double kScale[kMaxFeedbackGroups] = {1e3,   180.0 / M_PI, 1e3,  1e3,
+                                                          100.0, 100.0,        100.0};
+    static constexpr const char* kUnit[kMaxFeedbackGroups] = {"mm", "deg", "mm", "ms",
+                                                              "%",  "%",   "%"};
     const char* sep = "";
-    for (int g = 0; g < kFeedbackGroups; ++g) {
+    for (int g = 0; g < kGroups; ++g) {
       const auto k = static_cast<std::size_t>(g);
       if (only_unsettled && settled[k]) continue;
       std::fprintf(out_, "%s%s %.3g %s (%.3g %% of prior)", sep,
-                   group_name(static_cast<CalibrationGroup>(g)), kScale[k] * u[k].sigma, kUnit[k],
+                   group_name(static_cast<FeedbackGroup>(g)), kScale[k] * u[k].sigma, kUnit[k],
                    100.0 * u[k].sigma / std::max(u[k].prior_sigma, 1e-300));
       sep = ", ";
     }
+  };
+  const auto advice = [&](int g) {
+    return motion_advice(static_cast<FeedbackGroup>(g), u[static_cast<std::size_t>(g)].direction);
   };
   switch (verdict) {
     case Verdict::kNoMarkers:
@@ -197,20 +255,24 @@ void LiveFeedback<M>::print(double t_s, Verdict verdict, int advised,
       figures(true);
       std::fprintf(out_, "\n");
       break;
-    case Verdict::kUncertain: {
+    case Verdict::kUncertain:
       std::fprintf(out_, "still uncertain: ");
       figures(true);
-      const auto g = static_cast<CalibrationGroup>(advised);
-      std::fprintf(out_, "; for the %s: %s\n", group_name(g),
-                   motion_advice(g, u[static_cast<std::size_t>(advised)].direction_c));
+      std::fprintf(out_, "; for the %s: %s\n", group_name(static_cast<FeedbackGroup>(advised)),
+                   advice(advised));
       break;
-    }
     case Verdict::kConverged:
       std::fprintf(out_,
-                   "converged (every sigma below %.0f %% of its prior, none fell by %.0f %% over "
-                   "%.0f s of motion): ",
-                   100.0 * kSettledRatio, 100.0 * kSettledFall, kWindowS);
+                   "converged (every sigma below %.0f %% of its prior%s, none fell by %.0f %% "
+                   "over %.0f s of motion): ",
+                   100.0 * kSettledRatio, weak >= 0 ? " but the weak intrinsics'" : "",
+                   100.0 * kSettledFall, kWindowS);
       figures(false);
+      if (weak >= 0)
+        std::fprintf(out_,
+                     "; the %s stay weak, near their prior (the report marks them): to inform "
+                     "them, %s",
+                     group_name(static_cast<FeedbackGroup>(weak)), advice(weak));
       std::fprintf(out_, "; you may stop\n");
       break;
     case Verdict::kNone:
@@ -219,12 +281,15 @@ void LiveFeedback<M>::print(double t_s, Verdict verdict, int advised,
   std::fflush(out_);
 }
 
-#define MIRRORCAL_LIVE_FEEDBACK_(M)                           \
-  template class LiveFeedback<M>;                             \
-  template CalibrationUncertainty calibration_uncertainty<M>( \
-      const CalibrationFilter<double, M, 0>::Covariance&,     \
-      const CalibrationFilter<double, M, 0>::Covariance&, const Eigen::Quaterniond&);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_LIVE_FEEDBACK_)
+#define MIRRORCAL_LIVE_FEEDBACK_(M, NI)                           \
+  template class LiveFeedback<M, NI>;                             \
+  template CalibrationUncertainty calibration_uncertainty<M, NI>( \
+      const CalibrationFilter<double, M, 0, NI>::Covariance&,     \
+      const CalibrationFilter<double, M, 0, NI>::Covariance&, const Eigen::Quaterniond&);
+#define MIRRORCAL_IDEAL_IMU_LIVE_FEEDBACK_(M) MIRRORCAL_LIVE_FEEDBACK_(M, 0)
+MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_IDEAL_IMU_LIVE_FEEDBACK_)
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_LIVE_FEEDBACK_)
+#undef MIRRORCAL_IDEAL_IMU_LIVE_FEEDBACK_
 #undef MIRRORCAL_LIVE_FEEDBACK_
 
 }  // namespace mirrorcal::app

@@ -16,27 +16,50 @@
 
 namespace mirrorcal::app {
 
-// The parts of the calibration a user's motion informs differently: the first kFeedbackGroups of
-// CalibrationGroup, those of run's filter (no intrinsics).
-constexpr int kFeedbackGroups = 4;
+// The parts of the calibration a user's motion informs differently: the calibration's groups (the
+// first four of CalibrationGroup: run's filter has no camera intrinsics) and, with the IMU's
+// intrinsics estimated (NI > 0), the gyroscope's (D_g), the accelerometer's (D_a) and the gyro's
+// g-sensitivity (T_s, NI = 24).
+enum class FeedbackGroup : std::uint8_t {
+  kCameraPosition,
+  kCameraRotation,
+  kMarkers,
+  kTimeOffset,
+  kGyroscope,
+  kAccelerometer,
+  kGSensitivity
+};
+static_assert(int(FeedbackGroup::kTimeOffset) == int(CalibrationGroup::kTimeOffset),
+              "the calibration's groups come first, in CalibrationGroup's order");
+constexpr int kMaxFeedbackGroups = 7;
+template <int NI>
+constexpr int kFeedbackGroups = NI == 0   ? 4
+                                : NI < 24 ? 6
+                                          : 7;
+constexpr bool is_imu_group(FeedbackGroup g) {
+  return int(g) > int(FeedbackGroup::kTimeOffset);
+}
 
-// One group's uncertainty: the 1-sigma of its least-known direction (SI: m, rad, m, s) against the
-// prior's there, and that direction in the camera frame (unit; unused for the time offset).
+// One group's uncertainty: the 1-sigma of its least-known direction against the prior's there.
+// The calibration's groups: SI units (m, rad, m, s), the direction in the camera frame (unit;
+// unused for the time offset). The IMU's: its least-known intrinsic (a matrix entry, relative),
+// the direction the IMU axis whose rate (gyroscope) or specific force (accelerometer,
+// g-sensitivity) informs it: D_g's entry (r, c) multiplies the reading about axis c.
 struct GroupUncertainty {
   double sigma = 0.0;
   double prior_sigma = 0.0;
-  Eigen::Vector3d direction_c = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
 };
 
-using CalibrationUncertainty = std::array<GroupUncertainty, kFeedbackGroups>;
+using CalibrationUncertainty = std::array<GroupUncertainty, kMaxFeedbackGroups>;
 
-// The uncertainty of each group from a filter's covariance P and its prior's P0 (the calibration
-// block of the live filter's state, M markers, no intrinsics: run's filter). The markers' group is
-// the worst of the M markers.
-template <int M>
+// The uncertainty of each group from a filter's covariance P and its prior's P0 (the live filter
+// of M markers, NI IMU intrinsics and no camera intrinsics: run's filter). The markers' group is
+// the worst of the M markers, an IMU group its intrinsic with the largest sigma against its prior.
+template <int M, int NI = 0>
 CalibrationUncertainty calibration_uncertainty(
-    const typename CalibrationFilter<double, M, 0>::Covariance& p,
-    const typename CalibrationFilter<double, M, 0>::Covariance& p0,
+    const typename CalibrationFilter<double, M, 0, NI>::Covariance& p,
+    const typename CalibrationFilter<double, M, 0, NI>::Covariance& p0,
     const Eigen::Quaterniond& q_b_c);
 
 // The motion that informs a group's least-known direction, as a user would be told it. For the
@@ -44,9 +67,12 @@ CalibrationUncertainty calibration_uncertainty(
 // that direction (a rotation about an axis says nothing along it: the lever arm and the hand-eye
 // rotation are seen only across it). For the markers: along the optical axis their depth trades
 // against the mirror's distance, which only motion towards and away from the mirror separates.
-const char* motion_advice(CalibrationGroup group, const Eigen::Vector3d& direction_c);
+// For the gyroscope: brisk rotation about the IMU axis named; for the accelerometer, that axis
+// pointed up and then down (gravity is the largest specific force a hand-held rig sees, and both
+// signs separate a scale factor from the bias).
+const char* motion_advice(FeedbackGroup group, const Eigen::Vector3d& direction);
 
-const char* group_name(CalibrationGroup group);
+const char* group_name(FeedbackGroup group);
 
 // The sink `run`'s live loop publishes to: every kWindowS of IMU time it compares each group's
 // sigma with the window before and prints a line to `out` when the verdict changes (on a terminal
@@ -55,10 +81,14 @@ const char* group_name(CalibrationGroup group);
 // than kSettledFall over a window in which the rig moved and the markers were seen; twice that to
 // leave the verdict again). Allocates nothing: it
 // runs inside the loop.
-template <int M>
-class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, M, 0>> {
+// With the IMU's intrinsics a group of them that stops falling while still near its prior is
+// weak: the motion leaves it to the prior (the report marks it), which does not hold back the
+// verdict; the converged line names it and the motion that would inform it.
+template <int M, int NI = 0>
+class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, M, 0, NI>> {
  public:
-  using Filter = CalibrationFilter<double, M, 0>;
+  using Filter = CalibrationFilter<double, M, 0, NI>;
+  static constexpr int kGroups = kFeedbackGroups<NI>;
   static constexpr double kWindowS = 5.0;
   static constexpr double kSettledFall = 0.05;
   // And its sigma below this share of the prior's: a direction the motion never excited stays
@@ -77,8 +107,8 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
  private:
   enum class Verdict : std::uint8_t { kNone, kNoMarkers, kStill, kUncertain, kConverged };
   void close_window(double t_s, const Filter& filter);
-  void print(double t_s, Verdict verdict, int advised, const CalibrationUncertainty& u,
-             const std::array<bool, kFeedbackGroups>& settled);
+  void print(double t_s, Verdict verdict, int advised, int weak, const CalibrationUncertainty& u,
+             const std::array<bool, kMaxFeedbackGroups>& settled);
 
   typename Filter::Covariance p0_;
   std::FILE* out_;
@@ -94,9 +124,12 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   Verdict verdict_ = Verdict::kNone;
   int advised_ = -1;
 };
-// Compiled in live_feedback.cpp for every built M.
+// Compiled in live_feedback.cpp for every built M and IMU model.
 #define MIRRORCAL_EXTERN_LIVE_FEEDBACK_(M) extern template class LiveFeedback<M>;
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_LIVE_FEEDBACK_)
 #undef MIRRORCAL_EXTERN_LIVE_FEEDBACK_
+#define MIRRORCAL_EXTERN_IMU_LIVE_FEEDBACK_(M, NI) extern template class LiveFeedback<M, NI>;
+MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_LIVE_FEEDBACK_)
+#undef MIRRORCAL_EXTERN_IMU_LIVE_FEEDBACK_
 
 }  // namespace mirrorcal::app

@@ -114,6 +114,8 @@ const std::vector<Command>& commands() {
        "              [--out DIR] [--duration S] [--rate HZ]\n"
        "              [--gyro-range DPS] [--accel-range G] [--config FILE] [--profile]\n"
        "              [--from RESULT]  (start from an earlier calibration, as calibrate --from)\n"
+       "              [--imu-model MODEL]  (as calibrate; default imu.yaml's imu_model: the\n"
+       "              live feedback then also names the motion the IMU's intrinsics need)\n"
        "              [--rt-priority P] [--mlock] [--cpu C]\n",
        cmd_run},
       {"export",

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <random>
@@ -21,6 +22,7 @@
 
 #include "mirrorcal/calibration/recording_run.hpp"
 #include "mirrorcal/detection/blob_detector.hpp"
+#include "mirrorcal/estimator/marker_counts.hpp"
 #include "mirrorcal/evaluation/process.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "test_support.hpp"
@@ -208,6 +210,29 @@ TEST(Cli, RecordWithIntrinsicsAsksForThemInThePriors) {
   ASSERT_EQ(run_mirrorcal("calibrate " + d + "/b --intrinsics --out " + d + "/cb", d).code, 0);
   EXPECT_EQ(slurp(d + "/ca/estimates.csv"), slurp(d + "/cb/estimates.csv"));
   EXPECT_NE(slurp(d + "/ca/estimates.csv").find("sigma_fu [px]"), std::string::npos);
+}
+
+// The IMU's intrinsics are a stage-1 model: imu.yaml's imu_model beside mirrorcal.yaml's
+// estimate_intrinsics is refused, by calibrate and by run alike (before run opens any device),
+// naming the model and what to do; run reads imu.yaml's model as calibrate does.
+TEST(Cli, TheImuModelBesideTheCameraIntrinsicsIsRefusedByCalibrateAndRun) {
+  if (!mirrorcal::imu_model_built(12)) GTEST_SKIP() << "built without scale-misalignment";
+  TempDir dir("cli-imu-model-stage2");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 9 --intrinsics --duration 5 --out " + d + "/rec", d).code,
+            0);
+  spit(d + "/rec/imu.yaml", slurp(d + "/rec/imu.yaml") + "imu_model: scale-misalignment\n");
+  for (const std::string& command :
+       {"calibrate " + d + "/rec --out " + d + "/cal",
+        "run --imu spi:" + d + "/no-such-spidev --sensors " + d + "/rec --out " + d + "/run"}) {
+    SCOPED_TRACE(command);
+    const Result r = run_mirrorcal(command, d);
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("the IMU model scale-misalignment is estimated in stage 1"),
+              std::string::npos)
+        << r.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(d + "/run"));
 }
 
 // Holding skew (most cameras have none; Kalibr and OpenVINS have no slot for it): the recording
