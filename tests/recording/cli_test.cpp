@@ -235,6 +235,42 @@ TEST(Cli, TheImuModelBesideTheCameraIntrinsicsIsRefusedByCalibrateAndRun) {
   EXPECT_FALSE(std::filesystem::exists(d + "/run"));
 }
 
+// calibrate --estimate-noise writes an imu.yaml with the densities it found; imu.yaml's own keys
+// (the IMU model, the tolerances) stay as the user gave them, so that calibrating from the new
+// file changes the noise and nothing else.
+TEST(Cli, TheImuYamlWithEstimatedNoiseKeepsTheModelAndTolerances) {
+  if (!mirrorcal::imu_model_built(12)) GTEST_SKIP() << "built without scale-misalignment";
+  TempDir dir("cli-estimated-imu-yaml");
+  const std::string& d = dir.path;
+  ASSERT_EQ(
+      run_mirrorcal("record --scenario mems --seed 2 --duration 10 --out " + d + "/rec", d).code,
+      0);
+  std::string imu_yaml;  // the recording's, its gyro's scale tolerance the user's own
+  std::istringstream lines(slurp(d + "/rec/imu.yaml"));
+  for (std::string line; std::getline(lines, line);)
+    if (line.rfind("gyroscope_scale_tolerance:", 0) != 0) imu_yaml += line + "\n";
+  spit(d + "/rec/imu.yaml",
+       imu_yaml + "imu_model: scale-misalignment\ngyroscope_scale_tolerance: 0.007\n");
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --estimate-noise --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  mirrorcal::sim::SensorInfo stated, written;
+  std::vector<std::string> notes;
+  std::string err;
+  ASSERT_TRUE(
+      mirrorcal::sim::parse_imu_yaml(slurp(d + "/rec/imu.yaml"), "stated", stated, notes, err))
+      << err;
+  ASSERT_TRUE(
+      mirrorcal::sim::parse_imu_yaml(slurp(d + "/cal/imu.yaml"), "written", written, notes, err))
+      << err;
+  ASSERT_TRUE(written.imu_model.has_value());
+  EXPECT_EQ(*written.imu_model, mirrorcal::ImuModel::kScaleMisalignment);
+  EXPECT_EQ(written.imu_tolerances.gyro_scale, 0.007);
+  EXPECT_EQ(written.imu_tolerances.accel_scale, stated.imu_tolerances.accel_scale);
+  EXPECT_EQ(written.imu_tolerances.gyro_misalignment, stated.imu_tolerances.gyro_misalignment);
+  EXPECT_EQ(written.imu.gyro_random_walk, stated.imu.gyro_random_walk);      // walks as stated
+  EXPECT_NE(written.imu.gyro_noise_density, stated.imu.gyro_noise_density);  // estimated
+}
+
 // Holding skew (most cameras have none; Kalibr and OpenVINS have no slot for it): the recording
 // asks for it, calibrate estimates fu fv cu cv only and writes camchain.yaml's skew back.
 TEST(Cli, HoldSkewEstimatesFourIntrinsicsAndKeepsTheCameraSkew) {

@@ -709,6 +709,8 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
     noise.told_pixel_sigma = config.pixel_sigma;
     noise.imu = config.imu;
     noise.imu_rate_hz = 1e9 / static_cast<double>(data.imu_period_ns);
+    noise.imu_model = State::kImuModel;
+    noise.imu_tolerances = passes.imu_tolerances;
     ImuWhiteNoise white;
     if (imu_white_noise(*data.open_imu(), data.imu_period_ns, white)) {
       noise.imu_differences = white.differences;

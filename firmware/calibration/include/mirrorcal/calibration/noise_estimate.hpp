@@ -52,7 +52,11 @@ struct NoiseEstimate {
   ImuNoise imu{};
   double gyro_density_sigma = 0.0, accel_density_sigma = 0.0;
   double pixel_sigma = 0.0, pixel_sigma_sigma = 0.0;
-  double imu_rate_hz = 0.0;           // the IMU's nominal rate (imu.yaml's update_rate)
+  double imu_rate_hz = 0.0;  // the IMU's nominal rate (imu.yaml's update_rate)
+  // imu.yaml's own keys the calibration used (the IMU model, the tolerances), which the imu.yaml
+  // written with the estimates keeps, so that calibrating from it changes only the noise.
+  ImuModel imu_model = ImuModel::kCalibrated;
+  ImuIntrinsicsSigma imu_tolerances{};
   std::uint64_t imu_differences = 0;  // the fourth differences the densities rest on
   // Whether each density was estimated: false where the samples' noise was not white from sample
   // to sample (ImuWhiteNoise::white; a part's own low-pass filter), and the stated one was kept.
@@ -86,8 +90,9 @@ bool imu_white_noise(hal::ImuSource& imu, std::int64_t nominal_period_ns, ImuWhi
 bool pixel_noise_estimate(double quadratic, double redundancy, double told_pixel_sigma,
                           double& estimate, double& sigma);
 
-// Kalibr's imu.yaml with the estimated densities (and the random walks stated), as the shared
-// writer writes it (sim::imu_yaml_text), with a comment saying where they come from.
+// Kalibr's imu.yaml with the estimated densities (and the random walks stated), the IMU model
+// and tolerances used, as the shared writer writes it (sim::imu_yaml_text), with a comment saying
+// where they come from.
 std::string estimated_imu_yaml(const NoiseEstimate& n);
 // The same as imu.yaml at path, added to out (written with the run's other outputs, or none).
 bool add_estimated_imu_yaml(files::OutputSet& out, const std::string& path, const NoiseEstimate& n,
