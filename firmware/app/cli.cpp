@@ -142,8 +142,9 @@ bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
   if (model == ImuModel::kCalibrated) return true;
   if (camera_intrinsics) {
     error = std::string("the IMU model ") + to_string(model) +
-            " is estimated in stage 1 (without the camera's intrinsics); calibrate stage 2 with "
-            "imu_model: calibrated, from the stage-1 result (--from)";
+            " is estimated in stage 1 (without the camera's intrinsics): mirrorcal has no stage 2 "
+            "with the IMU's intrinsics yet. Calibrate stage 1 with it; a stage 2 from that result "
+            "(--from, imu_model: calibrated) assumes an ideal IMU and says consistent: false";
     return false;
   }
   if (sensors.imu_tolerances_defaulted)

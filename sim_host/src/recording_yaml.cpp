@@ -251,16 +251,21 @@ namespace {
 // datasheet's 1-sigma, relative for scale factors and cross-axis sensitivity (1 % = 0.01, about
 // 0.57 deg for an axis's tilt), (rad/s)/(m/s^2) for the g-sensitivity; one of 20 % or more is no
 // trimmed part's (or a percentage given as a number).
+// An IMU model's name at key (imu_intrinsics.hpp).
+bool imu_model_key(const YamlMap& y, const char* key, ImuModel& model) {
+  std::string name;
+  if (!y.string(key, name)) return false;
+  if (imu_model_from_string(name, model)) return true;
+  return y.fail(y.node(key), key,
+                text::quoted(name) +
+                    " is not an IMU model (calibrated, scale-misalignment, "
+                    "scale-misalignment-rotation, scale-misalignment-rotation-g-sensitivity)");
+}
+
 bool parse_imu_model_keys(const YamlMap& y, SensorInfo& out) {
   if (y.has("imu_model")) {
-    std::string name;
     ImuModel model = ImuModel::kCalibrated;
-    if (!y.string("imu_model", name)) return false;
-    if (!imu_model_from_string(name, model))
-      return y.fail(y.node("imu_model"), "imu_model",
-                    text::quoted(name) +
-                        " is not an IMU model (calibrated, scale-misalignment, "
-                        "scale-misalignment-rotation, scale-misalignment-rotation-g-sensitivity)");
+    if (!imu_model_key(y, "imu_model", model)) return false;
     out.imu_model = model;
   }
   ImuIntrinsicsSigma& t = out.imu_tolerances;
@@ -652,6 +657,13 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
     return false;
   out.trusted = true;
   if (y.has("consistent") && !y.flag("consistent", out.trusted)) return false;
+  // The IMU model it estimated (its imu section's; results written before it had none).
+  out.imu_model = ImuModel::kCalibrated;
+  if (y.has("imu")) {
+    YamlMap imu(file, error);
+    if (!imu.sub(y, "imu") || (imu.has("model") && !imu_model_key(imu, "model", out.imu_model)))
+      return false;
+  }
   out.has_camera = y.has("intrinsics");
   return !out.has_camera || read_camera(y, "skew", out.camera);
 }

@@ -235,6 +235,47 @@ TEST(Cli, TheImuModelBesideTheCameraIntrinsicsIsRefusedByCalibrateAndRun) {
   EXPECT_FALSE(std::filesystem::exists(d + "/run"));
 }
 
+// Stage 2 assumes an ideal IMU: from a stage 1 that estimated the IMU's intrinsics (a MEMS part)
+// it says consistent: false and why; from a stage 1 of the ideal IMU it does not. A stage 1's
+// result naming an IMU model no one knows is refused, naming the key.
+TEST(Cli, StageTwoFromAStageOneWithTheImuModelSaysItCannotBeTrusted) {
+  if (!mirrorcal::imu_model_built(12)) GTEST_SKIP() << "built without scale-misalignment";
+  TempDir dir("cli-stage2-imu-model");
+  const std::string& d = dir.path;
+  for (const char* rec : {"rec1 --seed 3", "rec2 --seed 4 --intrinsics"})
+    ASSERT_EQ(run_mirrorcal(std::string("record --duration 15 --out ") + d + "/" + rec, d).code, 0);
+  ASSERT_EQ(
+      run_mirrorcal(
+          "calibrate " + d + "/rec1 --imu-model scale-misalignment --out " + d + "/s1-model", d)
+          .code,
+      0);
+  ASSERT_EQ(run_mirrorcal("calibrate " + d + "/rec1 --out " + d + "/s1-ideal", d).code, 0);
+  const auto stage2 = [&](const std::string& from) {
+    const Result r = run_mirrorcal(
+        "calibrate " + d + "/rec2 --from " + d + "/" + from + " --out " + d + "/s2-" + from, d);
+    EXPECT_EQ(r.code, 0) << r.output;
+    return r;
+  };
+  const std::string warning = "that estimated the IMU's scale factors and axes";
+  const Result from_model = stage2("s1-model");
+  EXPECT_NE(from_model.output.find(warning), std::string::npos) << from_model.output;
+  EXPECT_FALSE(YAML::LoadFile(d + "/s2-s1-model/mirrorcal-result.yaml")["consistent"].as<bool>());
+  const Result from_ideal = stage2("s1-ideal");
+  EXPECT_EQ(from_ideal.output.find(warning), std::string::npos) << from_ideal.output;
+
+  std::string result = slurp(d + "/s1-model/mirrorcal-result.yaml");
+  const std::size_t at = result.find("model: scale-misalignment");
+  ASSERT_NE(at, std::string::npos);
+  result.replace(at, std::string("model: scale-misalignment").size(), "model: scale-and-hope");
+  spit(d + "/s1-model/mirrorcal-result.yaml", result);
+  const Result bad =
+      run_mirrorcal("calibrate " + d + "/rec2 --from " + d + "/s1-model --out " + d + "/s2-bad", d);
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.output.find("imu.model"), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("'scale-and-hope' is not an IMU model"), std::string::npos)
+      << bad.output;
+}
+
 // calibrate --estimate-noise writes an imu.yaml with the densities it found; imu.yaml's own keys
 // (the IMU model, the tolerances) stay as the user gave them, so that calibrating from the new
 // file changes the noise and nothing else.

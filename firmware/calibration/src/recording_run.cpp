@@ -61,7 +61,7 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   passes.imu_tolerances = r.sensors.imu_tolerances;  // the ideal-IMU check's prior
   run = run_loop<M, NK, NI>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr,
                             progress, {}, passes);
-  run.result.from_untrusted = from != nullptr && !from->trusted;
+  if (from != nullptr) note_start(*from, run.result);
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();
     return false;

@@ -796,7 +796,13 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   const int n = s.layout().size();
   s.covariance = earlier.covariance.topLeftCorner(n, n);
   s.trusted = consistent(earlier);
+  s.imu_model = earlier.imu.model;
   return s;
+}
+
+void note_start(const sim::CalibrationStart& earlier, CalibrationResult& r) {
+  r.from_untrusted = !earlier.trusted;
+  r.from_imu_model = earlier.imu_model;
 }
 
 }  // namespace mirrorcal::calibration

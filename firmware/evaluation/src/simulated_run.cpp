@@ -119,7 +119,7 @@ CalibrationRun<M, NK> run_two_stage_simulation(const sim::Scenario& s, std::uint
   start_from(start, x0, p0);
   const State truth = truth_state<State>(s);
   Run run = run_loop<M, NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
-  run.result.from_untrusted = !start.trusted;
+  note_start(start, run.result);
   run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
 }

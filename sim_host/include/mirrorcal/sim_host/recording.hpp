@@ -269,6 +269,9 @@ struct CalibrationStart {
   CameraInfo camera;
   std::string recording_fingerprint;  // Recording::fingerprint of its data; empty in older results
   bool trusted = true;  // its self-check's `consistent` (true where a hand-written start has none)
+  // The IMU model it estimated (its imu section's): one with intrinsics says the IMU is a MEMS
+  // part whose scale factors and axes an ideal IMU's model does not cover.
+  ImuModel imu_model = ImuModel::kCalibrated;
 
   // The covariance's rows: the calibration block of these markers, without the intrinsics.
   CalibrationLayout layout() const {

@@ -39,7 +39,10 @@ struct CalibrationResult {
   std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
   int passes = 1;                     // passes over the data (sim_run.hpp)
   bool from_untrusted = false;  // started from an earlier calibration that said consistent: false
-  int restarted_pass = 0;       // 1-based; the pass restarted from the guesses (run.hpp), or 0
+  // The IMU model of the calibration it started from (--from): one with intrinsics found the IMU
+  // a MEMS part, which a calibration assuming an ideal IMU (stage 2) cannot account for.
+  ImuModel from_imu_model = ImuModel::kCalibrated;
+  int restarted_pass = 0;  // 1-based; the pass restarted from the guesses (run.hpp), or 0
   // What the filter saw itself, for the self-check (no truth needed): the normalised innovation
   // squared per degree of freedom over the last pass once the gate was on.
   double nis_per_dof = 0.0;

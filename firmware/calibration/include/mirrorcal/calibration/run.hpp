@@ -251,6 +251,9 @@ MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_RUN_LOOP_)
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier);
+// What a result started from an earlier calibration owes to it, for its self-check: whether that
+// one said consistent, and the IMU model it estimated.
+void note_start(const sim::CalibrationStart& earlier, CalibrationResult& r);
 
 // Starts the camera pose, markers and time offset at an earlier calibration's estimate and
 // covariance in place of the prior's guesses; the IMU state and the intrinsics keep the prior's,
