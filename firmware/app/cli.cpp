@@ -126,6 +126,20 @@ std::string imu_model_not_built(ImuModel model) {
          "\"";
 }
 
+void print_result_warnings(const calibration::CalibrationResult& r) {
+  for (const std::string& w : calibration::result_warnings(r))
+    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+}
+
+int calibration_exit_status(const calibration::CalibrationResult& r) {
+  if (calibration::consistent(r)) return 0;
+  std::fprintf(stderr,
+               "mirrorcal: the calibration says consistent: false (the WARNING above): its files "
+               "are written and say so, not to be used as they are (exit status %d)\n",
+               kExitNotConsistent);
+  return kExitNotConsistent;
+}
+
 bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
                            const std::string& folder, bool camera_intrinsics, ImuModel& model,
                            std::string& error) {

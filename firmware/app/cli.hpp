@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/estimator/marker_counts.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
@@ -38,6 +39,16 @@ struct Options {
 // call it: the helpers return false with the message, and the command chooses the exit code (2: the
 // command line or the files it names are wrong; 1: a file, a device or an output failed).
 [[noreturn]] void fail(const std::string& msg, int code = 2);
+
+// The exit status of a command whose calibration says consistent: false (its files are written,
+// and say so): distinct from 1 (a failure) and 2 (bad input), so that no script takes a flagged
+// calibration for a good one. export refusing such a result (without --force) exits with it too.
+constexpr int kExitNotConsistent = 3;
+// A calibration's warnings on stderr, a WARNING line each.
+void print_result_warnings(const calibration::CalibrationResult& r);
+// The status a command that wrote the calibration r exits with: 0, or kExitNotConsistent with a
+// last line on stderr saying so.
+int calibration_exit_status(const calibration::CalibrationResult& r);
 
 // Whether --help (or -h) is anywhere in argv[first..): main then prints the command's usage.
 bool asks_for_help(int argc, char** argv, int first);

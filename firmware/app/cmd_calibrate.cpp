@@ -117,8 +117,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
       if (log->unreadable > std::uint64_t(log->kept)) std::fprintf(stderr, "  ...\n");
     }
   }
-  for (const std::string& w : result_warnings(run.result))
-    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+  print_result_warnings(run.result);
   if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
                                     report_plots(), err, rec.warnings))
     fail(err, 1);
@@ -128,7 +127,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
       out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "",
       NI > 0 ? ", kalibr_imu_chain.yaml (the IMU's intrinsics, as OpenVINS reads them)" : "",
       run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
-  return 0;
+  return calibration_exit_status(run.result);
 }
 
 }  // namespace

@@ -238,8 +238,7 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
 // The result's warnings on stderr, and its files in dir.
 bool write_run_result(const std::string& dir, const CalibrationResult& result,
                       const ReportData& report, std::string& error) {
-  for (const std::string& w : result_warnings(result))
-    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+  print_result_warnings(result);
   files::OutputSet out;
   if (!write_camchain_imucam(out, dir + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(out, dir + "/mirrorcal-result.yaml", result, error) ||
@@ -328,7 +327,7 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   if (!write_run_result(s.out, result, report, error)) fail(error, 1);
   if (end == firmware::LoopEnd::kImuError) fail(streams.imu().error(), 1);
   if (end == firmware::LoopEnd::kMarkerError) fail(streams.markers().error(), 1);
-  return 0;
+  return calibration_exit_status(result);
 }
 
 int cmd_run(int argc, char** argv) {

@@ -82,7 +82,7 @@ struct SimReport {
 // What a run shows and writes, whichever stage it ended in; false with the error when a file
 // cannot be written.
 template <class Run>
-bool report_run(const Run& run, const SimReport& r, std::string& err) {
+bool report_run(const Run& run, const SimReport& r, int& status, std::string& err) {
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - r.t0).count();
   end_progress("calibrating done");
@@ -91,8 +91,7 @@ bool report_run(const Run& run, const SimReport& r, std::string& err) {
   if (r.frames.enabled) print_detection(run.detection, r.frames.format);
 
   const auto& params = run.result.params;
-  for (const std::string& w : result_warnings(run.result))
-    std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
+  print_result_warnings(run.result);
   // The error plots first: the report embeds them.
   ReportPlots figures = report_plots(r.plots);
   if (figures.draw) {
@@ -109,6 +108,7 @@ bool report_run(const Run& run, const SimReport& r, std::string& err) {
       "report.html, residuals.csv%s\n",
       r.dir.c_str(),
       run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
+  status = calibration_exit_status(run.result);
   return !r.profiler ||
          report_profile(*r.profiler,
                         "this host's monotonic clock, simulated data fed as fast as it is taken",
@@ -208,27 +208,29 @@ int cmd_sim(int argc, char** argv) {
     constexpr int M = decltype(markers)::value;
     std::string err;
     bool written = false;
+    int status = 0;
     if (lens)
       written = report_run(one_stage ? run_one_stage_simulation<M, 8>(s, seed, progress)
                                      : run_two_stage_simulation<M, 8>(s, seed, progress),
-                           report, err);
+                           report, status, err);
     else if (intrinsics && o.flag("hold-skew"))
       written = report_run(one_stage ? run_one_stage_simulation<M, 4>(s, seed, progress)
                                      : run_two_stage_simulation<M, 4>(s, seed, progress),
-                           report, err);
+                           report, status, err);
     else if (intrinsics)
       written = report_run(one_stage ? run_one_stage_simulation<M, 5>(s, seed, progress)
                                      : run_two_stage_simulation<M, 5>(s, seed, progress),
-                           report, err);
+                           report, status, err);
     else
       with_imu_model_of(imu_model, [&](auto imu) {
         constexpr int NI = decltype(imu)::value;
-        written = report_run(
-            run_simulation<M, NI>(s, seed, progress, frames, profiler.get(), passes), report, err);
+        written =
+            report_run(run_simulation<M, NI>(s, seed, progress, frames, profiler.get(), passes),
+                       report, status, err);
         return 0;
       });
     if (!written) fail(err, 1);
-    return 0;
+    return status;
   });
 }
 

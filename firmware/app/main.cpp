@@ -125,7 +125,8 @@ const std::vector<Command>& commands() {
        "              kalibr_imucam_chain.yaml; vins-fusion: the camera-IMU keys of its config, "
        "and\n"
        "              its camera file OUT's stem + _cam0.yaml beside it; ros-camera-info: a ROS\n"
-       "              camera_info YAML)\n",
+       "              camera_info YAML) [--force]  (a result that says consistent: false is\n"
+       "              refused, exit status 3, unless --force)\n",
        cmd_export},
       {"imu-noise",
        "  imu-noise   an IMU's noise from a still recording, as Kalibr's imu.yaml\n"

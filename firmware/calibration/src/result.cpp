@@ -120,11 +120,32 @@ void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_
 
 }  // namespace
 
+namespace {
+
+// That the file holds a calibration not to be trusted, and why, as comment lines a reader sees
+// first (the tools that read the file skip them).
+void write_distrust_comment(std::FILE* o, const std::string& why) {
+  std::fprintf(o, "# NOT TO BE TRUSTED: mirrorcal's self-check says consistent: false.\n");
+  constexpr std::size_t kWidth = 96;
+  for (std::size_t start = 0; start < why.size();) {
+    std::size_t end = std::min(start + kWidth, why.size());
+    if (end < why.size()) {
+      const std::size_t space = why.rfind(' ', end);
+      if (space != std::string::npos && space > start) end = space;
+    }
+    std::fprintf(o, "# %s\n", why.substr(start, end - start).c_str());
+    start = end + 1;
+  }
+}
+
+}  // namespace
+
 bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
                            const CalibrationResult& r, std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
   write_yaml_header(o, "mirrorcal calibration, Kalibr camchain-imucam format");
+  if (!consistent(r)) write_distrust_comment(o, convergence_warning(r));
   write_imucam_chain(o, r, false);
   return true;
 }
@@ -600,7 +621,7 @@ std::string vins_camera_file(const std::string& config_path) {
 }
 
 bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
-                  std::string& error) {
+                  std::string& error, bool untrusted) {
   files::OutputSet out;
   if (format == ExportFormat::kVinsFusion) {
     std::FILE* camera = out.add(vins_camera_file(path), error);
@@ -621,6 +642,11 @@ bool write_export(ExportFormat format, const std::string& path, const Calibratio
       write_ros_camera_info(o, r);
       break;
   }
+  // At the end: VINS-Fusion's reader (OpenCV's FileStorage) wants its %YAML line first.
+  if (untrusted)
+    write_distrust_comment(o,
+                           "Exported with --force from a mirrorcal-result.yaml that says so (its "
+                           "report.txt and WARNINGs say why).");
   return out.commit(error);
 }
 

@@ -211,7 +211,8 @@ void write_yaml_header(std::FILE* o, const char* what);
 void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent);
 
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's. Read unmodified
-// by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike.
+// by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike. A calibration that says
+// consistent: false says so in comments at its top, with why.
 // The writers add their file to out, which writes it when committed (files.hpp); false,
 // with a message naming the file, if it cannot be created.
 bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
@@ -226,9 +227,10 @@ enum class ExportFormat {
 bool export_format_from_string(const std::string& name, ExportFormat& format);
 // VINS-Fusion's camera file, written beside its config at config_path: "<stem>_cam0.yaml".
 std::string vins_camera_file(const std::string& config_path);
-// Writes the file (and VINS-Fusion's camera file) whole or not at all.
+// Writes the file (and VINS-Fusion's camera file) whole or not at all; untrusted: r said
+// consistent: false and is exported anyway (a comment says so).
 bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
-                  std::string& error);
+                  std::string& error, bool untrusted = false);
 // Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
 // and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
 bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
