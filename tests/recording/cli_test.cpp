@@ -989,6 +989,33 @@ TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
 // has not converged: its estimate and sigmas are not to be trusted (sim_run.cpp measures the step;
 // runs 78, 71 and 132 of `montecarlo --scenario random --seed 3` end with steps of 70, 2800
 // and 6400 sigmas).
+// Detection that saw blobs but told few markers apart is named as the cause, first, whatever else
+// the self-check then finds (its advice would send the user the wrong way); many spare blobs
+// beside well-labelled markers (room lights, ghosts) or an empty view are not this.
+TEST(Cli, AnIdentificationThatFailedIsNamedAsTheCause) {
+  using Counts = mc::calibration::CalibrationResult::DetectionCounts;
+  mc::calibration::CalibrationResult r;
+  r.markers.resize(3);
+  r.markers_observed = r.markers_used = 3;
+  const auto says = [&](const Counts& c) {
+    r.detection = c;
+    return mc::calibration::convergence_warning(r);
+  };
+  // The fourth rendered recording: 3 labelled in 1,201 frames among 6,728 blobs.
+  const std::string failed = says({1201, 3, 744, 5984});
+  EXPECT_EQ(failed.rfind("the detection labelled 3 markers in 1201 frames", 0), 0u) << failed;
+  EXPECT_NE(failed.find("744 blobs it withheld in doubt and 5984 it left unlabelled"),
+            std::string::npos);
+  EXPECT_FALSE(mc::calibration::consistent(r));
+  r.markers_observed = r.markers_used = 3400;
+  EXPECT_EQ(says({1200, 2871, 29, 29}), "");    // a good run (sim --frames)
+  EXPECT_EQ(says({1200, 3400, 10, 6000}), "");  // room lights and ghosts beside it
+  r.markers_observed = r.markers_used = 40;
+  EXPECT_EQ(says({1200, 40, 0, 10}).find("the detection labelled"),
+            std::string::npos);       // none seen
+  EXPECT_EQ(says({0, 0, 0, 0}), "");  // markers that came labelled
+}
+
 TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
   mc::calibration::CalibrationResult r;
   r.markers_observed = r.markers_used = 8700;

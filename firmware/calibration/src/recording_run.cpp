@@ -70,6 +70,7 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
     run.detection = *data.image_detection;
     run.features_found = true;
     run.result.markers_observed = run.detection.markers_labelled;
+    run.result.detection = detection_counts(run.detection);
   }
   run.result.rostopic = r.sensors.rostopic;
   run.result.recording_fingerprint = r.fingerprint;

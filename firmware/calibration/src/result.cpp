@@ -1,6 +1,7 @@
 #include "mirrorcal/calibration/result.hpp"
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -190,6 +191,13 @@ bool used_too_few(const CalibrationResult& r) {
          double(r.markers_used) < kMinUsedFraction * double(r.markers_observed);
 }
 
+bool identification_failed(const CalibrationResult& r) {
+  const CalibrationResult::DetectionCounts& d = r.detection;
+  const double possible = double(d.frames) * double(r.markers.size());
+  return d.frames > 0 && double(d.labelled) < kMinLabelledShare * possible &&
+         d.in_doubt + d.unlabelled > d.labelled;
+}
+
 bool prior_contradicted(const CalibrationResult& r) {
   return r.prior_offset_sigmas > kPriorContradictedSigmas;
 }
@@ -258,6 +266,27 @@ std::string fit_warning(const CalibrationResult& r) {
                 "guesses (or estimate the intrinsics in a second stage, calibrate --from), and "
                 "check the recording.",
                 100.0 * markers_rejected(r) / seen, r.passes);
+  return text;
+}
+
+// Said first: the other checks then fail for this reason, and their advice (move more briskly,
+// check the timestamps) would send the user the wrong way.
+std::string identification_warning(const CalibrationResult& r) {
+  if (!identification_failed(r)) return {};
+  const CalibrationResult::DetectionCounts& d = r.detection;
+  char text[700];
+  std::snprintf(text, sizeof text,
+                "the detection labelled %llu markers in %llu frames (of up to %zu a frame), "
+                "though it saw %llu blobs it withheld in doubt and %llu it left unlabelled: the "
+                "markers were not told apart, which no motion mends. The labels come from the "
+                "LEDs' brightness (1 : 1.5 : 2.25 in features_c's order) and from the filter's "
+                "prediction: check the LEDs' order against mirrorcal.yaml's features_c, the "
+                "exposure (a saturated LED loses its brightness code), and the priors' "
+                "conventions (q_b_c_wxyz is w first; p_b_c in the IMU frame, in metres).",
+                static_cast<unsigned long long>(d.labelled),
+                static_cast<unsigned long long>(d.frames), r.markers.size(),
+                static_cast<unsigned long long>(d.in_doubt),
+                static_cast<unsigned long long>(d.unlabelled));
   return text;
 }
 
@@ -352,10 +381,16 @@ std::string start_imu_warning(const CalibrationResult& r) {
 
 }  // namespace
 
+// The self-check's reasons not to trust r, each empty or its WARNING, the most telling first.
+std::array<std::string, 8> self_check_reasons(const CalibrationResult& r) {
+  return {identification_warning(r), fit_warning(r),      markers_used_warning(r),
+          prior_warning(r),          imu_warning(r),      scale_warning(r),
+          start_warning(r),          start_imu_warning(r)};
+}
+
 std::string convergence_warning(const CalibrationResult& r) {
-  for (std::string w : {fit_warning(r), markers_used_warning(r), prior_warning(r), imu_warning(r),
-                        scale_warning(r), start_warning(r), start_imu_warning(r)})
-    if (!w.empty()) return w;
+  for (std::string& w : self_check_reasons(r))
+    if (!w.empty()) return std::move(w);
   return {};
 }
 
@@ -394,9 +429,9 @@ std::string skew_warning(const CalibrationResult& r) {
 
 std::vector<std::string> result_warnings(const CalibrationResult& r) {
   std::vector<std::string> w;
-  for (std::string s : {fit_warning(r), markers_used_warning(r), prior_warning(r), imu_warning(r),
-                        scale_warning(r), start_warning(r), start_imu_warning(r), skew_warning(r)})
+  for (std::string& s : self_check_reasons(r))
     if (!s.empty()) w.push_back(std::move(s));
+  if (std::string s = skew_warning(r); !s.empty()) w.push_back(std::move(s));
   return w;
 }
 

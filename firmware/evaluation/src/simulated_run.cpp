@@ -66,6 +66,7 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   if (rendered) {
     run.detection = rendered->report();
     run.detection.wrong_labels_before = wrong_labels_before;
+    run.result.detection = detection_counts(run.detection);
   }
   return run;
 }

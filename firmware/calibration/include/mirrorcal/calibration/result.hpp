@@ -57,6 +57,12 @@ struct CalibrationResult {
   double refinement_step_sigmas = 0.0;
   // Markers in the frames the loop was given (each pass offers them all; 0: detected on the fly).
   std::uint64_t markers_observed = 0;
+  // What detection in the images did over the last pass (calibrate from images, sim --frames):
+  // its frames, the markers it labelled, and the blobs it withheld in doubt or left unlabelled.
+  // All 0 when the markers came labelled (features.csv, a simulation without frames).
+  struct DetectionCounts {
+    std::uint64_t frames = 0, labelled = 0, in_doubt = 0, unlabelled = 0;
+  } detection;
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
@@ -151,6 +157,12 @@ bool imu_not_ideal(const CalibrationResult& r);
 // errors 0.84-2.1 of their sigmas RMS. 2.6 % of the family's rigs lie beyond it, all slow sweeps.
 constexpr double kLooseMarkerScale = 0.04;
 bool scale_unresolved(const CalibrationResult& r);
+// Detection in the images saw blobs but labelled few markers: fewer than kMinLabelledShare of
+// the M a frame can show, while the blobs it withheld or left unlabelled outnumber them. The
+// identification failed (a brightness code not in id order, identical LEDs, a prior of the wrong
+// convention), not the motion; the calibration rests on a handful of markers, perhaps mislabelled.
+constexpr double kMinLabelledShare = 0.25;
+bool identification_failed(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do (the first of these reasons;
 // result_warnings gives each).
 std::string convergence_warning(const CalibrationResult& r);

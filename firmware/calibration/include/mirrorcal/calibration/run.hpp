@@ -36,6 +36,10 @@ struct DetectionReport {
   double ms_per_frame = 0.0;                // detection and identification, wall time
   double read_ms_per_frame = 0.0;           // reading the image first (calibrate from images)
 };
+// What the self-check needs of a detection report (CalibrationResult::detection).
+inline CalibrationResult::DetectionCounts detection_counts(const DetectionReport& d) {
+  return {d.frames, d.markers_labelled, d.dropped_in_doubt, d.unlabelled_blobs};
+}
 
 // One calibration of M markers: its final estimate and result, the estimate after every frame
 // (history), and what the loop, the filter and detection met on the way. NK camera parameters
