@@ -1016,6 +1016,40 @@ TEST(Cli, AnIdentificationThatFailedIsNamedAsTheCause) {
   EXPECT_EQ(says({0, 0, 0, 0}), "");  // markers that came labelled
 }
 
+// Markers 0 and 1 with their ids swapped in features.csv in every other frame (a detection that
+// confuses two LEDs): the calibration names the pair and is flagged; the same recording unswapped
+// says nothing of it.
+TEST(Cli, MarkersWhoseLabelsSwapAreNamed) {
+  TempDir dir("cli-label-swap");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("record --seed 3 --duration 20 --out " + d + "/rec", d).code, 0);
+  const std::string warning = "markers 0 and 1 (feature_id 0 and 1) look swapped";
+  Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/clean", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("look swapped"), std::string::npos) << r.output;
+
+  const std::string features = d + "/rec/mav0/cam0/features.csv";
+  std::istringstream in(slurp(features));
+  std::string out, line, frame;
+  bool swap = false;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line[0] != '#') {
+      const std::string t = line.substr(0, line.find(','));
+      if (t != frame) swap = !swap;  // every other frame
+      frame = t;
+      const std::size_t id = line.find(',') + 1;
+      if (swap && (line[id] == '0' || line[id] == '1') && line[id + 1] == ',')
+        line[id] = line[id] == '0' ? '1' : '0';
+    }
+    out += line + "\n";
+  }
+  spit(features, out);
+  r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/swapped", d);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("WARNING: " + warning), std::string::npos) << r.output;
+  EXPECT_FALSE(YAML::LoadFile(d + "/swapped/mirrorcal-result.yaml")["consistent"].as<bool>());
+}
+
 TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
   mc::calibration::CalibrationResult r;
   r.markers_observed = r.markers_used = 8700;

@@ -198,6 +198,12 @@ bool identification_failed(const CalibrationResult& r) {
          d.in_doubt + d.unlabelled > d.labelled;
 }
 
+bool labels_swapped(const CalibrationResult& r) {
+  const CalibrationResult::LabelSwap& w = r.label_swap;
+  return w.a >= 0 && w.frames >= kMinSwappedFrames &&
+         double(w.frames) > kSwappedShare * double(w.both_seen);
+}
+
 bool prior_contradicted(const CalibrationResult& r) {
   return r.prior_offset_sigmas > kPriorContradictedSigmas;
 }
@@ -287,6 +293,22 @@ std::string identification_warning(const CalibrationResult& r) {
                 static_cast<unsigned long long>(d.frames), r.markers.size(),
                 static_cast<unsigned long long>(d.in_doubt),
                 static_cast<unsigned long long>(d.unlabelled));
+  return text;
+}
+
+std::string label_swap_warning(const CalibrationResult& r) {
+  if (!labels_swapped(r)) return {};
+  const CalibrationResult::LabelSwap& w = r.label_swap;
+  char text[600];
+  std::snprintf(text, sizeof text,
+                "markers %d and %d (feature_id %d and %d) look swapped in %llu of the %llu frames "
+                "that showed both: in those, each one's reflection lies where the other's was in "
+                "the frame before. The detection confuses them (LEDs of like brightness?) or "
+                "features.csv's ids swap them, and the calibration took the swapped labels as "
+                "data. Tell them apart (the brightness code in features_c's order) and calibrate "
+                "again.",
+                w.a, w.b, w.a, w.b, static_cast<unsigned long long>(w.frames),
+                static_cast<unsigned long long>(w.both_seen));
   return text;
 }
 
@@ -382,10 +404,10 @@ std::string start_imu_warning(const CalibrationResult& r) {
 }  // namespace
 
 // The self-check's reasons not to trust r, each empty or its WARNING, the most telling first.
-std::array<std::string, 8> self_check_reasons(const CalibrationResult& r) {
-  return {identification_warning(r), fit_warning(r),      markers_used_warning(r),
-          prior_warning(r),          imu_warning(r),      scale_warning(r),
-          start_warning(r),          start_imu_warning(r)};
+std::array<std::string, 9> self_check_reasons(const CalibrationResult& r) {
+  return {identification_warning(r), label_swap_warning(r), fit_warning(r),
+          markers_used_warning(r),   prior_warning(r),      imu_warning(r),
+          scale_warning(r),          start_warning(r),      start_imu_warning(r)};
 }
 
 std::string convergence_warning(const CalibrationResult& r) {

@@ -2,6 +2,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <memory>
 #include <optional>
@@ -337,6 +338,43 @@ void record_prior_offset(const typename CalibrationRun<M, NK, NI>::State& x0,
       }
     }
   }
+}
+
+// For the self-check: the pair of markers whose labels look swapped in the most frames of the
+// last pass (CalibrationResult::LabelSwap), from the measurements alone, so that a calibration the
+// swaps carried off still names them: from one frame to the next each marker's reflection moves a
+// few pixels, far less than the markers lie apart. A frame counts for (i, j), both seen in it and
+// in the frame before, when i's reflection lies where j's was and j's where i's was: the swapped
+// labels' squared steps under a tenth of the own ones, which exceed twice (kSwapResidualSigmas
+// pixel sigmas)^2.
+template <int M, int NK, int NI>
+void record_label_swaps(double pixel_sigma, CalibrationRun<M, NK, NI>& run) {
+  std::array<std::array<std::uint64_t, M>, M> swapped{}, both{};
+  const double own_floor = 2.0 * std::pow(kSwapResidualSigmas * pixel_sigma, 2);
+  std::array<bool, M> seen_before{};
+  std::array<Eigen::Vector2d, M> before{};
+  for (const auto& row : run.history) {
+    for (int i = 0; i < M; ++i)
+      for (int j = i + 1; j < M; ++j) {
+        const auto a = std::size_t(i), b = std::size_t(j);
+        if (!row.seen[a] || !row.seen[b] || !seen_before[a] || !seen_before[b]) continue;
+        ++both[a][b];
+        const double own = (row.measured[a] - before[a]).squaredNorm() +
+                           (row.measured[b] - before[b]).squaredNorm();
+        const double swap = (row.measured[a] - before[b]).squaredNorm() +
+                            (row.measured[b] - before[a]).squaredNorm();
+        if (own > own_floor && swap < 0.1 * own) ++swapped[a][b];
+      }
+    if (row.markers_seen == 0) continue;  // the final row, or a frame without markers
+    seen_before = row.seen;
+    before = row.measured;
+  }
+  CalibrationResult::LabelSwap& worst = run.result.label_swap;
+  for (int i = 0; i < M; ++i)
+    for (int j = i + 1; j < M; ++j) {
+      const auto a = std::size_t(i), b = std::size_t(j);
+      if (swapped[a][b] > worst.frames) worst = {i, j, swapped[a][b], both[a][b]};
+    }
 }
 
 // How far a refinement step moved the calibration from the estimate it started at, in the step's
@@ -757,6 +795,7 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
   }
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<M, NK, NI>(x0, p0, run);
+  record_label_swaps(used.pixel_sigma, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
     run.prior_sigma.push_back(std::sqrt(p0(i, i)));
   for (int i = State::kImu; i < State::kImu + NI; ++i)

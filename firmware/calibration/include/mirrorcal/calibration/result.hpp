@@ -63,6 +63,13 @@ struct CalibrationResult {
   struct DetectionCounts {
     std::uint64_t frames = 0, labelled = 0, in_doubt = 0, unlabelled = 0;
   } detection;
+  // The pair of markers whose labels look swapped most often over the last pass: in how many of
+  // the frames that showed both (and the frame before) each one's reflection lies where the
+  // other's was (record_label_swaps, run.cpp). a < 0: no frame did.
+  struct LabelSwap {
+    int a = -1, b = -1;
+    std::uint64_t frames = 0, both_seen = 0;
+  } label_swap;
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
@@ -163,6 +170,14 @@ bool scale_unresolved(const CalibrationResult& r);
 // convention), not the motion; the calibration rests on a handful of markers, perhaps mislabelled.
 constexpr double kMinLabelledShare = 0.25;
 bool identification_failed(const CalibrationResult& r);
+// Two markers' labels swapped in more than kSwappedShare of the frames showing both (and in at
+// least kMinSwappedFrames): a detection that confuses them, or features.csv's ids. A frame counts
+// when each reflection lies where the other's was in the frame before (run.cpp,
+// record_label_swaps), its own step beyond kSwapResidualSigmas of the pixel noise.
+constexpr double kSwappedShare = 0.01;
+constexpr std::uint64_t kMinSwappedFrames = 5;
+constexpr double kSwapResidualSigmas = 3.0;
+bool labels_swapped(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do (the first of these reasons;
 // result_warnings gives each).
 std::string convergence_warning(const CalibrationResult& r);
