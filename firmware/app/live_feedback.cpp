@@ -40,8 +40,6 @@ int largest_axis(const Eigen::Vector3d& d) {
   return axis;
 }
 
-}  // namespace
-
 // The IMU group of an intrinsic: D_a's entries the accelerometer's, D_g's the gyroscope's, T_s's
 // the g-sensitivity's.
 FeedbackGroup imu_group(ImuIntrinsics<double>::Matrix m) {
@@ -49,6 +47,8 @@ FeedbackGroup imu_group(ImuIntrinsics<double>::Matrix m) {
          : m == ImuIntrinsics<double>::kDg ? FeedbackGroup::kGyroscope
                                            : FeedbackGroup::kGSensitivity;
 }
+
+}  // namespace
 
 template <int M, int NI>
 CalibrationUncertainty calibration_uncertainty(
