@@ -251,6 +251,27 @@ bool write_run_result(const std::string& dir, const CalibrationResult& result,
   return true;
 }
 
+// The live pass's filter, its start and its feedback, allocated once before the loop starts: with
+// 6 markers and the IMU's intrinsics they outgrow the 64 KiB a stack frame is held to.
+template <int M, int NI>
+struct LiveEstimator {
+  using Filter = CalibrationFilter<double, M, 0, NI>;
+  struct Start {
+    typename Filter::State x0;
+    typename Filter::Covariance p0;
+    explicit Start(const Prior<M>& prior) { initialise(prior, x0, p0); }
+  };
+  LiveEstimator(const Prior<M>& prior, const CalibrationConfig& config, bool every_window)
+      : start(prior), filter(config), feedback(start.p0, stdout, every_window) {
+    filter.reset(start.x0, start.p0);
+  }
+  Start start;
+  Filter filter;
+  // While the user moves the rig: what is still uncertain, what motion helps, when it converged.
+  // On a terminal a line every window; in a log only when the verdict changes.
+  LiveFeedback<M, NI> feedback;
+};
+
 }  // namespace
 
 // The live loop of M markers (and NI of the IMU's intrinsics) on the devices, then the calibration
@@ -278,12 +299,9 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
     fail(error, exit_code);
   if (!create_out_dir(s.out, error)) fail(error, 1);
 
-  using Filter = CalibrationFilter<double, M, 0, NI>;
-  Filter filter(recording_config(sensors));
-  typename Filter::State x0;
-  typename Filter::Covariance p0;
-  initialise(prior, x0, p0);
-  filter.reset(x0, p0);
+  const auto estimator = std::make_unique<LiveEstimator<M, NI>>(prior, recording_config(sensors),
+                                                                isatty(STDOUT_FILENO) == 1);
+  auto& filter = estimator->filter;
   const std::int64_t imu_period = imu_period_ns(sensors.sensors.imu_rate_hz);
   const std::int64_t frame_period = frame_period_ns(devices);
   LiveStreams<M> streams(devices, s.duration_s, imu_period, frame_period);
@@ -295,11 +313,8 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
-  // While the user moves the rig: what is still uncertain, what motion helps, when it converged.
-  // On a terminal a line every window; in a log only when the verdict changes.
-  LiveFeedback<M, NI> feedback(p0, stdout, isatty(STDOUT_FILENO) == 1);
   firmware::CalibrationLoop<double, M, 0, NI> loop(filter, streams.imu(), streams.markers(), lc,
-                                                   devices.camera ? &feedback : nullptr);
+                                                   devices.camera ? &estimator->feedback : nullptr);
   if (devices.camera) loop.set_identifier(streams.identifier());
   print_run_start(s, devices, sensors.sensors.imu_rate_hz);
   if constexpr (NI > 0)
