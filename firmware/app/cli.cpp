@@ -191,6 +191,32 @@ bool line_delay_option(const Options& o, const std::string& key, const sim::Scen
 
 }  // namespace
 
+namespace {
+
+// A share of the simulated frames (--outliers, --label-swaps): "0.02" or "2%", within
+// 0..kMaxSimulatedMistakeShare; value is left alone when the option is absent.
+bool share_option(const Options& o, const std::string& key, const char* what, double& value,
+                  std::string& error) {
+  if (!o.flag(key)) return true;
+  const std::string text = o.get(key, "");
+  char* end = nullptr;
+  double share = std::strtod(text.c_str(), &end);
+  if (end != text.c_str() && *end == '%') {
+    share /= 100.0;
+    ++end;
+  }
+  if (end == text.c_str() || *end != '\0' || !(share >= 0.0) ||
+      !(share <= kMaxSimulatedMistakeShare)) {
+    error = "--" + key + ": '" + text + "' is not a share of frames with " + what +
+            " (0..0.5, or 0..50%)";
+    return false;
+  }
+  value = share;
+  return true;
+}
+
+}  // namespace
+
 bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error) {
   s = sim::Scenario{};
   const std::string name = o.get("scenario", "paper");
@@ -237,6 +263,11 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
     }
     s.truth.t_d = t_d;
   }
+  // --outliers P, --label-swaps P: the detector's mistakes in the share P of frames ("0.02" or
+  // "2%").
+  if (!share_option(o, "outliers", "a mis-detected marker", s.outlier_share, error) ||
+      !share_option(o, "label-swaps", "two markers' labels swapped", s.label_swap_share, error))
+    return false;
   // --line-delay S: a rolling shutter that reads each row S seconds after the one above;
   // --filter-line-delay S: the line delay the filter is told, if not the true one.
   if (o.flag("line-delay") &&

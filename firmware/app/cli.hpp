@@ -71,11 +71,15 @@ bool parse_count(const Options& o, const std::string& key, std::uint64_t def, st
 // --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
 // --distortion MODEL, the camera has that lens (sim::set_lens); with --line-delay S, a rolling
 // shutter reading each row S seconds after the one above (a whole frame within
-// kMaxSimulatedReadoutS).
+// kMaxSimulatedReadoutS); with --outliers P, in the share P of frames (at most
+// kMaxSimulatedMistakeShare; "0.02" or "2%") one marker's pixel is a random one, as a detector
+// that took a room light for an LED gives it; with --label-swaps P, two markers' labels are
+// swapped in that share.
 constexpr double kMinSimulatedDurationS = 1.0;
 constexpr double kMaxSimulatedDurationS = 600.0;
 constexpr double kMaxSimulatedTimeshiftS = 0.5;
 constexpr double kMaxSimulatedReadoutS = 0.1;
+constexpr double kMaxSimulatedMistakeShare = 0.5;
 bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error);
 // ", N markers" for a rig with other than the paper's three markers, "" for three: what the
 // simulating commands add to their titles.

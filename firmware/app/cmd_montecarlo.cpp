@@ -40,7 +40,8 @@ struct Outcome {
   // The ideal-IMU check's statistic over its bound (IdealImuCheck; 0 when not made): above 1,
   // the run said consistent: false for it.
   double imu_check = 0;
-  bool suspect = false;  // convergence_warning() would warn a user of this run
+  bool suspect = false;        // convergence_warning() would warn a user of this run
+  std::uint64_t screened = 0;  // reflections the loop's marker screen withheld, last pass
   ErrorSeries series;
   DetectionReport detection;  // --frames only
   sim::Scenario scenario;     // the run's rig (a family draws one per run)
@@ -311,6 +312,10 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if ((c.hold_skew || c.one_stage) && !c.intrinsics)
     return refuse("--hold-skew and --one-stage apply with --intrinsics");
   if (!frame_mode_option(o, c.frames, error)) return false;
+  if ((o.flag("outliers") || o.flag("label-swaps")) && c.frames.enabled)
+    return refuse(
+        "--outliers and --label-swaps mis-detect listed markers; rendered frames (--frames) have "
+        "room lights");
   if (c.intrinsics && c.frames.enabled)
     return refuse("--intrinsics runs on listed markers (not yet with --frames)");
   if (!o.flag("runs")) return refuse(std::string("montecarlo needs --runs N\n") + usage());
@@ -397,6 +402,7 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
     oc.nees = last.nees;
     oc.gated = r.filter_counters.markers_gated;
     oc.suspect = !convergence_warning(r.result).empty();
+    for (const std::uint64_t n : r.result.markers_screened) oc.screened += n;
     oc.passes = r.result.passes;
     oc.nis_per_dof = r.result.nis_per_dof;
     oc.sigma_ratio = r.result.sigma_ratio;
@@ -656,7 +662,7 @@ void write_runs_csv(std::FILE* f, const std::vector<Outcome>& out,
   for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
   std::fprintf(f,
                ",nees,markers_gated,filter_failures,wall_s,passes,nis_per_dof,sigma_ratio,"
-               "refinement_step");
+               "refinement_step,consistent,markers_screened");
   std::fprintf(f,
                ",mirror,motion,camera_hz,pixel_sigma,imu_noise_scale,prior_marker [cm],"
                "prior_p_b_c [cm],prior_rot_b_c [deg]");
@@ -671,6 +677,7 @@ void write_runs_csv(std::FILE* f, const std::vector<Outcome>& out,
                  (unsigned long long)out[i].gated, (unsigned long long)out[i].failures,
                  out[i].wall_s, out[i].passes, out[i].nis_per_dof, out[i].sigma_ratio,
                  out[i].refinement_step);
+    std::fprintf(f, ",%d,%llu", out[i].suspect ? 0 : 1, (unsigned long long)out[i].screened);
     const sim::Scenario& rs = out[i].scenario;
     std::fprintf(f, ",%s,%s,%.2f,%.3f,%.2f,%.2f,%.2f,%.2f", rs.mirror.c_str(),
                  rs.motion_kind.c_str(), rs.camera_rate_hz, rs.pixel_sigma, rs.imu_noise_scale,
@@ -695,7 +702,7 @@ int cmd_montecarlo(int argc, char** argv) {
   if (!parse(argc, argv, 2,
              {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
-              "rig", "imu-model"},
+              "outliers", "label-swaps", "rig", "imu-model"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion",
               "estimate-noise"},
              o, error) ||

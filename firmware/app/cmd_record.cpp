@@ -248,7 +248,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
 
 int cmd_record(int argc, char** argv) {
   std::vector<std::string> with_value = {"scenario",  "seed",       "out",        "config",
-                                         "timeshift", "distortion", "line-delay", "markers"};
+                                         "timeshift", "distortion", "line-delay", "markers",
+                                         "outliers",  "label-swaps"};
   for (const char* key : kRunKeys)
     if (std::string(key) != "out") with_value.emplace_back(key);
   Options o;

@@ -122,6 +122,10 @@ bool check_stage_options(const Options& o, const FrameMode& frames, std::string&
   const bool intrinsics = o.flag("intrinsics");
   if (intrinsics && (frames.enabled || o.flag("profile")))
     error = "--intrinsics runs on listed markers, without --profile (not yet with --frames)";
+  else if ((o.flag("outliers") || o.flag("label-swaps")) && frames.enabled)
+    error =
+        "--outliers and --label-swaps mis-detect listed markers; rendered frames (--frames) have "
+        "room lights";
   else if ((o.flag("hold-skew") || o.flag("one-stage")) && !intrinsics)
     error = "--hold-skew and --one-stage apply with --intrinsics";
   else if (o.flag("estimate-distortion") &&
@@ -139,7 +143,8 @@ int cmd_sim(int argc, char** argv) {
                                          "format",     "pixel-sigma", "imu-model",
                                          "spot-noise", "passes",      "timeshift",
                                          "distortion", "line-delay",  "filter-line-delay",
-                                         "markers",    "duration"},
+                                         "markers",    "duration",    "outliers",
+                                         "label-swaps"},
                            flags = {"no-plots",      "frames",    "intrinsics",
                                     "hold-skew",     "one-stage", "estimate-distortion",
                                     "estimate-noise"};

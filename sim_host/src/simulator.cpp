@@ -1,5 +1,6 @@
 #include "mirrorcal/sim_host/simulator.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "mirrorcal/sim_host/frame_renderer.hpp"
@@ -92,6 +93,10 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
   const std::uint64_t n_frames = frame_count(s);
   d.frames.reserve(n_frames);
   const int m = static_cast<int>(s.truth.markers.size());
+  // The detector's mistakes from a stream of their own: the rest of the data is the same with any
+  // outlier_share.
+  std::mt19937_64 rng_outlier(derive_seed(seed, 3)), rng_swap(derive_seed(seed, 4));
+  std::uniform_real_distribution<double> u01;
   for (std::uint64_t j = 0; j < n_frames; ++j) {
     ObservedFrame f;
     f.t_ns = frame_stamp_ns(s, j);
@@ -103,6 +108,22 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
         continue;
       }
       f.markers.push_back({i, uv.x() + s.pixel_sigma * du, uv.y() + s.pixel_sigma * dv});
+    }
+    const double draw = u01(rng_outlier), which = u01(rng_outlier);
+    const double u = u01(rng_outlier) * s.truth.width, v = u01(rng_outlier) * s.truth.height;
+    if (draw < s.outlier_share && !f.markers.empty()) {
+      const auto k = std::min(f.markers.size() - 1, std::size_t(which * double(f.markers.size())));
+      f.markers[k].u = u;
+      f.markers[k].v = v;
+      ++d.outliers;
+    }
+    const double swap = u01(rng_swap), first = u01(rng_swap), second = u01(rng_swap);
+    if (swap < s.label_swap_share && f.markers.size() >= 2) {
+      const std::size_t n = f.markers.size();
+      const auto a = std::min(n - 1, std::size_t(first * double(n)));
+      const auto b = (a + 1 + std::min(n - 2, std::size_t(second * double(n - 1)))) % n;
+      std::swap(f.markers[a].id, f.markers[b].id);
+      ++d.label_swaps;
     }
     d.frames.push_back(std::move(f));
   }

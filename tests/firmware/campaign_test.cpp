@@ -395,16 +395,17 @@ TEST(Campaign, TenRandomRigsOfStageTwoAreConsistent) {
   EXPECT_LT(rms_k, 2.0 * sigma_k);
 }
 
-// Three one-stage runs of the paper scenario (montecarlo --intrinsics --one-stage --seed 1, runs
-// 43, 44 and 65) lock onto a wrong solution in their first passes whatever passes from that
-// estimate do (they ended at NEES 1.4e7, 4.3e10 and 1722, flagged). Restarted from the guesses at
-// an inflated pixel noise (run.hpp, kAnnealedPixelNoise), each comes back: consistent, its NEES
-// within the 99.9 % quantile of its 21 states, and the result says it was restarted.
+// Two one-stage runs of the paper scenario (montecarlo --intrinsics --one-stage --seed 1, runs
+// 43 and 65) lock onto a wrong solution in their first passes whatever passes from that estimate
+// do (they ended at NEES 1.4e7 and 1722, flagged). Restarted from the guesses at an inflated
+// pixel noise (run.hpp, kAnnealedPixelNoise), each comes back: consistent, its NEES within the
+// 99.9 % quantile of its 21 states, and the result says it was restarted. (Run 44 did too until
+// the loop's marker screen let a first frame's markers wait for a second: it no longer locks on.)
 TEST(Campaign, OneStageRunsThatLockedOnComeBackFromARestart) {
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("mirrorcal-restart-" + std::to_string(getpid()));
   const double bound = mirrorcal::calibration::chi2_quantile(0.999, 21.0);
-  for (const char* seed : {"2950729420637482990", "12053053263890300383", "14466042551222691088"}) {
+  for (const char* seed : {"2950729420637482990", "14466042551222691088"}) {
     const std::string log = dir.string() + ".log";
     const std::string cmd = std::string(MIRRORCAL_BIN) + " sim --intrinsics --one-stage --seed " +
                             seed + " --no-plots --out " + dir.string() + " > " + log + " 2>&1";
@@ -451,6 +452,49 @@ TEST(Campaign, TenRandomRigsWithAnotherMarkerCountAreConsistent) {
   EXPECT_GT(mean, lo);
   EXPECT_LT(mean, hi);
   EXPECT_LE(missed, 1);  // as the three markers' family (TwentyRandomRigsHoldTheirFigures)
+}
+
+// The random family with a detector's mistakes: in one frame of ten, one marker's pixel is a
+// random one (--outliers 10%). Without the loop's marker screen every such run diverged (20 of 20
+// at 2 %); with it, the runs that said consistent: true are consistent (their average NEES within
+// its 99.9 % interval), at most two of ten are flagged, none lies beyond 4 sigma unflagged, and
+// the screen withheld reflections in every run.
+TEST(Campaign, TenRandomRigsWithAWrongBlobInOneFrameOfTenAreConsistent) {
+  const RandomSummary summary = random_campaign("random-outliers", "--outliers 10% --runs 10");
+  const std::vector<std::string>& cell = summary.cell;
+  ASSERT_GE(cell.size(), 8u);
+  ASSERT_EQ(cell[0], "all");
+  const int runs = std::stoi(cell[2]), flagged = std::stoi(cell[6]), missed = std::stoi(cell[7]);
+  EXPECT_EQ(runs, 10);
+  EXPECT_LE(flagged, 2);
+  EXPECT_EQ(missed, 0);
+  // The unflagged runs' NEES from runs.csv.
+  const auto column = [&](const char* name) {
+    return static_cast<std::size_t>(
+        std::find(summary.runs_header.begin(), summary.runs_header.end(), name) -
+        summary.runs_header.begin());
+  };
+  const std::size_t consistent = column("consistent"), screened = column("markers_screened");
+  ASSERT_LT(consistent, summary.runs_header.size());
+  ASSERT_LT(screened, summary.runs_header.size());
+  double sum = 0.0;
+  int trusted = 0;
+  for (std::size_t r = 0; r < summary.runs.size(); ++r) {
+    EXPECT_GT(std::stoull(summary.runs[r].at(screened)), 0u) << "run " << r;
+    if (summary.runs[r].at(consistent) != "1") continue;
+    sum += summary.nees[r];
+    ++trusted;
+  }
+  ASSERT_GT(trusted, 0);
+  const double states = mirrorcal::calibration_layout(3, 0).size();
+  const double lo = mirrorcal::calibration::chi2_quantile(0.0005, states * trusted) / trusted;
+  const double hi = mirrorcal::calibration::chi2_quantile(0.9995, states * trusted) / trusted;
+  std::printf(
+      "random, wrong blobs in 10 %% of the frames: %d of %d runs flagged, unflagged NEES "
+      "%.2f (99.9 %% interval %.2f..%.2f)\n",
+      flagged, runs, sum / trusted, lo, hi);
+  EXPECT_GT(sum / trusted, lo);
+  EXPECT_LT(sum / trusted, hi);
 }
 
 }  // namespace

@@ -59,6 +59,7 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   mc::firmware::LoopConfig lc;
   lc.profiler = profiler.get();
   mc::firmware::CalibrationLoop<double, 3, 0> loop(filter, imu, markers, lc, &sink);
+  markers.watch(&loop.screen());
 
   mc::test::AllocCounter counting;
   const auto end = loop.run();
@@ -69,11 +70,13 @@ TEST(LoopNoHeap, LoopDoesNotAllocateAfterStartUp) {
   EXPECT_EQ(loop.counters().imu_restarts, 1u);
   EXPECT_GT(filter.counters().markers_used, 2000u);
   EXPECT_EQ(sink.rows().size(), loop.counters().frames + 1);
-  // Each marker the filter took has its residual, and the updates' NIS add up to the filter's.
+  // Each marker the filter took (not withheld by the loop's screen) has its residual, and the
+  // updates' NIS add up to the filter's.
   std::uint64_t residuals = 0;
   double nis = 0.0;
   for (const auto& row : sink.rows()) {
-    for (bool valid : row.residual_valid) residuals += valid ? 1 : 0;
+    for (std::size_t i = 0; i < row.residual_valid.size(); ++i)
+      residuals += row.residual_valid[i] && !row.withheld[i] ? 1 : 0;
     nis += row.nis;
   }
   EXPECT_EQ(residuals, filter.counters().markers_used + filter.counters().markers_gated);

@@ -99,7 +99,7 @@ ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& 
     out.nis_dof = row.nis_dof;
     d.rows.push_back(out);
     for (int m = 0; m < State::kMarkers; ++m)
-      if (row.residual_valid[std::size_t(m)])
+      if (row.residual_valid[std::size_t(m)] && !row.withheld[std::size_t(m)])
         d.residuals.push_back({out.t_s, m, row.residual[std::size_t(m)].x(),
                                row.residual[std::size_t(m)].y(), k >= run.gate_after_frames});
   }

@@ -204,6 +204,10 @@ bool labels_swapped(const CalibrationResult& r) {
          double(w.frames) > kSwappedShare * double(w.both_seen);
 }
 
+bool priors_miss_first_frame(const CalibrationResult& r) {
+  return r.prior_fit.seen > 0 && r.prior_fit.near_image == 0;
+}
+
 bool prior_contradicted(const CalibrationResult& r) {
   return r.prior_offset_sigmas > kPriorContradictedSigmas;
 }
@@ -293,6 +297,22 @@ std::string identification_warning(const CalibrationResult& r) {
                 static_cast<unsigned long long>(d.frames), r.markers.size(),
                 static_cast<unsigned long long>(d.in_doubt),
                 static_cast<unsigned long long>(d.unlabelled));
+  return text;
+}
+
+std::string prior_convention_warning(const CalibrationResult& r) {
+  if (!priors_miss_first_frame(r)) return {};
+  const CalibrationResult::PriorFit& f = r.prior_fit;
+  char text[720];
+  std::snprintf(text, sizeof text,
+                "the priors put none of the first frame's %d markers near the image (%d of them "
+                "with their mirror image behind the camera): they contradict the data from the "
+                "start, and every later check fails for that. Check mirrorcal.yaml's "
+                "conventions: quaternions are Hamilton and w first (q_n_b_wxyz, q_b_c_wxyz, not "
+                "x, y, z, w), R_b_c takes the camera's vectors into the IMU frame, p_b_c is the "
+                "camera in the IMU frame and features_c the markers in the camera frame, in "
+                "metres, and gravity_n points down in the mirror's frame (z along its normal).",
+                f.seen, f.seen - f.predictable);
   return text;
 }
 
@@ -404,10 +424,17 @@ std::string start_imu_warning(const CalibrationResult& r) {
 }  // namespace
 
 // The self-check's reasons not to trust r, each empty or its WARNING, the most telling first.
-std::array<std::string, 9> self_check_reasons(const CalibrationResult& r) {
-  return {identification_warning(r), label_swap_warning(r), fit_warning(r),
-          markers_used_warning(r),   prior_warning(r),      imu_warning(r),
-          scale_warning(r),          start_warning(r),      start_imu_warning(r)};
+std::array<std::string, 10> self_check_reasons(const CalibrationResult& r) {
+  return {prior_convention_warning(r),
+          identification_warning(r),
+          label_swap_warning(r),
+          fit_warning(r),
+          markers_used_warning(r),
+          prior_warning(r),
+          imu_warning(r),
+          scale_warning(r),
+          start_warning(r),
+          start_imu_warning(r)};
 }
 
 std::string convergence_warning(const CalibrationResult& r) {
@@ -551,6 +578,15 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
   if (r.markers_observed > 0)
     std::fprintf(o, "markers_observed: %llu  # in the data the loop was given\n",
                  static_cast<unsigned long long>(r.markers_observed));
+  if (!r.markers_screened.empty()) {
+    std::fprintf(o, "markers_screened: [");
+    for (std::size_t i = 0; i < r.markers_screened.size(); ++i)
+      std::fprintf(o, "%s%llu", i > 0 ? ", " : "",
+                   static_cast<unsigned long long>(r.markers_screened[i]));
+    std::fprintf(o,
+                 "]  # per marker, last pass: withheld before the filter, their step against the "
+                 "other markers' (a wrong blob or label)\n");
+  }
   if (!r.prior_offset_state.empty())
     std::fprintf(o, "prior_offset: %.2f  # sigmas of the prior, at its furthest: %s\n",
                  r.prior_offset_sigmas, r.prior_offset_state.c_str());
@@ -568,7 +604,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
                "above 1, sigma_ratio below %g, refinement_step above %g, under half the markers "
                "used, a prior or the IMU's tolerances contradicted by 5 sigma, marker_scale_sigma "
-               "above %g or a start "
+               "above %g, priors that put no marker of the first frame near the image or a start "
                "(--from) that said false: do not trust it\n",
                consistent(r) ? "true" : "false", kSigmaRatioLimit, kRefinementStepLimit,
                kLooseMarkerScale);

@@ -133,6 +133,7 @@ CalibrationRun<M, NK, NI> run_pass(
   lc.profiler = input.profiler;
   firmware::CalibrationLoop<double, M, NK, NI> loop(filter, *imu, markers, lc, &sink);
   if (relabeler != nullptr) loop.set_identifier(&markers);
+  markers.watch(&loop.screen());
 
   const std::size_t report_every = data.imu_samples() / 100 + 1;
   std::size_t n = 0;
@@ -148,6 +149,7 @@ CalibrationRun<M, NK, NI> run_pass(
   run.result = make_result(filter, data.width, data.height);
   run.filter_counters = filter.counters();
   run.loop_counters = loop.counters();
+  for (int i = 0; i < M; ++i) run.result.markers_screened.push_back(loop.screen().rejected(i));
   run.imu_samples = data.imu_samples();
   run.frames = data.frame_count();
   return run;
@@ -375,6 +377,31 @@ void record_label_swaps(double pixel_sigma, CalibrationRun<M, NK, NI>& run) {
       const auto a = std::size_t(i), b = std::size_t(j);
       if (swapped[a][b] > worst.frames) worst = {i, j, swapped[a][b], both[a][b]};
     }
+}
+
+// For the self-check: the first frame's markers against the priors' guess there (the first
+// pass's prediction at that frame, at its exposure) (CalibrationResult::PriorFit).
+template <int M, int NK, int NI>
+void record_prior_fit(const CalibrationConfig& config, CalibrationRun<M, NK, NI>& run) {
+  const auto& row = run.first_frame;
+  std::array<bool, M> ok = row.seen;
+  Eigen::Matrix<double, 2 * M, 1> z = Eigen::Matrix<double, 2 * M, 1>::Zero();
+  Exposure<double> at_state;
+  at_state.stamp_minus_filter_s = -row.predicted.t_d;
+  at_state.gravity_n = config.gravity_n;
+  predict_markers(row.predicted, config.intrinsics, at_state, std::array<double, M>{}, z, ok);
+  CalibrationResult::PriorFit& fit = run.result.prior_fit;
+  fit = {};
+  const double w = run.result.width, h = run.result.height;
+  for (int i = 0; i < M; ++i) {
+    const auto k = std::size_t(i);
+    if (!row.seen[k]) continue;
+    ++fit.seen;
+    if (!ok[k]) continue;
+    ++fit.predictable;
+    const Eigen::Vector2d uv = z.template segment<2>(2 * i);
+    if (uv.x() > -w && uv.x() < 2.0 * w && uv.y() > -h && uv.y() < 2.0 * h) ++fit.near_image;
+  }
 }
 
 // How far a refinement step moved the calibration from the estimate it started at, in the step's
@@ -796,6 +823,7 @@ CalibrationRun<M, NK, NI> run_loop(const CalibrationConfig& config,
   run.result.markers_observed = markers_in(data);
   if (!run.history.empty()) record_prior_offset<M, NK, NI>(x0, p0, run);
   record_label_swaps(used.pixel_sigma, run);
+  record_prior_fit(used, run);
   for (int i = State::kCalibrationBegin; i < State::kDim; ++i)
     run.prior_sigma.push_back(std::sqrt(p0(i, i)));
   for (int i = State::kImu; i < State::kImu + NI; ++i)

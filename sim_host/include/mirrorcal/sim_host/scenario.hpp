@@ -88,6 +88,11 @@ struct Scenario {
   double camera_offset_s = 0.0025;  // frames fall between IMU samples
   double duration_s = 60.0;
   double pixel_sigma = 1.0;
+  // The share of frames in which the detector mistook something else for one of the markers it
+  // saw (a room light, a reflection): that marker's pixel is anywhere in the image instead.
+  double outlier_share = 0.0;
+  // The share of frames in which the detector swapped two of the markers' labels.
+  double label_swap_share = 0.0;
   Rig truth;
   // The rolling shutter's line delay the filter is told (camchain.yaml's), when not the true one:
   // what an unmodelled or mis-measured shutter does to a calibration.

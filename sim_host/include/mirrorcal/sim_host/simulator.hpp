@@ -26,11 +26,14 @@ struct SimData {
   std::vector<ObservedFrame> frames;
   Eigen::Vector3d b_a0 = Eigen::Vector3d::Zero(), b_g0 = Eigen::Vector3d::Zero();  // true, at t=0
   std::uint64_t markers_out_of_image = 0;  // reflections that fell outside the image or behind
+  std::uint64_t outliers = 0;              // markers given a random pixel (outlier_share)
+  std::uint64_t label_swaps = 0;           // frames with two labels swapped (label_swap_share)
 };
 
 // Synthesises the IMU stream (docs/design.md's model: white noise and bias random walks from the
 // Kalibr densities) and the marker reflections (eq. 11 through the true camera, pixel noise,
-// dropped when out of the image or not in front of the camera). Deterministic in seed.
+// dropped when out of the image or not in front of the camera), and the detector's mistakes
+// (outlier_share, label_swap_share). Deterministic in seed.
 SimData simulate(const Scenario& s, std::uint64_t seed);
 
 // The true pixel of marker i in the frame whose row 0 was exposed at IMU time exposure_ns (a

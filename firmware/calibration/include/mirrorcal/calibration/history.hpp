@@ -51,6 +51,8 @@ struct HistoryRow {
   // The frame's markers as the loop took them (detected and labelled, from images), px.
   std::array<bool, State::kMarkers> seen{};
   std::array<Eigen::Vector2d, State::kMarkers> measured{};
+  // Of those, the ones the loop withheld from the update (firmware::MarkerScreen).
+  std::array<bool, State::kMarkers> withheld{};
   int markers_seen = 0;
   // This update's markers rejected by the gate, and their normalised innovation squared with its
   // degrees of freedom (2 per marker used; 0 until the gate is on: see CalibrationConfig).
@@ -95,11 +97,15 @@ class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<
   }
   const char* error() const override { return source_.error(); }
   std::int64_t detection_ns() const override { return source_.detection_ns(); }
+  // The loop's screen, which withholds some of a frame's markers after the tap saw them.
+  void watch(const firmware::MarkerScreen<M>* screen) { screen_ = screen; }
   // The frame stamped t_ns the loop took last, once; nullptr if it was taken already or the
-  // estimate published at t_ns followed no frame (the final one).
-  const MarkerFrame<M>* take(std::int64_t t_ns) {
+  // estimate published at t_ns followed no frame (the final one). withheld: its markers the
+  // screen withheld.
+  const MarkerFrame<M>* take(std::int64_t t_ns, std::array<bool, M>& withheld) {
     if (!fresh_ || last_.t_ns != t_ns) return nullptr;
     fresh_ = false;
+    withheld = screen_ != nullptr ? screen_->withheld_from(t_ns) : std::array<bool, M>{};
     return &last_;
   }
 
@@ -108,6 +114,7 @@ class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<
   hal::MarkerRelabeler<M>* relabeler_;
   MarkerFrame<M> last_{};
   bool fresh_ = false;
+  const firmware::MarkerScreen<M>* screen_ = nullptr;
 };
 
 // The frame's markers against the filter's estimate after its update: the filter's own measurement
@@ -166,7 +173,7 @@ class HistorySink final : public firmware::EstimateSink<Filter> {
     r.markers_gated = static_cast<int>(c.markers_gated - counted_.markers_gated);
     counted_ = c;
     if (tap_ != nullptr)
-      if (const auto* frame = tap_->take(t_ns)) record_residuals(f, *frame, r);
+      if (const auto* frame = tap_->take(t_ns, r.withheld)) record_residuals(f, *frame, r);
     rows_.push_back(r);
     if (motion_) {
       motion_row_.step = f.motion_step();

@@ -36,6 +36,9 @@ struct CalibrationResult {
   // Over the last pass: markers used, gated, and those the model could not predict at the
   // estimate (their mirror image not in front of the camera).
   std::uint64_t markers_used = 0, markers_gated = 0, markers_invalid = 0;
+  // Each marker's frames in the last pass whose reflection the loop withheld before the filter:
+  // its step disagreed with the other markers' (a wrong blob or label; firmware::MarkerScreen).
+  std::vector<std::uint64_t> markers_screened;
   std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
   int passes = 1;                     // passes over the data (sim_run.hpp)
   bool from_untrusted = false;  // started from an earlier calibration that said consistent: false
@@ -70,6 +73,12 @@ struct CalibrationResult {
     int a = -1, b = -1;
     std::uint64_t frames = 0, both_seen = 0;
   } label_swap;
+  // The first frame against the priors' guess (record_prior_fit, run.cpp): the markers it showed,
+  // those the guess could predict (their mirror image in front of the camera), and those it put
+  // within an image's size of the image.
+  struct PriorFit {
+    int seen = 0, predictable = 0, near_image = 0;
+  } prior_fit;
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_state;
@@ -178,6 +187,10 @@ constexpr double kSwappedShare = 0.01;
 constexpr std::uint64_t kMinSwappedFrames = 5;
 constexpr double kSwapResidualSigmas = 3.0;
 bool labels_swapped(const CalibrationResult& r);
+// The priors' guess put none of the first frame's markers within an image's size of the image:
+// the priors contradict the data from the start (a quaternion given x, y, z, w; a transform
+// inverted), which no motion mends.
+bool priors_miss_first_frame(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do (the first of these reasons;
 // result_warnings gives each).
 std::string convergence_warning(const CalibrationResult& r);

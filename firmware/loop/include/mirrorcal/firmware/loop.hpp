@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/firmware/marker_screen.hpp"
 #include "mirrorcal/firmware/timing.hpp"
 #include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/hal/sources.hpp"
@@ -26,6 +27,8 @@ struct LoopConfig {
   double restart_gap_s = 0.3;
   // Times every stage of the loop when set (see timing.hpp).
   LoopProfiler* profiler = nullptr;
+  // Each frame's markers judged against each other before the update (marker_screen.hpp).
+  MarkerScreenConfig screen{};
 };
 
 // What the loop met on its streams; nothing is dropped without being counted here.
@@ -41,6 +44,8 @@ struct LoopCounters {
   std::uint64_t frames_before_filter = 0;
   std::uint64_t frames_after_imu = 0;  // frames still pending when the IMU stream ended
   std::uint64_t filter_failures = 0;   // predicts or updates refused with a numerical status
+  // markers withheld from the update: their step disagreed with the other markers' (MarkerScreen)
+  std::uint64_t markers_screened = 0;
 };
 
 enum class LoopEnd : std::uint8_t { kEndOfStream, kImuError, kMarkerError };
@@ -60,7 +65,12 @@ class CalibrationLoop {
 
   CalibrationLoop(Filter& filter, hal::ImuSource& imu, hal::MarkerSource<M>& markers,
                   const LoopConfig& config, EstimateSink<Filter>* sink = nullptr)
-      : filter_(filter), imu_(imu), markers_(markers), config_(config), sink_(sink) {}
+      : filter_(filter),
+        imu_(imu),
+        markers_(markers),
+        config_(config),
+        sink_(sink),
+        screen_(config.screen, filter.config().pixel_sigma) {}
 
   // Processes one IMU sample and every frame it completes. False once the IMU stream has ended
   // or a source failed (end() says which).
@@ -75,6 +85,7 @@ class CalibrationLoop {
   void set_identifier(hal::MarkerRelabeler<M>* identifier) { identifier_ = identifier; }
 
   const LoopCounters& counters() const { return counters_; }
+  const MarkerScreen<M>& screen() const { return screen_; }
   LoopEnd end() const { return end_; }
   std::int64_t time_ns() const { return last_.t_ns; }
 
@@ -103,6 +114,7 @@ class CalibrationLoop {
   EstimateSink<Filter>* sink_;
   hal::MarkerRelabeler<M>* identifier_ = nullptr;
   hal::MarkerPrediction<M> prediction_{};
+  MarkerScreen<M> screen_;
 
   LoopCounters counters_{};
   LoopEnd end_ = LoopEnd::kEndOfStream;
