@@ -1050,6 +1050,34 @@ TEST(Cli, MarkersWhoseLabelsSwapAreNamed) {
   EXPECT_FALSE(YAML::LoadFile(d + "/swapped/mirrorcal-result.yaml")["consistent"].as<bool>());
 }
 
+// A recording whose features.csv holds a detector's mistakes (a random pixel for one marker in one
+// frame of ten) calibrates as one without them would: consistent, the mistakes withheld by the
+// loop and counted per marker. A share that is not one is refused, naming the option.
+TEST(Cli, WrongBlobsInARecordingAreWithheldAndCounted) {
+  TempDir dir("cli-outliers");
+  const std::string& d = dir.path;
+  ASSERT_EQ(
+      run_mirrorcal("record --scenario random --seed 5 --outliers 10% --out " + d + "/rec", d).code,
+      0);
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const YAML::Node result = YAML::LoadFile(d + "/cal/mirrorcal-result.yaml");
+  EXPECT_TRUE(result["consistent"].as<bool>());
+  ASSERT_EQ(result["markers_screened"].size(), 3u);
+  std::uint64_t screened = 0;
+  for (const auto& n : result["markers_screened"]) screened += n.as<std::uint64_t>();
+  // About one frame in ten lost a marker to a random pixel, a few landing near the truth.
+  const double frames = result["markers_observed"].as<double>() / 3.0;
+  EXPECT_GT(double(screened), 0.05 * frames);
+  EXPECT_LT(double(screened), 0.2 * frames);
+  for (const char* bad : {"abc", "0.6", "-1%", "60%"}) {
+    const Result refused = run_mirrorcal({"sim", "--outliers", bad, "--out", d + "/refused"}, d);
+    EXPECT_EQ(refused.code, 2) << bad << refused.output;
+    EXPECT_NE(refused.output.find(std::string("--outliers: '") + bad + "'"), std::string::npos)
+        << refused.output;
+  }
+}
+
 TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
   mc::calibration::CalibrationResult r;
   r.markers_observed = r.markers_used = 8700;
