@@ -46,6 +46,14 @@ class RigidRig {
   std::normal_distribution<double> noise_;
 };
 
+// Shows the screen the rig's first n frames, as they come.
+void show(RigidRig& rig, MarkerScreen<kM>& screen, int n, bool confirm = false) {
+  for (int k = 0; k < n; ++k) {
+    MarkerFrame<kM> f = rig.frame(k);
+    screen.screen(f, confirm);
+  }
+}
+
 TEST(MarkerScreen, WithholdsNothingOfARigidRig) {
   RigidRig rig(1);
   MarkerScreen<kM> screen(MarkerScreenConfig{}, kPixelSigma);
@@ -60,10 +68,7 @@ TEST(MarkerScreen, WithholdsNothingOfARigidRig) {
 TEST(MarkerScreen, WithholdsAWrongBlobAndTakesTheMarkerBackNextFrame) {
   RigidRig rig(2);
   MarkerScreen<kM> screen(MarkerScreenConfig{}, kPixelSigma);
-  for (int k = 0; k < 10; ++k) {
-    MarkerFrame<kM> f = rig.frame(k);
-    screen.screen(f, false);
-  }
+  show(rig, screen, 10);
   MarkerFrame<kM> wrong = rig.frame(10);
   wrong.uv[2] += Eigen::Vector2d(150.0, -90.0);  // a room light taken for marker 2
   EXPECT_EQ(screen.screen(wrong, false), 1);
@@ -80,10 +85,7 @@ TEST(MarkerScreen, WithholdsAWrongBlobAndTakesTheMarkerBackNextFrame) {
 TEST(MarkerScreen, WithholdsTwoSwappedLabels) {
   RigidRig rig(3);
   MarkerScreen<kM> screen(MarkerScreenConfig{}, kPixelSigma);
-  for (int k = 0; k < 10; ++k) {
-    MarkerFrame<kM> f = rig.frame(k);
-    screen.screen(f, false);
-  }
+  show(rig, screen, 10);
   MarkerFrame<kM> swapped = rig.frame(10);
   std::swap(swapped.uv[0], swapped.uv[1]);
   EXPECT_EQ(screen.screen(swapped, false), 2);
@@ -139,10 +141,7 @@ TEST(MarkerScreen, UnconfirmedMarkersWaitForASecondFrameWhenAsked) {
 TEST(MarkerScreen, ForgetsItsReferencesAcrossAGapInTheFrames) {
   RigidRig rig(6);
   MarkerScreen<kM> screen(MarkerScreenConfig{}, kPixelSigma);
-  for (int k = 0; k < 5; ++k) {
-    MarkerFrame<kM> f = rig.frame(k);
-    screen.screen(f, false);
-  }
+  show(rig, screen, 5);
   // Two seconds later the rig is elsewhere: nothing to judge against, nothing withheld.
   MarkerFrame<kM> later = rig.frame(45);
   later.uv[1] += Eigen::Vector2d(300.0, 0.0);
@@ -155,10 +154,7 @@ TEST(MarkerScreen, DisabledItWithholdsNothing) {
   MarkerScreenConfig off;
   off.enabled = false;
   MarkerScreen<kM> screen(off, kPixelSigma);
-  for (int k = 0; k < 5; ++k) {
-    MarkerFrame<kM> f = rig.frame(k);
-    screen.screen(f, true);
-  }
+  show(rig, screen, 5, true);
   MarkerFrame<kM> wrong = rig.frame(5);
   wrong.uv[0] += Eigen::Vector2d(200.0, 200.0);
   EXPECT_EQ(screen.screen(wrong, true), 0);
