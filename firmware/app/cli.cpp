@@ -266,7 +266,7 @@ bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std
   // --outliers P, --label-swaps P: the detector's mistakes in the share P of frames ("0.02" or
   // "2%").
   if (!share_option(o, "outliers", "a mis-detected marker", s.outlier_share, error) ||
-      !share_option(o, "label-swaps", "two markers' labels swapped", s.label_swap_share, error))
+      !share_option(o, "label-swaps", "markers 0 and 1 swapped", s.label_swap_share, error))
     return false;
   // --line-delay S: a rolling shutter that reads each row S seconds after the one above;
   // --filter-line-delay S: the line delay the filter is told, if not the true one.

@@ -73,8 +73,8 @@ bool parse_count(const Options& o, const std::string& key, std::uint64_t def, st
 // shutter reading each row S seconds after the one above (a whole frame within
 // kMaxSimulatedReadoutS); with --outliers P, in the share P of frames (at most
 // kMaxSimulatedMistakeShare; "0.02" or "2%") one marker's pixel is a random one, as a detector
-// that took a room light for an LED gives it; with --label-swaps P, two markers' labels are
-// swapped in that share.
+// that took a room light for an LED gives it; with --label-swaps P, markers 0's and 1's labels
+// are swapped in that share.
 constexpr double kMinSimulatedDurationS = 1.0;
 constexpr double kMaxSimulatedDurationS = 600.0;
 constexpr double kMaxSimulatedTimeshiftS = 0.5;

@@ -37,7 +37,7 @@ const std::vector<Command>& commands() {
        "              [--duration S]  (S seconds of the simulated motion, 1..600; default 60)\n"
        "              [--outliers P]  (in the share P of frames, 0.02 or 2%, one marker's pixel\n"
        "              is a random one: a detector that took a room light for an LED)\n"
-       "              [--label-swaps P]  (in the share P of frames two markers' labels swapped)\n"
+       "              [--label-swaps P]  (in the share P of frames markers 0 and 1 swapped)\n"
        "              [--intrinsics [--hold-skew] [--one-stage]]  (stage 2: Table III;\n"
        "              --hold-skew: skew 0; --one-stage: everything at once from one minute)\n"
        "              [--estimate-distortion]  (with --intrinsics and --distortion: stage 2\n"

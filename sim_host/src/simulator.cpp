@@ -117,12 +117,16 @@ SimData simulate(const Scenario& s, std::uint64_t seed) {
       f.markers[k].v = v;
       ++d.outliers;
     }
-    const double swap = u01(rng_swap), first = u01(rng_swap), second = u01(rng_swap);
-    if (swap < s.label_swap_share && f.markers.size() >= 2) {
-      const std::size_t n = f.markers.size();
-      const auto a = std::min(n - 1, std::size_t(first * double(n)));
-      const auto b = (a + 1 + std::min(n - 2, std::size_t(second * double(n - 1)))) % n;
-      std::swap(f.markers[a].id, f.markers[b].id);
+    // Markers 0 and 1 swapped, as a detection that cannot tell two LEDs apart swaps them.
+    const double swap = u01(rng_swap);
+    ObservedMarker* first = nullptr;
+    ObservedMarker* second = nullptr;
+    for (ObservedMarker& m : f.markers) {
+      if (m.id == 0) first = &m;
+      if (m.id == 1) second = &m;
+    }
+    if (swap < s.label_swap_share && first != nullptr && second != nullptr) {
+      std::swap(first->id, second->id);
       ++d.label_swaps;
     }
     d.frames.push_back(std::move(f));

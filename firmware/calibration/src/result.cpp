@@ -183,7 +183,7 @@ bool path_gained_false_information(const CalibrationResult& r) {
 }
 
 bool refinement_unconverged(const CalibrationResult& r) {
-  return r.refinement_step_sigmas > kRefinementStepLimit;
+  return r.refinement_refused || r.refinement_step_sigmas > kRefinementStepLimit;
 }
 
 bool used_too_few(const CalibrationResult& r) {
@@ -239,6 +239,15 @@ std::string fit_warning(const CalibrationResult& r) {
     return text;
   }
   if (!gated_too_many(r) && !innovations_too_large(r)) {
+    if (r.refinement_refused) {
+      std::snprintf(text, sizeof text,
+                    "the refinement could take no Gauss-Newton step (its replay of the data met "
+                    "other frames than the passes, or fitted worse than they did): the free "
+                    "passes' own estimate and sigmas are reported, and those can be far more "
+                    "confident than the data allow. Move the rig more (tilts and moves toward the "
+                    "mirror), start from better guesses, and check the recording.");
+      return text;
+    }
     if (refinement_unconverged(r)) {
       std::snprintf(text, sizeof text,
                     "the last Gauss-Newton step of the refinement still moved the calibration by "
@@ -596,13 +605,18 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                "refinement_step: %.4f  # the last Gauss-Newton step, in sigmas: well under 1 "
                "when converged\n",
                r.nis_per_dof, r.sigma_ratio, r.refinement_step_sigmas);
+  if (r.refinement_refused)
+    std::fprintf(o,
+                 "refinement_refused: true  # no Gauss-Newton step taken: the free passes' "
+                 "estimate and sigmas\n");
   std::fprintf(o,
                "marker_scale_sigma: %.4f  # the markers' common scale, relative 1-sigma: only "
                "the IMU's acceleration fixes it\n",
                marker_scale_sigma(r));
   std::fprintf(o,
                "consistent: %s  # false: more than 0.5 %% of the markers gated, nis_per_dof well "
-               "above 1, sigma_ratio below %g, refinement_step above %g, under half the markers "
+               "above 1, sigma_ratio below %g, refinement_step above %g or no refinement step, "
+               "under half the markers "
                "used, a prior or the IMU's tolerances contradicted by 5 sigma, marker_scale_sigma "
                "above %g, priors that put no marker of the first frame near the image or a start "
                "(--from) that said false: do not trust it\n",

@@ -91,7 +91,7 @@ struct Scenario {
   // The share of frames in which the detector mistook something else for one of the markers it
   // saw (a room light, a reflection): that marker's pixel is anywhere in the image instead.
   double outlier_share = 0.0;
-  // The share of frames in which the detector swapped two of the markers' labels.
+  // The share of frames in which the detector swapped markers 0's and 1's labels.
   double label_swap_share = 0.0;
   Rig truth;
   // The rolling shutter's line delay the filter is told (camchain.yaml's), when not the true one:

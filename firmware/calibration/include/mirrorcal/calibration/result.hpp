@@ -58,6 +58,9 @@ struct CalibrationResult {
   // calibration in the reported covariance's sigmas (Mahalanobis): well under one when the
   // iteration has converged; 0 without a refinement.
   double refinement_step_sigmas = 0.0;
+  // The refinement took no step (its replay met other frames than the passes', or fitted worse
+  // than they did): the free passes' own estimate and sigmas are reported.
+  bool refinement_refused = false;
   // Markers in the frames the loop was given (each pass offers them all; 0: detected on the fly).
   std::uint64_t markers_observed = 0;
   // What detection in the images did over the last pass (calibrate from images, sim --frames):
@@ -141,6 +144,7 @@ bool path_gained_false_information(const CalibrationResult& r);
 // Over 900 rigs of the random family (seeds 1, 2, 3 and 7) the last step's median is 0.2 sigmas
 // and its 99th percentile about 2; 3 runs end with a longer one (4.3, 4.5 and 21 sigmas), one of
 // them 4.8 sigmas off (NEES 74) and flagged by nothing else.
+// Or the refinement took no step at all (refinement_refused): the free passes' estimate stands.
 constexpr double kRefinementStepLimit = 3.0;
 bool refinement_unconverged(const CalibrationResult& r);
 // The filter used under kMinUsedFraction of the markers in the data (the loop skipped the rest:

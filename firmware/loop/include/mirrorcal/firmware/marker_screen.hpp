@@ -26,6 +26,9 @@ struct MarkerScreenConfig {
   // Frames further apart than this (s) are not compared: every marker is taken as it comes, as
   // at the first frame.
   double max_frame_gap_s = 0.25;
+  // While the filter's gate is open, a marker's first sighting waits for a second frame to
+  // confirm it (off: it is taken as it comes).
+  bool confirm_while_gate_open = true;
   // A marker missing from a frame, or withheld, keeps a reference that moves with the others'
   // common step for this many frames, and is then taken as it comes.
   int max_carried_frames = 3;
@@ -45,8 +48,9 @@ class MarkerScreen {
   // marker judged. A marker without a reference (its first frame, or back after an absence) is
   // taken as it comes, unless confirm: then it is withheld until a second frame agrees (not
   // counted as screened), for a filter that would take any blob (its gate still open).
-  int screen(MarkerFrame<M>& frame, bool confirm) {
+  int screen(MarkerFrame<M>& frame, bool gate_open) {
     if (!config_.enabled) return 0;
+    const bool confirm = gate_open && config_.confirm_while_gate_open;
     if (has_frame_ && static_cast<double>(frame.t_ns - last_t_ns_) * 1e-9 > config_.max_frame_gap_s)
       reference_.fill(false);
     has_frame_ = true;
