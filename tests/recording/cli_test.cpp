@@ -971,6 +971,34 @@ TEST(Cli, APriorContradictedByTheDataIsFlagged) {
   EXPECT_GT(bad["prior_offset"].as<double>(), 5.0);
 }
 
+// The camera's rotation given the wrong way round (R_c_b for R_b_c: the quaternion conjugated) puts
+// the first frame's markers behind the camera: the WARNING that comes first says so and names the
+// conventions, where it had said that the gate rejected most markers.
+TEST(Cli, AnInvertedCameraRotationInThePriorsIsNamedAsTheCause) {
+  TempDir dir("cli-inverted");
+  const std::string& d = dir.path;
+  ASSERT_EQ(
+      run_mirrorcal("record --scenario random --seed 1 --duration 20 --out " + d + "/rec", d).code,
+      0);
+  const std::string priors = d + "/rec/mirrorcal.yaml";
+  const YAML::Node q = YAML::LoadFile(priors)["q_b_c_wxyz"];
+  std::istringstream in(slurp(priors));
+  std::string lines;
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind("q_b_c_wxyz:", 0) == 0)
+      l = "q_b_c_wxyz: [" + q[0].as<std::string>() + ", " + std::to_string(-q[1].as<double>()) +
+          ", " + std::to_string(-q[2].as<double>()) + ", " + std::to_string(-q[3].as<double>()) +
+          "]";
+    lines += l + "\n";
+  }
+  spit(priors, lines);
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  ASSERT_EQ(r.code, 3) << r.output;
+  const std::size_t first = r.output.find("WARNING: ");
+  ASSERT_NE(first, std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("WARNING: the priors put none of the first frame's"), first) << r.output;
+}
+
 // A run that used under half the markers in its data is not to be trusted, however well they fit.
 TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
   mc::calibration::CalibrationResult r;
@@ -1088,6 +1116,33 @@ TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
   const std::string w = mc::calibration::convergence_warning(r);
   EXPECT_NE(w.find("still moved the calibration by 16.0 of its sigmas"), std::string::npos) << w;
   EXPECT_FALSE(mc::calibration::consistent(r));
+  // A refinement that took no step at all leaves the free passes' estimate: flagged too.
+  r.refinement_step_sigmas = 0.0;
+  r.refinement_refused = true;
+  const std::string refused = mc::calibration::convergence_warning(r);
+  EXPECT_NE(refused.find("could take no Gauss-Newton step"), std::string::npos) << refused;
+  EXPECT_FALSE(mc::calibration::consistent(r));
+}
+
+// Priors that put none of the first frame's markers near the image are named before anything
+// they then make fail (here, the gate rejecting most markers), with the conventions to check;
+// one marker near the image is enough not to say so.
+TEST(Cli, PriorsThatMissTheFirstFrameAreNamedFirst) {
+  mc::calibration::CalibrationResult r;
+  r.markers_observed = 8700;
+  r.markers_used = 8000;
+  r.markers_gated = 700;
+  r.prior_fit = {3, 0, 0};
+  const std::string w = mc::calibration::convergence_warning(r);
+  EXPECT_EQ(w.rfind("the priors put none of the first frame's 3 markers near the image (3 of them "
+                    "with their mirror image behind the camera)",
+                    0),
+            0u)
+      << w;
+  EXPECT_NE(w.find("w first"), std::string::npos) << w;
+  r.prior_fit = {3, 3, 1};
+  EXPECT_NE(mc::calibration::convergence_warning(r).find("rejected by the 99.9 % gate"),
+            std::string::npos);
 }
 
 namespace {
