@@ -65,6 +65,17 @@ std::string calibration_file(const std::string& path) {
   return text;
 }
 
+// Replaces the line of the yaml file at path that starts with "key:" by "key: value".
+void set_yaml_line(const std::string& path, const std::string& key, const std::string& value) {
+  std::istringstream in(slurp(path));
+  std::string lines;
+  for (std::string l; std::getline(in, l);) {
+    if (l.rfind(key + ":", 0) == 0) l = key + ": " + value;
+    lines += l + "\n";
+  }
+  spit(path, lines);
+}
+
 Eigen::Matrix4d matrix4(const YAML::Node& rows) {
   Eigen::Matrix4d t;
   for (int i = 0; i < 4; ++i)
@@ -952,16 +963,10 @@ TEST(Cli, APriorContradictedByTheDataIsFlagged) {
   const std::string priors = d + "/rec/mirrorcal.yaml";
   const YAML::Node y = YAML::LoadFile(priors);
   const double x = y["p_b_c"][0].as<double>() + 0.02;
-  std::string text = slurp(priors), lines;
-  std::istringstream in(text);
-  for (std::string l; std::getline(in, l);) {
-    if (l.rfind("p_b_c:", 0) == 0)
-      l = "p_b_c: [" + std::to_string(x) + ", " + y["p_b_c"][1].as<std::string>() + ", " +
-          y["p_b_c"][2].as<std::string>() + "]";
-    if (l.rfind("sigma_p_b_c:", 0) == 0) l = "sigma_p_b_c: 0.001";
-    lines += l + "\n";
-  }
-  spit(priors, lines);
+  set_yaml_line(priors, "p_b_c",
+                "[" + std::to_string(x) + ", " + y["p_b_c"][1].as<std::string>() + ", " +
+                    y["p_b_c"][2].as<std::string>() + "]");
+  set_yaml_line(priors, "sigma_p_b_c", "0.001");
   r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/bad", d);
   ASSERT_EQ(r.code, 3) << r.output;  // flagged
   EXPECT_NE(r.output.find("WARNING: the estimate of p_"), std::string::npos) << r.output;
@@ -982,16 +987,10 @@ TEST(Cli, AnInvertedCameraRotationInThePriorsIsNamedAsTheCause) {
       0);
   const std::string priors = d + "/rec/mirrorcal.yaml";
   const YAML::Node q = YAML::LoadFile(priors)["q_b_c_wxyz"];
-  std::istringstream in(slurp(priors));
-  std::string lines;
-  for (std::string l; std::getline(in, l);) {
-    if (l.rfind("q_b_c_wxyz:", 0) == 0)
-      l = "q_b_c_wxyz: [" + q[0].as<std::string>() + ", " + std::to_string(-q[1].as<double>()) +
-          ", " + std::to_string(-q[2].as<double>()) + ", " + std::to_string(-q[3].as<double>()) +
-          "]";
-    lines += l + "\n";
-  }
-  spit(priors, lines);
+  set_yaml_line(priors, "q_b_c_wxyz",
+                "[" + q[0].as<std::string>() + ", " + std::to_string(-q[1].as<double>()) + ", " +
+                    std::to_string(-q[2].as<double>()) + ", " + std::to_string(-q[3].as<double>()) +
+                    "]");
   const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
   ASSERT_EQ(r.code, 3) << r.output;
   const std::size_t first = r.output.find("WARNING: ");
