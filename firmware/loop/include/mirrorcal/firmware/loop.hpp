@@ -44,8 +44,6 @@ struct LoopCounters {
   std::uint64_t frames_before_filter = 0;
   std::uint64_t frames_after_imu = 0;  // frames still pending when the IMU stream ended
   std::uint64_t filter_failures = 0;   // predicts or updates refused with a numerical status
-  // markers withheld from the update: their step disagreed with the other markers' (MarkerScreen)
-  std::uint64_t markers_screened = 0;
 };
 
 enum class LoopEnd : std::uint8_t { kEndOfStream, kImuError, kMarkerError };

@@ -148,7 +148,7 @@ bool CalibrationLoop<S, M, NK, NI>::step() {
     if (identifier_ != nullptr && predict_marker_pixels(filter_, pending_, prediction_))
       identifier_->relabel(prediction_, pending_);
     const bool gate_open = filter_.counters().updates < filter_.config().gate_after_frames;
-    counters_.markers_screened += std::uint64_t(screen_.screen(pending_, gate_open));
+    screen_.screen(pending_, gate_open);  // its counts per marker: screen()
     apply_frame(pending_);
   }
   propagate_to(sample);
