@@ -15,9 +15,11 @@
 //   mirrorcal_opcount stage2-update|stage2-restore <NK> <N>
 //                                            stage 2 (M = 3, double, radtan lens) with NK = 4
 //                                            (lens known) or 8 (its coefficients estimated)
-//   mirrorcal_opcount imu-predict|imu-predict2|imu-update|imu-restore <NI> <N>
+//   mirrorcal_opcount imu-predict|imu-predict2|imu-predict10|imu-update|imu-restore <NI> <N>
 //                                            stage 1 (M = 3, double) with the IMU's NI = 12
-//                                            intrinsics (scale-misalignment)
+//                                            intrinsics (scale-misalignment); imu-predict10 as
+//                                            predict10 (its settling read applies the IMU
+//                                            block's deferred covariance and checks it)
 //   mirrorcal_opcount recording <N>          N runs of the whole loop over the 60 s recording
 //   mirrorcal_opcount shipped <N>            N calibrations of it as mirrorcal runs them
 //                                            (its free passes, the Gauss-Newton refinement and
@@ -47,7 +49,8 @@ int usage() {
       "<N>\n"
       "       mirrorcal_opcount textbook-predict|textbook-update|textbook-restore <M> <N>\n"
       "       mirrorcal_opcount stage2-update|stage2-restore <4|8> <N>\n"
-      "       mirrorcal_opcount imu-predict|imu-predict2|imu-update|imu-restore <12> <N>\n"
+      "       mirrorcal_opcount imu-predict|imu-predict2|imu-predict10|imu-update|imu-restore <12> "
+      "<N>\n"
       "       mirrorcal_opcount recording|shipped|shipped-imu <N>\n"
       "       mirrorcal_opcount sizes|stack\n",
       stderr);
@@ -163,8 +166,8 @@ int main(int argc, char** argv) {
     }
     return failed == 0 ? 0 : 1;
   }
-  if ((what == "imu-predict" || what == "imu-predict2" || what == "imu-update" ||
-       what == "imu-restore") &&
+  if ((what == "imu-predict" || what == "imu-predict2" || what == "imu-predict10" ||
+       what == "imu-update" || what == "imu-restore") &&
       argc == 4) {
     const auto ops = mb::make_imu_filter_ops(std::atoi(argv[2]));
     if (!ops) {
@@ -178,6 +181,10 @@ int main(int argc, char** argv) {
       if (what == "imu-update") failed += ops->update() ? 0 : 1;
       if (what == "imu-predict" || what == "imu-predict2") failed += ops->predict() ? 0 : 1;
       if (what == "imu-predict2") failed += ops->predict() ? 0 : 1;
+      if (what == "imu-predict10") {
+        for (int k = 0; k < 10; ++k) failed += ops->predict() ? 0 : 1;
+        failed += ops->settle() > -1e300 ? 0 : 1;
+      }
     }
     return failed == 0 ? 0 : 1;
   }

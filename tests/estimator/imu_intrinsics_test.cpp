@@ -215,6 +215,48 @@ TEST(ImuIntrinsics, PredictsGiveTheCovarianceOfTheDenseSteps) {
   if (!predicts_as_the_dense_steps_if_built<12>()) GTEST_SKIP() << "scale-misalignment not built";
 }
 
+// With the intrinsics the predicts leave the IMU block's covariance to settle, so an indefinite
+// block (an intrinsic's variance below zero) is found where settle reads it: the frame's update
+// is refused, the estimate as it was, and so is every predict after it until a reset.
+template <int NI>
+void expect_indefinite_imu_block_refused() {
+  using Filter = CalibrationFilter<double, 3, 0, NI>;
+  constexpr int N = Filter::kDim;
+  CalibrationConfig config;
+  config.gravity_n = kGravity;
+  Filter filter(config);
+  const Step<NI> st = lively_step<NI>(13, 5'000'000);
+  Eigen::Matrix<double, N, N> p = 1e-4 * Eigen::Matrix<double, N, N>::Identity();
+  p(StateI<NI>::kImu + 1, StateI<NI>::kImu + 1) = -1e-6;
+  filter.reset(st.x, p);
+  ASSERT_EQ(filter.predict(st.s0, st.s1), FilterStatus::kOk);  // P_dd not read yet
+  const StateI<NI> before = filter.state();
+  MarkerFrame<3> frame;
+  frame.t_ns = st.s1.t_ns;
+  EXPECT_EQ(filter.update(frame).status, FilterStatus::kCovarianceNotPositiveDefinite);
+  EXPECT_EQ(filter.state().p, before.p);
+  EXPECT_EQ(filter.state().imu.d_a, before.imu.d_a);
+  ImuSample s2 = st.s1;
+  s2.t_ns += 5'000'000;
+  EXPECT_EQ(filter.predict(st.s1, s2), FilterStatus::kCovarianceNotPositiveDefinite);
+  EXPECT_EQ(filter.state().p, before.p);
+  EXPECT_EQ(filter.counters().failures, 2u);
+  filter.reset(st.x, 1e-4 * Eigen::Matrix<double, N, N>::Identity());
+  EXPECT_EQ(filter.predict(st.s0, st.s1), FilterStatus::kOk);
+  EXPECT_EQ(filter.update(frame).status, FilterStatus::kNoMeasurement);
+}
+template <int NI>
+bool indefinite_imu_block_refused_if_built() {
+  if constexpr (imu_model_built(NI)) {
+    expect_indefinite_imu_block_refused<NI>();
+    return true;
+  }
+  return false;
+}
+TEST(ImuIntrinsics, AnIndefiniteImuBlockIsRefusedWhereSettleReadsIt) {
+  if (!indefinite_imu_block_refused_if_built<12>()) GTEST_SKIP() << "scale-misalignment not built";
+}
+
 // The ideal IMU is the model with intrinsics at the identity: both integrate a step to the same
 // state, and the Jacobian's common blocks agree.
 TEST(ImuIntrinsics, IdentityIntrinsicsIntegrateAsTheIdealImu) {

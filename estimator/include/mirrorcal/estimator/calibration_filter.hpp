@@ -74,6 +74,7 @@ class CalibrationFilter {
     if constexpr (NI > 0) unsettled_noise_.setZero();
     has_unsettled_ = false;
     imu_block_checked_ = false;
+    imu_block_indefinite_ = false;
   }
   // The IMU signal at the time the estimate holds for: the loop's first sample, then every
   // predict's end. Until it is known, frames are taken at t_cam + t_d with the rig at rest
@@ -239,6 +240,12 @@ class CalibrationFilter {
   void settle_imu_block() const {
     if constexpr (NI > 0) {  // (an explicit instantiation makes every member, NI = 0's too)
       constexpr int D = State::kDynamicDim;
+      // The predicts did not read P_dd, so its check (imu_block_checked_) is made here, where it
+      // is read; a failure shows at the next predict or update.
+      if (!imu_block_checked_) {
+        imu_block_indefinite_ = !imu_block_positive_definite();
+        imu_block_checked_ = true;
+      }
       Eigen::Matrix<S, D, D> p_dd;
       unsettled_.sandwich(filter_.covariance().template topLeftCorner<D, D>(), p_dd);
       // The ideal IMU's [v, b_a, b_g | p, theta] are this block's [v, b_a, b_g | (intrinsics) p,
@@ -259,10 +266,17 @@ class CalibrationFilter {
   // parabola gave (imu_signal_at), so a short interval does not amplify the noise.
   Vec3<S> gyro_rate_ = Vec3<S>::Zero();
   bool timed_ = false;
-  // Whether the covariance's IMU block is known positive definite: predict checks it when
-  // anything else (reset, update, restart) changed the covariance since its last check, not
-  // after its own steps, which keep it so (F P F^T + Q, Q positive definite).
-  bool imu_block_checked_ = false;
+  // Whether the covariance's IMU block is known positive definite: its reader (predict; with the
+  // IMU's intrinsics, settle) checks it when anything else (reset, update, restart) changed the
+  // covariance since its last check, not after the predicts' steps, which keep it so (F P F^T +
+  // Q, Q positive definite).
+  mutable bool imu_block_checked_ = false;
+  mutable bool imu_block_indefinite_ = false;  // settle's check failed (NI > 0)
+  bool imu_block_positive_definite() const {
+    constexpr int D = State::kDynamicDim;
+    Eigen::Matrix<S, D, D> factor = filter_.covariance().template topLeftCorner<D, D>();
+    return cholesky_in_place</*kZeroUpper=*/false>(factor);
+  }
 };
 
 template <typename S, int M, int NK, int NI>
@@ -319,13 +333,13 @@ FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const
   static_assert(State::kDynamicBegin == 0, "the IMU block leads the error state");
   ++counters_.predicts;
   const Covariance& p = filter_.covariance();
-  if (!imu_block_checked_) {
-    Eigen::Matrix<S, D, D> factor = p.template topLeftCorner<D, D>();
-    if (!cholesky_in_place</*kZeroUpper=*/false>(factor)) {
-      ++counters_.failures;
-      return FilterStatus::kCovarianceNotPositiveDefinite;
-    }
+  if constexpr (NI == 0) {
+    if (!imu_block_checked_) imu_block_indefinite_ = !imu_block_positive_definite();
     imu_block_checked_ = true;
+  }
+  if (imu_block_indefinite_) {
+    ++counters_.failures;
+    return FilterStatus::kCovarianceNotPositiveDefinite;
   }
   const double dt = static_cast<double>(s1.t_ns - s0.t_ns) * 1e-9;
   const Transition f = imu_transition(filter_.mean(), s0, s1);
@@ -336,12 +350,18 @@ FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const
   const bool moved_finite = x.v.allFinite() && x.p.allFinite() && x.q_n_b.coeffs().allFinite();
   if constexpr (NI > 0) {  // P_dd waits with P_cd (settle_imu_block); the noise accumulates
     Eigen::Matrix<S, 15, 15> q;
-    f.motion_sandwich(unsettled_noise_, q);
+    if (has_unsettled_)
+      f.motion_sandwich(unsettled_noise_, q);
+    else  // the first step since a settle: no noise has accumulated to carry
+      q.setZero();
     add_imu_process_noise<S>(noise, dt, q);
     // Q is positive definite, so every entry of F's motion rows but the intrinsics' columns
-    // shows on q's diagonal from the first step on; those columns are checked themselves.
-    if (!q.diagonal().allFinite() || !f.imu.v.allFinite() || !f.imu.p.allFinite() ||
-        !f.imu.theta.allFinite() || !moved_finite) {
+    // shows on q's diagonal from the second step since a settle on (the first carries no noise:
+    // its F is checked whole); those columns are checked themselves.
+    const bool f_finite =
+        has_unsettled_ ? f.imu.v.allFinite() && f.imu.p.allFinite() && f.imu.theta.allFinite()
+                       : f.all_finite();
+    if (!q.diagonal().allFinite() || !f_finite || !moved_finite) {
       ++counters_.failures;
       return FilterStatus::kNonFinite;
     }
@@ -361,7 +381,8 @@ FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const
     }
     filter_.template reset_leading<D>(x, p_dd);
   }
-  unsettled_ = unsettled_.followed_by(f);
+  // The first step since a settle is the composition itself (identity().followed_by(f) is f).
+  unsettled_ = has_unsettled_ ? unsettled_.followed_by(f) : f;
   has_unsettled_ = true;
   if (keep_steps_) since_update_ = since_update_.followed_by(f);
   now_ = s1;
@@ -394,6 +415,13 @@ template <typename S, int M, int NK, int NI>
 UpdateResult CalibrationFilter<S, M, NK, NI>::update(const MarkerFrame<M>& frame) {
   predicted_ = filter_.mean();
   settle();
+  if (imu_block_indefinite_) {  // its reader's check failed: nothing sound to update
+    UpdateResult refused;
+    refused.status = FilterStatus::kCovarianceNotPositiveDefinite;
+    ++counters_.updates;
+    ++counters_.failures;
+    return refused;
+  }
   if (keep_steps_) {
     step_.transition =
         restarted_since_update_ ? MotionMatrix::Zero().eval() : since_update_.dense();

@@ -19,6 +19,8 @@
 // (with U = -I on b_a and W = -I on b_g this is the bias-only Jacobian above).
 #pragma once
 
+#include <cmath>
+
 #include "mirrorcal/estimator/mirror_model.hpp"
 
 namespace mirrorcal {
@@ -65,6 +67,17 @@ struct ImuTransition {
   S dt;
   Mat3<S> v_ba, v_bg, v_theta, p_ba, p_bg, p_theta, theta_bg, theta_theta;
   ImuIntrinsicColumns<S, NI> imu;
+
+  // Whether every entry of F is finite (the identity's rows are).
+  bool all_finite() const {
+    bool finite = std::isfinite(dt) && v_ba.allFinite() && v_bg.allFinite() &&
+                  v_theta.allFinite() && p_ba.allFinite() && p_bg.allFinite() &&
+                  p_theta.allFinite() && theta_bg.allFinite() && theta_theta.allFinite();
+    if constexpr (NI > 0)
+      finite = finite && imu.v.allFinite() && imu.p.allFinite() && imu.theta.allFinite() &&
+               imu.theta_ba.allFinite();
+    return finite;
+  }
 
   // out = F x, for x with the kDim rows of the IMU block; out must not alias x.
   template <class In, class Out>
