@@ -412,8 +412,9 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
     oc.failures = r.filter_counters.failures;
     oc.series = error_series(r.history, r.result.params);
     if (c.family && !c.intrinsics) {  // stage 1's limit (stage 2's is not computed yet)
-      constexpr int M = std::decay_t<decltype(r)>::State::kMarkers;
-      const std::vector<double> limit = data_limit_sigmas<M>(rs, run_seed);
+      using State = typename std::decay_t<decltype(r)>::State;
+      const std::vector<double> limit =
+          data_limit_sigmas<State::kMarkers, State::kImuIntrinsics>(rs, run_seed);
       for (std::size_t j = 0; j < limit.size(); ++j)
         oc.limit.push_back(limit[j] * r.result.params[j].scale);
     }

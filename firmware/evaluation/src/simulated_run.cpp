@@ -71,9 +71,9 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   return run;
 }
 
-template <int M>
+template <int M, int NI>
 std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed) {
-  using Run = CalibrationRun<M, 0>;
+  using Run = CalibrationRun<M, 0, NI>;
   const sim::SimData noisy = sim::simulate(s, seed);
   typename Run::State x0;
   typename Run::Filter::Covariance p0;
@@ -90,7 +90,11 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
   start.q_n_b = k.q_n_b;
   start.b_a = data.b_a0;
   start.b_g = data.b_g0;
-  const Run run = run_single_pass<M, 0>(scenario_config(s), start, p0, loop_data(s, data), nullptr);
+  // What the data hold is of their true noise, whatever noise the user stated (told_imu).
+  CalibrationConfig config = scenario_config(s);
+  config.imu = s.imu;
+  config.pixel_sigma = s.pixel_sigma;
+  const Run run = run_single_pass<M, 0, NI>(config, start, p0, loop_data(s, data), nullptr);
   std::vector<double> sigma;
   for (int i = Run::State::kCalibrationBegin; i < Run::State::kDim; ++i)
     sigma.push_back(std::sqrt(run.covariance(i, i)));
@@ -139,18 +143,20 @@ CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint
   return run;
 }
 
-#define MIRRORCAL_SIMULATED_RUNS_(M)                                                      \
-  template MIRRORCAL_RUN_SIMULATION(M, 0);                                                \
-  template std::vector<double> data_limit_sigmas<M>(const sim::Scenario&, std::uint64_t); \
-  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                   \
-  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                   \
-  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);                   \
-  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);                   \
-  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);                   \
+#define MIRRORCAL_SIMULATED_RUNS_(M)                                                         \
+  template MIRRORCAL_RUN_SIMULATION(M, 0);                                                   \
+  template std::vector<double> data_limit_sigmas<M, 0>(const sim::Scenario&, std::uint64_t); \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                      \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                      \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);                      \
+  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);                      \
+  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);                      \
   template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_SIMULATED_RUNS_)
 #undef MIRRORCAL_SIMULATED_RUNS_
-#define MIRRORCAL_IMU_SIMULATION_(M, NI) template MIRRORCAL_RUN_SIMULATION(M, NI);
+#define MIRRORCAL_IMU_SIMULATION_(M, NI)    \
+  template MIRRORCAL_RUN_SIMULATION(M, NI); \
+  template std::vector<double> data_limit_sigmas<M, NI>(const sim::Scenario&, std::uint64_t);
 MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_IMU_SIMULATION_)
 #undef MIRRORCAL_IMU_SIMULATION_
 

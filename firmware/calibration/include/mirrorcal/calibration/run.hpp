@@ -234,21 +234,23 @@ CalibrationRun<M, NK, NI> run_single_pass(
       const CalibrationRun<M, NK, NI>::Filter::Covariance&, const LoopData&,       \
       const CalibrationRun<M, NK, NI>::State*, const std::function<void(double)>&, \
       const std::function<LoopHooks<M>(int)>&, Passes)
-#define MIRRORCAL_RUN_SINGLE_PASS(M)                                                          \
-  CalibrationRun<M, 0> run_single_pass<M, 0>(const CalibrationConfig&,                        \
-                                             const CalibrationRun<M, 0>::State&,              \
-                                             const CalibrationRun<M, 0>::Filter::Covariance&, \
-                                             const LoopData&, const CalibrationRun<M, 0>::State*)
+#define MIRRORCAL_RUN_SINGLE_PASS(M, NI)                                    \
+  CalibrationRun<M, 0, NI> run_single_pass<M, 0, NI>(                       \
+      const CalibrationConfig&, const CalibrationRun<M, 0, NI>::State&,     \
+      const CalibrationRun<M, 0, NI>::Filter::Covariance&, const LoopData&, \
+      const CalibrationRun<M, 0, NI>::State*)
 #define MIRRORCAL_EXTERN_RUN_LOOP_(M)          \
   extern template MIRRORCAL_RUN_LOOP(M, 0, 0); \
   extern template MIRRORCAL_RUN_LOOP(M, 4, 0); \
   extern template MIRRORCAL_RUN_LOOP(M, 5, 0); \
   extern template MIRRORCAL_RUN_LOOP(M, 8, 0); \
-  extern template MIRRORCAL_RUN_SINGLE_PASS(M);
+  extern template MIRRORCAL_RUN_SINGLE_PASS(M, 0);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_RUN_LOOP_)
 #undef MIRRORCAL_EXTERN_RUN_LOOP_
 // Stage 1 with the IMU's intrinsics, for every built IMU model (MIRRORCAL_IMU_MODELS).
-#define MIRRORCAL_EXTERN_IMU_RUN_LOOP_(M, NI) extern template MIRRORCAL_RUN_LOOP(M, 0, NI);
+#define MIRRORCAL_EXTERN_IMU_RUN_LOOP_(M, NI)   \
+  extern template MIRRORCAL_RUN_LOOP(M, 0, NI); \
+  extern template MIRRORCAL_RUN_SINGLE_PASS(M, NI);
 MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_RUN_LOOP_)
 #undef MIRRORCAL_EXTERN_IMU_RUN_LOOP_
 

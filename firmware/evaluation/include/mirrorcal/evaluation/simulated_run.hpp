@@ -49,8 +49,9 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
 // calibration_params() order) that a filter linearised at the truth ends with, on the same rig,
 // motion and sensors with noise-free data, started at the truth from the prior's covariance (one
 // pass; the curvature the transform sees over the prior still widens its first frames a little).
-// The campaigns judge errors against it: a run's estimate can be no better than this.
-template <int M>
+// The campaigns judge errors against it: a run's estimate can be no better than this. NI: the IMU
+// model's intrinsics, estimated too (started at the scenario's true ones, with the prior's sigmas).
+template <int M, int NI = 0>
 std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed);
 
 // The paper's section III and Table III: stage 1 as run_simulation (the camera's intrinsics known),
@@ -77,18 +78,21 @@ CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint
 #define MIRRORCAL_STAGED_SIMULATION(name, M, NK)                         \
   CalibrationRun<M, NK> name<M, NK>(const sim::Scenario&, std::uint64_t, \
                                     const std::function<void(double)>&)
-#define MIRRORCAL_EXTERN_SIMULATED_RUNS_(M)                                                      \
-  extern template MIRRORCAL_RUN_SIMULATION(M, 0);                                                \
-  extern template std::vector<double> data_limit_sigmas<M>(const sim::Scenario&, std::uint64_t); \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                   \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                   \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);                   \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);                   \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);                   \
+#define MIRRORCAL_EXTERN_SIMULATED_RUNS_(M)                                         \
+  extern template MIRRORCAL_RUN_SIMULATION(M, 0);                                   \
+  extern template std::vector<double> data_limit_sigmas<M, 0>(const sim::Scenario&, \
+                                                              std::uint64_t);       \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);      \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);      \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);      \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);      \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);      \
   extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_SIMULATED_RUNS_)
 #undef MIRRORCAL_EXTERN_SIMULATED_RUNS_
-#define MIRRORCAL_EXTERN_IMU_SIMULATION_(M, NI) extern template MIRRORCAL_RUN_SIMULATION(M, NI);
+#define MIRRORCAL_EXTERN_IMU_SIMULATION_(M, NI)    \
+  extern template MIRRORCAL_RUN_SIMULATION(M, NI); \
+  extern template std::vector<double> data_limit_sigmas<M, NI>(const sim::Scenario&, std::uint64_t);
 MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_SIMULATION_)
 #undef MIRRORCAL_EXTERN_IMU_SIMULATION_
 
