@@ -208,6 +208,12 @@ bool priors_miss_first_frame(const CalibrationResult& r) {
   return r.prior_fit.seen > 0 && r.prior_fit.near_image == 0;
 }
 
+bool priors_read_another_way(const CalibrationResult& r) {
+  const CalibrationResult::PriorFit& f = r.prior_fit;
+  return !f.better_reading.empty() && f.median_px > kConventionMinPx &&
+         f.better_median_px < kConventionFitShare * f.median_px;
+}
+
 bool prior_contradicted(const CalibrationResult& r) {
   return r.prior_offset_sigmas > kPriorContradictedSigmas;
 }
@@ -309,10 +315,25 @@ std::string identification_warning(const CalibrationResult& r) {
   return text;
 }
 
-std::string prior_convention_warning(const CalibrationResult& r) {
-  if (!priors_miss_first_frame(r)) return {};
+// Why a result flagged for other reasons is: the priors' q_b_c read another way fits the first
+// frame far better (priors_read_another_way).
+std::string quaternion_reading_warning(const CalibrationResult& r) {
   const CalibrationResult::PriorFit& f = r.prior_fit;
   char text[720];
+  std::snprintf(text, sizeof text,
+                "the priors' q_b_c_wxyz fits the first frame far better read %s: its %d markers "
+                "lie a median %.0f px from where that reading puts them, and %.0f px as given. "
+                "The quaternion's convention is most likely mistaken, and the checks below fail "
+                "for that: mirrorcal.yaml's quaternions are Hamilton and w first (q_b_c_wxyz: "
+                "[w, x, y, z]), and R_b_c takes the camera's vectors into the IMU frame.",
+                f.better_reading.c_str(), f.predictable, f.better_median_px, f.median_px);
+  return text;
+}
+
+std::string prior_convention_warning(const CalibrationResult& r) {
+  const CalibrationResult::PriorFit& f = r.prior_fit;
+  char text[720];
+  if (!priors_miss_first_frame(r)) return {};
   std::snprintf(text, sizeof text,
                 "the priors put none of the first frame's %d markers near the image (%d of them "
                 "with their mirror image behind the camera): they contradict the data from the "
@@ -322,7 +343,14 @@ std::string prior_convention_warning(const CalibrationResult& r) {
                 "camera in the IMU frame and features_c the markers in the camera frame, in "
                 "metres, and gravity_n points down in the mirror's frame (z along its normal).",
                 f.seen, f.seen - f.predictable);
-  return text;
+  std::string warning = text;
+  if (std::isfinite(f.better_median_px)) {
+    std::snprintf(text, sizeof text,
+                  " Read %s, q_b_c_wxyz puts them a median %.0f px from where they are.",
+                  f.better_reading.c_str(), f.better_median_px);
+    warning += text;
+  }
+  return warning;
 }
 
 std::string label_swap_warning(const CalibrationResult& r) {
@@ -434,16 +462,23 @@ std::string start_imu_warning(const CalibrationResult& r) {
 
 // The self-check's reasons not to trust r, each empty or its WARNING, the most telling first.
 std::array<std::string, 10> self_check_reasons(const CalibrationResult& r) {
-  return {prior_convention_warning(r),
-          identification_warning(r),
-          label_swap_warning(r),
-          fit_warning(r),
-          markers_used_warning(r),
-          prior_warning(r),
-          imu_warning(r),
-          scale_warning(r),
-          start_warning(r),
-          start_imu_warning(r)};
+  std::array<std::string, 10> reasons = {prior_convention_warning(r),
+                                         identification_warning(r),
+                                         label_swap_warning(r),
+                                         fit_warning(r),
+                                         markers_used_warning(r),
+                                         prior_warning(r),
+                                         imu_warning(r),
+                                         scale_warning(r),
+                                         start_warning(r),
+                                         start_imu_warning(r)};
+  // A reading of q_b_c that fits the first frame far better names the cause of a result the
+  // other reasons flag; alone it flags nothing, as a prior's guesses may be far off.
+  const bool flagged =
+      std::any_of(reasons.begin(), reasons.end(), [](const std::string& s) { return !s.empty(); });
+  if (reasons[0].empty() && flagged && priors_read_another_way(r))
+    reasons[0] = quaternion_reading_warning(r);
+  return reasons;
 }
 
 std::string convergence_warning(const CalibrationResult& r) {

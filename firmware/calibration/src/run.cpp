@@ -6,6 +6,7 @@
 #include <cmath>
 #include <memory>
 #include <optional>
+#include <utility>
 
 #include "mirrorcal/calibration/image_markers.hpp"
 #include "mirrorcal/calibration/noise_estimate.hpp"
@@ -387,28 +388,62 @@ void record_label_swaps(double pixel_sigma, CalibrationRun<M, NK, NI>& run) {
     }
 }
 
-// For the self-check: the first frame's markers against the priors' guess there (the first
-// pass's prediction at that frame, at its exposure) (CalibrationResult::PriorFit).
-template <int M, int NK, int NI>
-void record_prior_fit(const CalibrationConfig& config, CalibrationRun<M, NK, NI>& run) {
-  const auto& row = run.first_frame;
+// The first frame's markers (row) as state x predicts them (at its exposure): how many the frame
+// showed, how many x predicts, how many of those land within an image's size of the image, and
+// their median distance from the measured.
+template <int M, class Row, class State>
+CalibrationResult::PriorFit first_frame_fit(const CalibrationConfig& config, const Row& row,
+                                            const State& x, double width, double height) {
   std::array<bool, M> ok = row.seen;
   Eigen::Matrix<double, 2 * M, 1> z = Eigen::Matrix<double, 2 * M, 1>::Zero();
   Exposure<double> at_state;
-  at_state.stamp_minus_filter_s = -row.predicted.t_d;
+  at_state.stamp_minus_filter_s = -x.t_d;
   at_state.gravity_n = config.gravity_n;
-  predict_markers(row.predicted, config.intrinsics, at_state, std::array<double, M>{}, z, ok);
-  CalibrationResult::PriorFit& fit = run.result.prior_fit;
-  fit = {};
-  const double w = run.result.width, h = run.result.height;
+  predict_markers(x, config.intrinsics, at_state, std::array<double, M>{}, z, ok);
+  CalibrationResult::PriorFit fit;
+  std::array<double, M> distance{};
   for (int i = 0; i < M; ++i) {
     const auto k = std::size_t(i);
     if (!row.seen[k]) continue;
     ++fit.seen;
     if (!ok[k]) continue;
-    ++fit.predictable;
     const Eigen::Vector2d uv = z.template segment<2>(2 * i);
-    if (uv.x() > -w && uv.x() < 2.0 * w && uv.y() > -h && uv.y() < 2.0 * h) ++fit.near_image;
+    distance[std::size_t(fit.predictable++)] = (uv - row.measured[k]).norm();
+    if (uv.x() > -width && uv.x() < 2.0 * width && uv.y() > -height && uv.y() < 2.0 * height)
+      ++fit.near_image;
+  }
+  if (fit.predictable > 0) {
+    const auto mid = distance.begin() + fit.predictable / 2;
+    std::nth_element(distance.begin(), mid, distance.begin() + fit.predictable);
+    fit.median_px = *mid;
+  }
+  return fit;
+}
+
+// For the self-check: the first frame's markers against the priors' guess there (the first
+// pass's prediction at that frame), and against the same guess with q_b_c read as the
+// conventions users mistake read it (CalibrationResult::PriorFit).
+template <int M, int NK, int NI>
+void record_prior_fit(const CalibrationConfig& config, CalibrationRun<M, NK, NI>& run) {
+  const auto& row = run.first_frame;
+  const double w = run.result.width, h = run.result.height;
+  CalibrationResult::PriorFit& fit = run.result.prior_fit;
+  fit = first_frame_fit<M>(config, row, row.predicted, w, h);
+  // The four numbers the priors gave as w, x, y, z, read as x, y, z, w; and R_c_b for R_b_c.
+  const Eigen::Quaterniond q = row.predicted.q_b_c;
+  const Eigen::Quaterniond xyzw = Eigen::Quaterniond(q.z(), q.w(), q.x(), q.y()).normalized();
+  const std::pair<const char*, Eigen::Quaterniond> readings[] = {
+      {"as x, y, z, w", xyzw},
+      {"conjugated (as R_c_b)", q.conjugate()},
+      {"as x, y, z, w and conjugated", xyzw.conjugate()}};
+  for (const auto& [name, other] : readings) {
+    auto x = row.predicted;
+    x.q_b_c = other;
+    const double median = first_frame_fit<M>(config, row, x, w, h).median_px;
+    if (median < std::min(fit.median_px, fit.better_median_px)) {
+      fit.better_reading = name;
+      fit.better_median_px = median;
+    }
   }
 }
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -78,9 +79,14 @@ struct CalibrationResult {
   } label_swap;
   // The first frame against the priors' guess (record_prior_fit, run.cpp): the markers it showed,
   // those the guess could predict (their mirror image in front of the camera), and those it put
-  // within an image's size of the image.
+  // within an image's size of the image; the median distance of the predicted from the measured
+  // (px), and the same with the priors' q_b_c read another way (its components x, y, z, w; its
+  // conjugate, R_c_b; both) where one of those fits better than the priors as given.
   struct PriorFit {
     int seen = 0, predictable = 0, near_image = 0;
+    double median_px = INFINITY;
+    std::string better_reading;  // empty: none fits better
+    double better_median_px = INFINITY;
   } prior_fit;
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
   double prior_offset_sigmas = 0.0;
@@ -195,6 +201,13 @@ bool labels_swapped(const CalibrationResult& r);
 // the priors contradict the data from the start (a quaternion given x, y, z, w; a transform
 // inverted), which no motion mends.
 bool priors_miss_first_frame(const CalibrationResult& r);
+// Read another way (x, y, z, w; conjugated), the priors' q_b_c puts the first frame's markers
+// within kConventionFitShare of the distance the priors as given leave, and that distance is
+// beyond kConventionMinPx: a convention mistaken, though the markers land in the image. It names
+// the cause of a result flagged for other reasons, and flags none itself.
+constexpr double kConventionFitShare = 0.5;
+constexpr double kConventionMinPx = 20.0;
+bool priors_read_another_way(const CalibrationResult& r);
 // Empty, or why the result should not be trusted and what to do (the first of these reasons;
 // result_warnings gives each).
 std::string convergence_warning(const CalibrationResult& r);
