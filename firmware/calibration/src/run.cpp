@@ -4,9 +4,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iterator>
 #include <memory>
 #include <optional>
 #include <utility>
+#include <vector>
 
 #include "mirrorcal/calibration/image_markers.hpp"
 #include "mirrorcal/calibration/noise_estimate.hpp"
@@ -100,12 +102,15 @@ std::uint64_t frames_met(const CalibrationRun<M, NK, NI>& run) {
 
 // One pass of the loop over the data from (x0, p0).
 template <int M, int NK, int NI>
-CalibrationRun<M, NK, NI> run_pass(
-    const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
-    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
-    const typename CalibrationRun<M, NK, NI>::State* truth,
-    const std::function<void(double)>& progress, const LoopHooks<M>& input,
-    Trajectory<M, NK, NI>* along = nullptr, bool keep_motion = false) {
+CalibrationRun<M, NK, NI> run_pass(const CalibrationConfig& config,
+                                   const typename CalibrationRun<M, NK, NI>::State& x0,
+                                   const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                                   const LoopData& data,
+                                   const typename CalibrationRun<M, NK, NI>::State* truth,
+                                   const std::function<void(double)>& progress,
+                                   const LoopHooks<M>& input,
+                                   Trajectory<M, NK, NI>* along = nullptr, bool keep_motion = false,
+                                   const OutlierVeto<M>* veto = nullptr) {
   using Run = CalibrationRun<M, NK, NI>;
   using Filter = typename Run::Filter;
   Run run;
@@ -126,6 +131,7 @@ CalibrationRun<M, NK, NI> run_pass(
   if (input.source == nullptr && relabeler == nullptr)
     relabeler = dynamic_cast<hal::MarkerRelabeler<M>*>(listed.get());
   FrameTap<M> markers(input.source != nullptr ? *input.source : *listed, relabeler);
+  markers.veto(veto);
   HistorySink<Filter> sink(data.frame_count() + 1, truth != nullptr ? &run.truth : nullptr,
                            &markers);
   if (keep_motion) {
@@ -158,7 +164,8 @@ CalibrationRun<M, NK, NI> run_pass(
   run.result = make_result(filter, data.width, data.height);
   run.filter_counters = filter.counters();
   run.loop_counters = loop.counters();
-  for (int i = 0; i < M; ++i) run.result.markers_screened.push_back(loop.screen().rejected(i));
+  for (int i = 0; i < M; ++i)
+    run.result.markers_screened.push_back(loop.screen().rejected(i) + markers.vetoed(i));
   run.imu_samples = data.imu_samples();
   run.frames = data.frame_count();
   return run;
@@ -548,10 +555,71 @@ struct Linearisation {
   typename CalibrationRun<M, NK, NI>::State start;
 };
 
+// The markers of a tracking pass (its estimate near the converged solution, the calibration held
+// there) whose residual after their frame's update lies beyond kOutlierSigmas of the pixel noise,
+// added to veto (kept in time order); whether it found any. The noise is the larger of the stated
+// one and the pass's own robust estimate (the residuals' median length over 1.1774, a 2-D
+// normal's), so that noise stated too small vetoes nothing. A wrong blob the frame's screen let
+// through (within its tolerance of the common step, 25 px and more) lies tens of sigmas off; in
+// a 2-D normal 6 sigmas come once in 6.6e7 residuals. The markers the screen withheld are not
+// the filter's, and not judged. A marker beyond it in more than kOutlierMaxShare of its frames
+// is not sporadically wrong: its own model is (an estimate not converged puts it off in every
+// frame), and none of its frames is vetoed.
+template <int M, int NK, int NI>
+bool find_outliers(const CalibrationRun<M, NK, NI>& track, double pixel_sigma,
+                   OutlierVeto<M>& veto) {
+  const auto judged = [](const auto& row, std::size_t i) {
+    return row.residual_valid[i] && !row.withheld[i];
+  };
+  std::vector<double> lengths;
+  std::array<std::size_t, M> frames{}, beyond{};
+  for (const auto& row : track.history)
+    for (std::size_t i = 0; i < std::size_t(M); ++i)
+      if (judged(row, i)) {
+        lengths.push_back(row.residual[i].norm());
+        ++frames[i];
+      }
+  if (lengths.empty()) return false;
+  const auto mid = lengths.begin() + std::ptrdiff_t(lengths.size() / 2);
+  std::nth_element(lengths.begin(), mid, lengths.end());
+  const double limit = kOutlierSigmas * std::max(pixel_sigma, *mid / 1.1774);
+  const auto outlier = [&](const auto& row, std::size_t i) {
+    return judged(row, i) && row.residual[i].norm() > limit;
+  };
+  for (const auto& row : track.history)
+    for (std::size_t i = 0; i < std::size_t(M); ++i) beyond[i] += outlier(row, i) ? 1 : 0;
+  std::array<bool, M> sporadic{};
+  for (std::size_t i = 0; i < std::size_t(M); ++i)
+    sporadic[i] = double(beyond[i]) <= kOutlierMaxShare * double(frames[i]);
+  OutlierVeto<M> found;
+  for (const auto& row : track.history) {
+    VetoedFrame<M> v{row.t_ns, {}};
+    bool any = false;
+    for (std::size_t i = 0; i < std::size_t(M); ++i)
+      if (sporadic[i] && outlier(row, i)) any = v.markers[i] = true;
+    if (any) found.push_back(v);
+  }
+  if (found.empty()) return false;
+  OutlierVeto<M> merged;
+  std::merge(veto.begin(), veto.end(), found.begin(), found.end(), std::back_inserter(merged),
+             [](const VetoedFrame<M>& a, const VetoedFrame<M>& b) { return a.t_ns < b.t_ns; });
+  veto.clear();
+  for (const VetoedFrame<M>& v : merged) {
+    if (!veto.empty() && veto.back().t_ns == v.t_ns) {
+      for (std::size_t i = 0; i < std::size_t(M); ++i) veto.back().markers[i] |= v.markers[i];
+    } else {
+      veto.push_back(v);
+    }
+  }
+  return true;
+}
+
 // One Gauss-Newton step from the estimate from, the calibration held near it by held: a tracking
 // pass from there, smoothed, and a pass from the prior (x0, p0) linearised along it, which it
 // returns; track and at get the tracking pass and what the step linearised along. Each pass asks
 // next_hooks() for its hooks as it starts (a source of rendered frames replaces the one before).
+// Both passes drop the markers in veto; outliers the tracking pass finds (find_outliers) join it,
+// and the tracking pass is made again without them.
 template <int M, int NK, int NI>
 std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
     const CalibrationConfig& c, const typename CalibrationRun<M, NK, NI>::State& x0,
@@ -560,11 +628,16 @@ std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
     const typename CalibrationRun<M, NK, NI>::State& from,
     const typename CalibrationRun<M, NK, NI>::Filter::Covariance& held,
     const std::function<LoopHooks<M>()>& next_hooks,
-    std::unique_ptr<CalibrationRun<M, NK, NI>>& track, Linearisation<M, NK, NI>& at) {
+    std::unique_ptr<CalibrationRun<M, NK, NI>>& track, Linearisation<M, NK, NI>& at,
+    OutlierVeto<M>& veto) {
   // The two runs a step makes live on the heap: on the stack they took 80 KB at 6 markers with
   // the lens estimated. (A new-expression builds each in place from run_pass's result.)
-  track.reset(new CalibrationRun<M, NK, NI>(
-      run_pass<M, NK, NI>(c, from, held, data, nullptr, {}, next_hooks(), nullptr, true)));
+  const auto tracking_pass = [&] {
+    track.reset(new CalibrationRun<M, NK, NI>(
+        run_pass<M, NK, NI>(c, from, held, data, nullptr, {}, next_hooks(), nullptr, true, &veto)));
+  };
+  tracking_pass();
+  if (find_outliers(*track, c.pixel_sigma, veto)) tracking_pass();
   // Each frame is linearised at the track smoothed over the whole pass, never at the track's
   // estimate after that frame's update: an estimate that holds the frame's own noise moves the
   // linearisation with that noise, and where the rig's motion leaves a direction weak (slow
@@ -583,8 +656,9 @@ std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
   at.start.p = from.p;
   at.start.v = from.v;
   at.start.q_n_b = from.q_n_b;
-  return std::unique_ptr<CalibrationRun<M, NK, NI>>(new CalibrationRun<M, NK, NI>(
-      run_pass<M, NK, NI>(c, at.start, p0, data, truth, {}, next_hooks(), at.trajectory.get())));
+  return std::unique_ptr<CalibrationRun<M, NK, NI>>(
+      new CalibrationRun<M, NK, NI>(run_pass<M, NK, NI>(
+          c, at.start, p0, data, truth, {}, next_hooks(), at.trajectory.get(), false, &veto)));
 }
 
 // Gauss-Newton over the whole recording, the filter its linear solver: a pass from the estimate
@@ -613,6 +687,8 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
   const std::function<LoopHooks<M>()> next_hooks = [&] {
     return hooks ? hooks(hook++) : LoopHooks<M>{};
   };
+  // The outliers the steps find at their solutions, dropped from every later pass.
+  OutlierVeto<M> veto = run.veto;
   // One Gauss-Newton step from run's estimate, linearised as c says; false if not taken.
   const auto step = [&](const CalibrationConfig& c) {
     State from = run.history.back().state;
@@ -622,7 +698,8 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     Linearisation<M, NK, NI> at;
     std::unique_ptr<CalibrationRun<M, NK, NI>> track;
     const std::unique_ptr<CalibrationRun<M, NK, NI>> refined = gauss_newton_step<M, NK, NI>(
-        c, x0, p0, data, truth, from, calibration_held<M, NK, NI>(p0, run), next_hooks, track, at);
+        c, x0, p0, data, truth, from, calibration_held<M, NK, NI>(p0, run), next_hooks, track, at,
+        veto);
     // A replay that did not meet the same frames (a source that ran dry) refines nothing.
     if (frames_met(*refined) != frames_met(run) || frames_met(*track) != frames_met(run) ||
         refined->filter_counters.failures > 0)
@@ -634,6 +711,7 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
     refined->first_frame = run.first_frame;
     refined->result.passes = free_passes;
     refined->result.restarted_pass = run.result.restarted_pass;
+    refined->veto = veto;
     run = std::move(*refined);
     imu_start_from<M, NK, NI>(config, run, p0, data, start);
     return true;
@@ -777,15 +855,17 @@ void check_ideal_imu(const CalibrationConfig& config,
   };
   std::unique_ptr<Run> track;
   Linearisation<M, 0, NI> at;
+  OutlierVeto<M> veto = run.veto;
   const std::unique_ptr<const Run> check = gauss_newton_step<M, 0, NI>(
       tangent, in_imu_model<NI>(x0), p, data, nullptr, in_imu_model<NI>(from),
-      with_imu_prior<NI, M, 0>(calibration_held<M, 0, 0>(p0, run), sigma), next_hooks, track, at);
+      with_imu_prior<NI, M, 0>(calibration_held<M, 0, 0>(p0, run), sigma), next_hooks, track, at,
+      veto);
   if (wald_statistic<M, NI>(*check, at.start, p, out)) return;
   // That step lost its way (1 % of ideal rigs; a mems rig whose ideal-IMU estimate was 3,956 NEES
   // off): a free pass from the same start judges instead (over-confident, but as a fallback it
   // adds 0.1 % of false alarms).
-  const std::unique_ptr<const Run> free(new Run(
-      run_pass<M, 0, NI>(config, in_imu_model<NI>(from), p, data, nullptr, {}, next_hooks())));
+  const std::unique_ptr<const Run> free(new Run(run_pass<M, 0, NI>(
+      config, in_imu_model<NI>(from), p, data, nullptr, {}, next_hooks(), nullptr, false, &veto)));
   wald_statistic<M, NI>(*free, in_imu_model<NI>(from), p, out);
 }
 

@@ -75,6 +75,16 @@ void calibration_error(const Filter& f, const typename Filter::State& truth,
   row.nees = row.error.dot(p.ldlt().solve(row.error));
 }
 
+// A frame's markers to be dropped (FrameTap::veto): those the refinement found to be outliers at
+// its converged solution (run.cpp, find_outliers).
+template <int M>
+struct VetoedFrame {
+  std::int64_t t_ns = 0;
+  std::array<bool, M> markers{};
+};
+template <int M>
+using OutlierVeto = std::vector<VetoedFrame<M>>;
+
 // Passes a marker source's frames to the loop and keeps the last one as the loop updates with it
 // (after relabelling, when the loop identifies markers), so that the estimate published after the
 // update can be compared with it. Keeps one frame: no allocation.
@@ -86,15 +96,23 @@ class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<
   hal::SourceStatus poll(MarkerFrame<M>& frame) override {
     const hal::SourceStatus st = source_.poll(frame);
     if (st == hal::SourceStatus::kOk) {
+      if (relabeler_ == nullptr) drop_vetoed(frame);  // labelled as they come
       last_ = frame;
       fresh_ = true;
     }
     return st;
   }
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override {
-    if (relabeler_ != nullptr) relabeler_->relabel(prediction, frame);
+    if (relabeler_ != nullptr) {
+      relabeler_->relabel(prediction, frame);
+      drop_vetoed(frame);
+    }
     last_ = frame;
   }
+  // Markers of given frames to drop as they come (the refinement's outliers at its converged
+  // solution, OutlierVeto), sorted by time; how many of marker i it dropped.
+  void veto(const OutlierVeto<M>* v) { veto_ = v; }
+  std::uint64_t vetoed(int i) const { return vetoed_[static_cast<std::size_t>(i)]; }
   const char* error() const override { return source_.error(); }
   std::int64_t detection_ns() const override { return source_.detection_ns(); }
   // The loop's screen, which withholds some of a frame's markers after the tap saw them.
@@ -112,9 +130,22 @@ class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<
  private:
   hal::MarkerSource<M>& source_;
   hal::MarkerRelabeler<M>* relabeler_;
+  void drop_vetoed(MarkerFrame<M>& frame) {
+    if (veto_ == nullptr) return;
+    while (next_veto_ < veto_->size() && (*veto_)[next_veto_].t_ns < frame.t_ns) ++next_veto_;
+    if (next_veto_ == veto_->size() || (*veto_)[next_veto_].t_ns != frame.t_ns) return;
+    for (std::size_t i = 0; i < std::size_t(M); ++i)
+      if (frame.seen[i] && (*veto_)[next_veto_].markers[i]) {
+        frame.seen[i] = false;
+        ++vetoed_[i];
+      }
+  }
   MarkerFrame<M> last_{};
   bool fresh_ = false;
   const firmware::MarkerScreen<M>* screen_ = nullptr;
+  const OutlierVeto<M>* veto_ = nullptr;
+  std::size_t next_veto_ = 0;
+  std::array<std::uint64_t, M> vetoed_{};
 };
 
 // The frame's markers against the filter's estimate after its update: the filter's own measurement

@@ -68,6 +68,9 @@ struct CalibrationRun {
   bool has_truth = false;               // the history rows carry the error against truth
   // Beside history, when a smoother asked for them (a temporary file too).
   std::optional<RecordStore<MotionRow<Filter>>> motion;
+  // The markers the refinement found to be outliers at its converged solution, which its passes
+  // and the ideal-IMU check drop (run.cpp, find_outliers).
+  OutlierVeto<M> veto;
 };
 
 // What the loop consumes, filled before it starts (the loop itself never allocates): the streams
@@ -148,6 +151,11 @@ constexpr double kAnnealedPixelNoise = 10.0;
 // (100 rigs: median 17.6 either way); the good runs' second step has a median of 0.0 sigmas.
 constexpr int kMaxRefinements = 4;
 constexpr double kConvergedStepSigmas = 1.0;
+// A marker whose residual at the refinement's converged solution (its tracking pass) lies beyond
+// kOutlierSigmas of the pixel noise is an outlier (a wrong blob the frame's screen let through):
+// the refinement's passes drop it (run.cpp, find_outliers).
+constexpr double kOutlierSigmas = 6.0;
+constexpr double kOutlierMaxShare = 0.05;
 // Those steps regress each frame's measurement over the filter's spread about the trajectory
 // (SigmaPointParams::linearised_alpha_scale 1), which pulls the iteration in from estimates far
 // off. But their fixed point is where the data's error follows the Jacobian while the covariance
