@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <random>
 #include <sstream>
@@ -976,26 +977,36 @@ TEST(Cli, APriorContradictedByTheDataIsFlagged) {
   EXPECT_GT(bad["prior_offset"].as<double>(), 5.0);
 }
 
+namespace {
+
+// A random rig's 20 s recording calibrated with the priors' q_b_c_wxyz rewritten from its four
+// numbers (w, x, y, z as written): the program's result.
+Result calibrate_with_q_b_c(const std::string& d,
+                            const std::function<std::string(const YAML::Node&)>& rewrite) {
+  EXPECT_EQ(
+      run_mirrorcal("record --scenario random --seed 1 --duration 20 --out " + d + "/rec", d).code,
+      0);
+  const std::string priors = d + "/rec/mirrorcal.yaml";
+  set_yaml_line(priors, "q_b_c_wxyz", rewrite(YAML::LoadFile(priors)["q_b_c_wxyz"]));
+  return run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+}
+
+}  // namespace
+
 // The camera's rotation given the wrong way round (R_c_b for R_b_c: the quaternion conjugated) puts
 // the first frame's markers behind the camera: the WARNING that comes first says so and names the
 // conventions, where it had said that the gate rejected most markers.
 TEST(Cli, AnInvertedCameraRotationInThePriorsIsNamedAsTheCause) {
   TempDir dir("cli-inverted");
-  const std::string& d = dir.path;
-  ASSERT_EQ(
-      run_mirrorcal("record --scenario random --seed 1 --duration 20 --out " + d + "/rec", d).code,
-      0);
-  const std::string priors = d + "/rec/mirrorcal.yaml";
-  const YAML::Node q = YAML::LoadFile(priors)["q_b_c_wxyz"];
-  set_yaml_line(priors, "q_b_c_wxyz",
-                "[" + q[0].as<std::string>() + ", " + std::to_string(-q[1].as<double>()) + ", " +
-                    std::to_string(-q[2].as<double>()) + ", " + std::to_string(-q[3].as<double>()) +
-                    "]");
-  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  const Result r = calibrate_with_q_b_c(dir.path, [](const YAML::Node& q) {
+    return "[" + q[0].as<std::string>() + ", " + std::to_string(-q[1].as<double>()) + ", " +
+           std::to_string(-q[2].as<double>()) + ", " + std::to_string(-q[3].as<double>()) + "]";
+  });
   ASSERT_EQ(r.code, 3) << r.output;
-  const std::size_t first = r.output.find("WARNING: ");
-  ASSERT_NE(first, std::string::npos) << r.output;
-  EXPECT_EQ(r.output.find("WARNING: the priors put none of the first frame's"), first) << r.output;
+  ASSERT_NE(r.output.find("WARNING: "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("WARNING: the priors put none of the first frame's"),
+            r.output.find("WARNING: "))
+      << r.output;
 }
 
 // The camera's rotation given x, y, z, w in q_b_c_wxyz: the first frame's markers land in the
@@ -1005,22 +1016,15 @@ TEST(Cli, AnInvertedCameraRotationInThePriorsIsNamedAsTheCause) {
 // first frame 7; of the same rigs' right priors, none fits better read another way.)
 TEST(Cli, AQuaternionGivenXyzwInThePriorsIsNamedAsTheCause) {
   TempDir dir("cli-xyzw");
-  const std::string& d = dir.path;
-  ASSERT_EQ(
-      run_mirrorcal("record --scenario random --seed 1 --duration 20 --out " + d + "/rec", d).code,
-      0);
-  const std::string priors = d + "/rec/mirrorcal.yaml";
-  const YAML::Node q = YAML::LoadFile(priors)["q_b_c_wxyz"];
-  set_yaml_line(priors, "q_b_c_wxyz",
-                "[" + q[1].as<std::string>() + ", " + q[2].as<std::string>() + ", " +
-                    q[3].as<std::string>() + ", " + q[0].as<std::string>() + "]");
-  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  const Result r = calibrate_with_q_b_c(dir.path, [](const YAML::Node& q) {
+    return "[" + q[1].as<std::string>() + ", " + q[2].as<std::string>() + ", " +
+           q[3].as<std::string>() + ", " + q[0].as<std::string>() + "]";
+  });
   ASSERT_EQ(r.code, 3) << r.output;
-  const std::size_t first = r.output.find("WARNING: ");
-  ASSERT_NE(first, std::string::npos) << r.output;
+  ASSERT_NE(r.output.find("WARNING: "), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("WARNING: the priors' q_b_c_wxyz fits the first frame far better read "
                           "as x, y, z, w"),
-            first)
+            r.output.find("WARNING: "))
       << r.output;
 }
 
