@@ -210,7 +210,7 @@ bool priors_miss_first_frame(const CalibrationResult& r) {
 
 bool priors_read_another_way(const CalibrationResult& r) {
   const CalibrationResult::PriorFit& f = r.prior_fit;
-  return !f.better_reading.empty() && f.median_px > kConventionMinPx &&
+  return f.better_reading != nullptr && f.median_px > kConventionMinPx &&
          f.better_median_px < kConventionFitShare * f.median_px;
 }
 
@@ -326,7 +326,7 @@ std::string quaternion_reading_warning(const CalibrationResult& r) {
                 "The quaternion's convention is most likely mistaken, and the checks below fail "
                 "for that: mirrorcal.yaml's quaternions are Hamilton and w first (q_b_c_wxyz: "
                 "[w, x, y, z]), and R_b_c takes the camera's vectors into the IMU frame.",
-                f.better_reading.c_str(), f.predictable, f.better_median_px, f.median_px);
+                f.better_reading, f.predictable, f.better_median_px, f.median_px);
   return text;
 }
 
@@ -347,7 +347,7 @@ std::string prior_convention_warning(const CalibrationResult& r) {
   if (std::isfinite(f.better_median_px)) {
     std::snprintf(text, sizeof text,
                   " Read %s, q_b_c_wxyz puts them a median %.0f px from where they are.",
-                  f.better_reading.c_str(), f.better_median_px);
+                  f.better_reading, f.better_median_px);
     warning += text;
   }
   return warning;

@@ -85,7 +85,7 @@ struct CalibrationResult {
   struct PriorFit {
     int seen = 0, predictable = 0, near_image = 0;
     double median_px = INFINITY;
-    std::string better_reading;  // empty: none fits better
+    const char* better_reading = nullptr;  // a string literal; none fits better: nullptr
     double better_median_px = INFINITY;
   } prior_fit;
   // The calibration state the estimate lies furthest from its prior guess, in the prior's sigmas.
