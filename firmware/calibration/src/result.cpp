@@ -629,7 +629,8 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                    static_cast<unsigned long long>(r.markers_screened[i]));
     std::fprintf(o,
                  "]  # per marker, last pass: withheld before the filter, their step against the "
-                 "other markers' (a wrong blob or label)\n");
+                 "other markers' or their residual at the refined solution (a wrong blob or "
+                 "label)\n");
   }
   if (!r.prior_offset_state.empty())
     std::fprintf(o, "prior_offset: %.2f  # sigmas of the prior, at its furthest: %s\n",

@@ -37,8 +37,9 @@ struct CalibrationResult {
   // Over the last pass: markers used, gated, and those the model could not predict at the
   // estimate (their mirror image not in front of the camera).
   std::uint64_t markers_used = 0, markers_gated = 0, markers_invalid = 0;
-  // Each marker's frames in the last pass whose reflection the loop withheld before the filter:
-  // its step disagreed with the other markers' (a wrong blob or label; firmware::MarkerScreen).
+  // Each marker's frames in the last pass whose reflection was withheld before the filter: its
+  // step disagreed with the other markers' (a wrong blob or label; firmware::MarkerScreen), or
+  // the refinement found it an outlier at its converged solution (run.cpp, find_outliers).
   std::vector<std::uint64_t> markers_screened;
   std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
   int passes = 1;                     // passes over the data (sim_run.hpp)
