@@ -25,8 +25,9 @@ list(JOIN _counts ", " MIRRORCAL_MARKER_COUNTS_ARRAY)
 list(LENGTH _counts MIRRORCAL_MARKER_COUNTS_N)
 list(GET _counts -1 MIRRORCAL_MARKER_COUNTS_MAX)
 
-# MIRRORCAL_IMU_MODELS: the IMU models with intrinsics (estimator/imu_intrinsics.hpp) whose stage-1
-# filters are built beside the ideal IMU's ("calibrated", always built), for every marker count.
+# MIRRORCAL_IMU_MODELS: the IMU models with intrinsics (estimator/imu_intrinsics.hpp) whose filters
+# (both stages) are built beside the ideal IMU's ("calibrated", always built), for every marker
+# count.
 set(_imu_dims "")
 foreach(model IN LISTS MIRRORCAL_IMU_MODELS)
   if(model STREQUAL "scale-misalignment")
@@ -41,13 +42,25 @@ foreach(model IN LISTS MIRRORCAL_IMU_MODELS)
 endforeach()
 list(REMOVE_DUPLICATES _imu_dims)
 set(MIRRORCAL_IMU_DIMS ${_imu_dims} CACHE INTERNAL "the intrinsics' dimension of every built IMU model but calibrated")
-set(_x "")
+# The filters the product instantiates, for every marker count M and IMU model NI (0, the ideal
+# IMU's, and the built models'): stage 1 (NK = 0) and stage 2's camera blocks (NK = 4, 5, 8).
+set(_stage1 "")
+set(_stage2 "")
+set(_all "")
+set(MIRRORCAL_FILTER_IMU_DIMS 0 ${_imu_dims} CACHE INTERNAL "NI of every built IMU model, 0 first")
 foreach(m IN LISTS _counts)
-  foreach(ni IN LISTS _imu_dims)
-    list(APPEND _x "X(${m}, ${ni})")
+  foreach(ni IN LISTS MIRRORCAL_FILTER_IMU_DIMS)
+    list(APPEND _stage1 "X(${m}, ${ni})")
+    list(APPEND _all "X(${m}, 0, ${ni})")
+    foreach(nk 4 5 8)
+      list(APPEND _stage2 "X(${m}, ${nk}, ${ni})")
+      list(APPEND _all "X(${m}, ${nk}, ${ni})")
+    endforeach()
   endforeach()
 endforeach()
-list(JOIN _x " " MIRRORCAL_IMU_FILTERS_X)
+list(JOIN _stage1 " " MIRRORCAL_STAGE1_FILTERS_X)
+list(JOIN _stage2 " " MIRRORCAL_STAGE2_FILTERS_X)
+list(JOIN _all " " MIRRORCAL_FILTERS_X)
 set(_x "")
 foreach(ni IN LISTS _imu_dims)
   list(APPEND _x "X(${ni})")

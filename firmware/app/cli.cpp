@@ -141,8 +141,7 @@ int calibration_exit_status(const calibration::CalibrationResult& r) {
 }
 
 bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
-                           const std::string& folder, bool camera_intrinsics, ImuModel& model,
-                           std::string& error) {
+                           const std::string& folder, ImuModel& model, std::string& error) {
   model = kDefaultImuModel;
   if (o.flag("imu-model")) {
     if (!imu_model_option(o, model, error)) return false;
@@ -154,13 +153,6 @@ bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
     }
   }
   if (model == ImuModel::kCalibrated) return true;
-  if (camera_intrinsics) {
-    error = std::string("the IMU model ") + to_string(model) +
-            " is estimated in stage 1 (without the camera's intrinsics): mirrorcal has no stage 2 "
-            "with the IMU's intrinsics yet. Calibrate stage 1 with it; a stage 2 from that result "
-            "(--from, imu_model: calibrated) assumes an ideal IMU and says consistent: false";
-    return false;
-  }
   if (sensors.imu_tolerances_defaulted)
     std::fprintf(stderr,
                  "mirrorcal: note: %s/imu.yaml: not every tolerance of the IMU's intrinsics is "

@@ -96,11 +96,9 @@ bool imu_model_option(const Options& o, ImuModel& model, std::string& error);
 std::string imu_model_not_built(ImuModel model);
 // The IMU model a calibration from the sensors folder `folder` (its imu.yaml read into sensors)
 // estimates: --imu-model, else imu.yaml's imu_model, else kDefaultImuModel. Notes on stderr any
-// tolerance imu.yaml leaves to the defaults. Refused: a model not built, and one with intrinsics
-// beside the camera's (camera_intrinsics; stage 2 starts from stage 1's result instead).
+// tolerance imu.yaml leaves to the defaults. Refused: a model not built.
 bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
-                           const std::string& folder, bool camera_intrinsics, ImuModel& model,
-                           std::string& error);
+                           const std::string& folder, ImuModel& model, std::string& error);
 
 // Calls f(ImuIntrinsicsCount<NI>{}) for model's NI (marker_counts.hpp); a model not built fails
 // (exit code 2).
@@ -110,6 +108,37 @@ int with_imu_model_of(ImuModel model, F&& f) {
   if (!with_imu_model(imu_intrinsics_dim(model), [&](auto ni) { code = f(ni); }))
     fail(imu_model_not_built(model));
   return code;
+}
+
+// The camera block a calibration estimates (MirrorState's NK): none, camchain.yaml's intrinsics
+// held (0); fu fv cu cv and the skew (5); the same with the skew held (4); or fu fv cu cv and the
+// lens's coefficients, the skew held (8).
+constexpr int camera_block(bool intrinsics, bool hold_skew, bool distortion) {
+  return !intrinsics ? 0 : distortion ? 8 : hold_skew ? 4 : 5;
+}
+
+// Calls f(std::integral_constant<int, NK>{}) for nk (camera_block) and returns its result.
+template <class F>
+auto with_camera_block(int nk, F&& f) {
+  switch (nk) {
+    case 4:
+      return f(std::integral_constant<int, 4>{});
+    case 5:
+      return f(std::integral_constant<int, 5>{});
+    case 8:
+      return f(std::integral_constant<int, 8>{});
+    default:
+      return f(std::integral_constant<int, 0>{});
+  }
+}
+
+// Calls f(std::integral_constant<int, NK>{}, ImuIntrinsicsCount<NI>{}) for the filter of nk
+// (camera_block) and model, and returns its exit code: every command reaches its filter's
+// instantiation through here (with_markers first).
+template <class F>
+int with_filter_blocks(int nk, ImuModel model, F&& f) {
+  return with_imu_model_of(
+      model, [&](auto ni) { return with_camera_block(nk, [&](auto k) { return f(k, ni); }); });
 }
 
 // Calls f(MarkerCount<M>{}) (marker_counts.hpp) for the built M equal to markers and returns its

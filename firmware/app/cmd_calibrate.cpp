@@ -196,19 +196,20 @@ int cmd_calibrate(int argc, char** argv) {
           "not estimated\n",
           in.c_str());
     ImuModel imu_model = kDefaultImuModel;
-    if (!calibration_imu_model(o, rec.sensors, in, intrinsics, imu_model, err)) fail(err);
+    if (!calibration_imu_model(o, rec.sensors, in, imu_model, err)) fail(err);
+    if (from && imu_model != ImuModel::kCalibrated && from->imu_model == imu_model &&
+        from->imu_covariance.rows() > 0)
+      std::printf("mirrorcal calibrate: the IMU's intrinsics (%s) start from it too\n",
+                  to_string(imu_model));
     // --estimate-noise: the noise densities and the pixel noise from the data, not imu.yaml's and
     // mirrorcal.yaml's (noise_estimate.hpp).
     Passes passes;
     passes.estimate_noise = o.flag("estimate-noise");
     // estimate_distortion (mirrorcal.yaml, which checked it needs estimate_intrinsics and a lens):
     // the lens's coefficients too, skew held.
-    if (intrinsics && rec.priors.estimate_distortion)
-      return calibrate<M, 8>(rec, in, out, from, passes);
-    if (intrinsics && hold_skew) return calibrate<M, 4>(rec, in, out, from, passes);
-    if (intrinsics) return calibrate<M, 5>(rec, in, out, from, passes);
-    return with_imu_model_of(imu_model, [&](auto imu) {
-      return calibrate<M, 0, decltype(imu)::value>(rec, in, out, from, passes);
+    const int nk = camera_block(intrinsics, hold_skew, rec.priors.estimate_distortion);
+    return with_filter_blocks(nk, imu_model, [&](auto k, auto imu) {
+      return calibrate<M, decltype(k)::value, decltype(imu)::value>(rec, in, out, from, passes);
     });
   });
 }

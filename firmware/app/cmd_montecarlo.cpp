@@ -351,15 +351,17 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if (c.intrinsics && o.flag("passes"))
     return refuse("--passes applies to stage 1 only (without --intrinsics)");
   if (!imu_model_option(o, c.imu_model, error)) return false;
-  if (c.imu_model != ImuModel::kCalibrated && (c.intrinsics || c.frames.enabled))
-    return refuse(
-        "--imu-model: the IMU's intrinsics are estimated in stage 1 from listed markers "
-        "(without --intrinsics and --frames)");
   // --estimate-noise: as sim (the mems family states noise levels 0.5-5x the true ones).
   c.passes.estimate_noise = o.flag("estimate-noise");
   if (c.intrinsics && c.passes.estimate_noise)
     return refuse("--estimate-noise applies to stage 1 only (without --intrinsics)");
   return true;
+}
+
+// The camera parameters the campaign's filter estimates: none in stage 1, fu fv cu cv (skew) in
+// stage 2, and the lens's four coefficients in place of the skew with estimate_distortion.
+int estimated_intrinsics(const Campaign& c) {
+  return camera_block(c.intrinsics, c.hold_skew, c.lens);
 }
 
 void print_campaign_title(const Campaign& c) {
@@ -425,22 +427,15 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
   // The rig's markers, checked when the options were read: each run reaches its M here.
   with_markers(int(rs.truth.markers.size()), [&](auto markers) {
     constexpr int M = decltype(markers)::value;
-    if (c.lens)
-      record(c.one_stage ? run_one_stage_simulation<M, 8>(rs, run_seed)
-                         : run_two_stage_simulation<M, 8>(rs, run_seed));
-    else if (c.intrinsics && c.hold_skew)
-      record(c.one_stage ? run_one_stage_simulation<M, 4>(rs, run_seed)
-                         : run_two_stage_simulation<M, 4>(rs, run_seed));
-    else if (c.intrinsics)
-      record(c.one_stage ? run_one_stage_simulation<M, 5>(rs, run_seed)
-                         : run_two_stage_simulation<M, 5>(rs, run_seed));
-    else
-      with_imu_model_of(c.imu_model, [&](auto imu) {
-        record(
-            run_simulation<M, decltype(imu)::value>(rs, run_seed, {}, c.frames, nullptr, c.passes));
-        return 0;
-      });
-    return 0;
+    return with_filter_blocks(estimated_intrinsics(c), c.imu_model, [&](auto k, auto imu) {
+      constexpr int NK = decltype(k)::value, NI = decltype(imu)::value;
+      if constexpr (NK == 0)
+        record(run_simulation<M, NI>(rs, run_seed, {}, c.frames, nullptr, c.passes));
+      else
+        record(c.one_stage ? run_one_stage_simulation<M, NK, NI>(rs, run_seed)
+                           : run_two_stage_simulation<M, NK, NI>(rs, run_seed));
+      return 0;
+    });
   });
 }
 
@@ -500,12 +495,6 @@ ErrorStatistics error_statistics(const std::vector<Outcome>& out, std::size_t np
   st.nees_lo = chi2_quantile(0.025, n * double(np)) / n;
   st.nees_hi = chi2_quantile(0.975, n * double(np)) / n;
   return st;
-}
-
-// The camera parameters the campaign's filter estimates: none in stage 1, fu fv cu cv (skew) in
-// stage 2, and the lens's four coefficients in place of the skew with estimate_distortion.
-int estimated_intrinsics(const Campaign& c) {
-  return !c.intrinsics ? 0 : c.lens ? 8 : c.hold_skew ? 4 : 5;
 }
 
 // The paper's row of parameter j: none for the lens's coefficients (estimate_distortion), which

@@ -218,21 +218,18 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
       log.left_out > 0 ? " (the rest did not fit the memory reserved)" : "", kDefaultPasses);
   log.to_recording(sensors);
   // The live pass predicted with camchain.yaml's intrinsics; the calibration estimates them too
-  // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew), or the IMU's as the live pass did
-  // (never both: calibration_imu_model).
-  const auto refine = [&](auto run) {
+  // when mirrorcal.yaml asks (estimate_intrinsics, hold_skew), with the IMU's as the live pass did.
+  const auto refine = [&](auto k) {
+    CalibrationRun<M, decltype(k)::value, NI> run;
     if (!calibrate_recording(sensors, run, error, {}, from)) return false;
     result = run.result;
     report = report_data(run, title);
     report.from_earlier = from != nullptr;
     return true;
   };
-  if (sensors.priors.estimate_intrinsics && sensors.priors.estimate_distortion)
-    return refine(CalibrationRun<M, 8>{});
-  if (sensors.priors.estimate_intrinsics && sensors.priors.hold_skew)
-    return refine(CalibrationRun<M, 4>{});
-  if (sensors.priors.estimate_intrinsics) return refine(CalibrationRun<M, 5>{});
-  return refine(CalibrationRun<M, 0, NI>{});
+  const sim::RecordingPriors& p = sensors.priors;
+  return with_camera_block(camera_block(p.estimate_intrinsics, p.hold_skew, p.estimate_distortion),
+                           refine);
 }
 
 // The result's warnings on stderr, and its files in dir.
@@ -356,8 +353,7 @@ int cmd_run(int argc, char** argv) {
   sim::Recording sensors;
   ImuModel imu_model = kDefaultImuModel;
   if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error) ||
-      !calibration_imu_model(o, sensors.sensors, s.sensors, sensors.priors.estimate_intrinsics,
-                             imu_model, error))
+      !calibration_imu_model(o, sensors.sensors, s.sensors, imu_model, error))
     fail(error, 2);
   return with_markers(int(sensors.priors.features_c.size()), [&](auto markers) {
     return with_imu_model_of(imu_model, [&](auto imu) {

@@ -174,10 +174,6 @@ int cmd_sim(int argc, char** argv) {
     fail("--passes applies to stage 1 only (without --intrinsics)");
   ImuModel imu_model = kDefaultImuModel;
   if (!imu_model_option(o, imu_model, error)) fail(error);
-  if (imu_model != ImuModel::kCalibrated && (intrinsics || frames.enabled))
-    fail(std::string("--imu-model ") + to_string(imu_model) +
-         ": the IMU's intrinsics are estimated in stage 1 from listed markers only (without "
-         "--intrinsics and --frames)");
   // --estimate-noise: the noise levels from the data, the calibration made again with them.
   passes.estimate_noise = o.flag("estimate-noise");
   if (intrinsics && passes.estimate_noise)
@@ -214,26 +210,20 @@ int cmd_sim(int argc, char** argv) {
     std::string err;
     bool written = false;
     int status = 0;
-    if (lens)
-      written = report_run(one_stage ? run_one_stage_simulation<M, 8>(s, seed, progress)
-                                     : run_two_stage_simulation<M, 8>(s, seed, progress),
+    with_filter_blocks(
+        camera_block(intrinsics || lens, o.flag("hold-skew"), lens), imu_model,
+        [&](auto k, auto imu) {
+          constexpr int NK = decltype(k)::value, NI = decltype(imu)::value;
+          if constexpr (NK == 0)
+            written =
+                report_run(run_simulation<M, NI>(s, seed, progress, frames, profiler.get(), passes),
                            report, status, err);
-    else if (intrinsics && o.flag("hold-skew"))
-      written = report_run(one_stage ? run_one_stage_simulation<M, 4>(s, seed, progress)
-                                     : run_two_stage_simulation<M, 4>(s, seed, progress),
-                           report, status, err);
-    else if (intrinsics)
-      written = report_run(one_stage ? run_one_stage_simulation<M, 5>(s, seed, progress)
-                                     : run_two_stage_simulation<M, 5>(s, seed, progress),
-                           report, status, err);
-    else
-      with_imu_model_of(imu_model, [&](auto imu) {
-        constexpr int NI = decltype(imu)::value;
-        written =
-            report_run(run_simulation<M, NI>(s, seed, progress, frames, profiler.get(), passes),
-                       report, status, err);
-        return 0;
-      });
+          else
+            written = report_run(one_stage ? run_one_stage_simulation<M, NK, NI>(s, seed, progress)
+                                           : run_two_stage_simulation<M, NK, NI>(s, seed, progress),
+                                 report, status, err);
+          return 0;
+        });
     if (!written) fail(err, 1);
     return status;
   });

@@ -286,10 +286,7 @@ void LiveFeedback<M, NI>::print(double t_s, Verdict verdict, int advised, int we
   template CalibrationUncertainty calibration_uncertainty<M, NI>( \
       const CalibrationFilter<double, M, 0, NI>::Covariance&,     \
       const CalibrationFilter<double, M, 0, NI>::Covariance&, const Eigen::Quaterniond&);
-#define MIRRORCAL_IDEAL_IMU_LIVE_FEEDBACK_(M) MIRRORCAL_LIVE_FEEDBACK_(M, 0)
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_IDEAL_IMU_LIVE_FEEDBACK_)
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_LIVE_FEEDBACK_)
-#undef MIRRORCAL_IDEAL_IMU_LIVE_FEEDBACK_
+MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_LIVE_FEEDBACK_)
 #undef MIRRORCAL_LIVE_FEEDBACK_
 
 }  // namespace mirrorcal::app

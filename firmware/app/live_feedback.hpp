@@ -125,11 +125,8 @@ class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<doubl
   int advised_ = -1;
 };
 // Compiled in live_feedback.cpp for every built M and IMU model.
-#define MIRRORCAL_EXTERN_LIVE_FEEDBACK_(M) extern template class LiveFeedback<M>;
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_LIVE_FEEDBACK_)
+#define MIRRORCAL_EXTERN_LIVE_FEEDBACK_(M, NI) extern template class LiveFeedback<M, NI>;
+MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_EXTERN_LIVE_FEEDBACK_)
 #undef MIRRORCAL_EXTERN_LIVE_FEEDBACK_
-#define MIRRORCAL_EXTERN_IMU_LIVE_FEEDBACK_(M, NI) extern template class LiveFeedback<M, NI>;
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_LIVE_FEEDBACK_)
-#undef MIRRORCAL_EXTERN_IMU_LIVE_FEEDBACK_
 
 }  // namespace mirrorcal::app

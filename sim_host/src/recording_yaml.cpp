@@ -4,6 +4,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
 
 #include <algorithm>
 #include <cmath>
@@ -128,6 +129,24 @@ class YamlMap {
     return numbers(n, key, count, v);
   }
   bool vec3(const char* key, Eigen::Vector3d& v) const { return numbers(key, 3, v.data()); }
+  // A list of `rows` rows of `cols` numbers each, every row's length checked before m is sized (a
+  // damaged file could list many).
+  bool matrix(const char* key, std::size_t rows, std::size_t cols, Eigen::MatrixXd& m) const {
+    const YAML::Node n = root_[key];
+    if (!n) return missing(key);
+    if (!n.IsSequence() || n.size() != rows)
+      return fail(n, key, "expected " + std::to_string(rows) + " rows");
+    for (std::size_t i = 0; i < rows; ++i)
+      if (!n[i].IsSequence() || n[i].size() != cols)
+        return fail(n[i], key, "expected a list of " + std::to_string(cols) + " numbers");
+    m.resize(long(rows), long(cols));
+    std::vector<double> row(cols);
+    for (std::size_t i = 0; i < rows; ++i) {
+      if (!numbers(n[i], key, cols, row.data())) return false;
+      for (std::size_t j = 0; j < cols; ++j) m(long(i), long(j)) = row[j];
+    }
+    return true;
+  }
   // A 1-sigma per axis: three numbers, or one for all axes; each > 0 and at most the ceiling.
   bool sigma3(const YAML::Node& n, const char* key, SigmaCeiling ceiling,
               Eigen::Vector3d& v) const {
@@ -611,6 +630,42 @@ bool parse_truth_yaml(std::string_view text, const std::string& file, RecordingT
   return !out.has_distortion || y.numbers("distortion_coeffs", 4, out.intrinsics.coeffs.data());
 }
 
+namespace {
+
+// The IMU's intrinsics a result estimated and their rows of the joint covariance (its imu section:
+// T_a, T_g, T_s and covariance, whose columns are the result's `dim` calibration states, then the
+// intrinsics), as the start of a later calibration takes them: the block up to the camera's
+// intrinsics, then theirs. Results written before the file carried the rows have none.
+bool parse_start_imu_intrinsics(const YamlMap& imu, std::size_t dim, CalibrationStart& out) {
+  const auto ni = static_cast<std::size_t>(imu_intrinsics_dim(out.imu_model));
+  if (ni == 0 || !imu.has("covariance")) return true;
+  Eigen::MatrixXd t_a, t_g, t_s, rows;
+  if (!imu.matrix("T_a", 3, 3, t_a) || !imu.matrix("T_g", 3, 3, t_g) ||
+      !imu.matrix("T_s", 3, 3, t_s) || !imu.matrix("covariance", ni, dim + ni, rows))
+    return false;
+  const long n = out.covariance.rows(), k = long(ni);
+  Eigen::MatrixXd joint(n + k, n + k);
+  joint << out.covariance, rows.leftCols(n).transpose(), rows.leftCols(n), rows.rightCols(k);
+  const double scale = joint.diagonal().cwiseAbs().maxCoeff();
+  if ((rows.rightCols(k) - rows.rightCols(k).transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale)
+    return imu.fail(imu.node("covariance"), "covariance", "is not symmetric");
+  if (joint.llt().info() != Eigen::Success)
+    return imu.fail(imu.node("covariance"), "covariance",
+                    "is not positive definite with the calibration states' covariance");
+  if (t_a.determinant() <= 0.0 || t_g.determinant() <= 0.0)
+    return imu.fail(imu.node("T_a"), "T_a", "and T_g must have a positive determinant");
+  // The model's entries only: the file's rounding leaves the others a few 1e-13 from zero.
+  out.imu_intrinsics.d_a = t_a.inverse().triangularView<Eigen::Lower>();
+  out.imu_intrinsics.d_g = t_g.inverse();
+  if (ni < 15) out.imu_intrinsics.d_g = out.imu_intrinsics.d_g.triangularView<Eigen::Lower>();
+  out.imu_intrinsics.t_s = ni < 24 ? Eigen::Matrix3d::Zero() : Eigen::Matrix3d(t_s);
+  out.imu_covariance.resize(k, n + k);
+  out.imu_covariance << rows.leftCols(n), rows.rightCols(k);
+  return true;
+}
+
+}  // namespace
+
 bool parse_calibration_start(std::string_view text, const std::string& file, CalibrationStart& out,
                              std::string& error) {
   YamlMap y(file, error);
@@ -634,17 +689,8 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
                       (out.has_t_d ? ", time offset), " : "), ") + std::to_string(n + 4) + ", " +
                       std::to_string(n + 5) + " (and intrinsics) or " + std::to_string(n + 8) +
                       " (and the lens)");
-  // Every row the right length before anything is allocated (a damaged file could list many).
-  for (std::size_t i = 0; i < dim; ++i)
-    if (!rows[i].IsSequence() || rows[i].size() != dim)
-      return y.fail(rows[i], "covariance",
-                    "expected a list of " + std::to_string(dim) + " numbers");
-  Eigen::MatrixXd full(dim, dim);
-  std::vector<double> row(dim);
-  for (std::size_t i = 0; i < dim; ++i) {
-    if (!y.numbers(rows[i], "covariance", dim, row.data())) return false;
-    for (std::size_t j = 0; j < dim; ++j) full(long(i), long(j)) = row[j];
-  }
+  Eigen::MatrixXd full;
+  if (!y.matrix("covariance", dim, dim, full)) return false;
   out.covariance = full.topLeftCorner(long(n), long(n));
   const double scale = out.covariance.diagonal().cwiseAbs().maxCoeff();
   if ((out.covariance - out.covariance.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale)
@@ -659,9 +705,11 @@ bool parse_calibration_start(std::string_view text, const std::string& file, Cal
   if (y.has("consistent") && !y.flag("consistent", out.trusted)) return false;
   // The IMU model it estimated (its imu section's; results written before it had none).
   out.imu_model = ImuModel::kCalibrated;
+  out.imu_covariance.resize(0, 0);
   if (y.has("imu")) {
     YamlMap imu(file, error);
-    if (!imu.sub(y, "imu") || (imu.has("model") && !imu_model_key(imu, "model", out.imu_model)))
+    if (!imu.sub(y, "imu") || (imu.has("model") && !imu_model_key(imu, "model", out.imu_model)) ||
+        !parse_start_imu_intrinsics(imu, dim, out))
       return false;
   }
   out.has_camera = y.has("intrinsics");

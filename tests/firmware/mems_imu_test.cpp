@@ -156,6 +156,40 @@ TEST(MemsImu, ThePipelineFromTheGuessesIsConsistent) {
   EXPECT_LT(nees_sum / unflagged, 24.0);
 }
 
+// Stage 2 (the camera's intrinsics, skew held) with the IMU's intrinsics, started from stage 1's
+// jointly with the camera's pose: on rigs of the mems family every run that says `consistent: true`
+// is within its sigmas, where the ideal IMU's model in both stages is off by more than its sigmas
+// say and flagged.
+TEST(MemsImu, StageTwoWithTheImuIntrinsicsIsConsistent) {
+  constexpr int kRigs = 6;
+  constexpr int kStates = MirrorState<double, 3, 4>::kCalibrationDim;  // 20
+  double nees_sum = 0.0;
+  int unflagged = 0;
+  for (std::uint64_t seed = 1; seed <= kRigs; ++seed) {
+    const sim::Scenario s = mems_told_the_truth(seed);
+    const auto with = evaluation::run_two_stage_simulation<3, 4, kScaleMisalignment>(s, seed);
+    const auto without = evaluation::run_two_stage_simulation<3, 4, 0>(s, seed);
+    const double nees = with.history.back().nees;
+    const bool trusted = calibration::consistent(with.result);
+    std::printf("rig %d: stage 2's NEES %.2f (%s) with the IMU's intrinsics, %.2f (%s) without\n",
+                int(seed), nees, trusted ? "consistent" : "flagged", without.history.back().nees,
+                calibration::consistent(without.result) ? "consistent" : "flagged");
+    EXPECT_EQ(with.result.imu.model, ImuModel::kScaleMisalignment);
+    if (without.history.back().nees > 45.3) {
+      EXPECT_FALSE(calibration::consistent(without.result)) << "rig " << seed;
+    }
+    if (!trusted) continue;
+    ++unflagged;
+    nees_sum += nees;
+    EXPECT_LT(nees, 45.3) << "rig " << seed;  // chi-square(20) beyond 99.9 %
+  }
+  ASSERT_GE(unflagged, kRigs / 2);
+  std::printf("unflagged %d, average NEES %.2f (%d states)\n", unflagged, nees_sum / unflagged,
+              kStates);
+  // The average of 3 to 6 draws of chi-square(20): below 31.9 with 99 % (at 3 draws).
+  EXPECT_LT(nees_sum / unflagged, 31.9);
+}
+
 // The ideal-IMU check on rigs whose IMU is ideal (the random family): it passes, and its statistic
 // is the chi-square it claims to be. 5 rigs of about 12 dof each: the sum over the dof within
 // chi-square(60)'s 99.9 % interval, 0.52..1.65.

@@ -224,33 +224,31 @@ TEST(Cli, RecordWithIntrinsicsAsksForThemInThePriors) {
   EXPECT_NE(slurp(d + "/ca/estimates.csv").find("sigma_fu [px]"), std::string::npos);
 }
 
-// The IMU's intrinsics are a stage-1 model: imu.yaml's imu_model beside mirrorcal.yaml's
-// estimate_intrinsics is refused, by calibrate and by run alike (before run opens any device),
-// naming the model and what to do; run reads imu.yaml's model as calibrate does.
-TEST(Cli, TheImuModelBesideTheCameraIntrinsicsIsRefusedByCalibrateAndRun) {
+// The IMU's intrinsics beside the camera's: imu.yaml's imu_model and mirrorcal.yaml's
+// estimate_intrinsics calibrate both at once.
+TEST(Cli, TheImuModelBesideTheCameraIntrinsicsEstimatesBoth) {
   if (!mirrorcal::imu_model_built(12)) GTEST_SKIP() << "built without scale-misalignment";
   TempDir dir("cli-imu-model-stage2");
   const std::string& d = dir.path;
   ASSERT_EQ(run_mirrorcal("record --seed 9 --intrinsics --duration 5 --out " + d + "/rec", d).code,
             0);
   spit(d + "/rec/imu.yaml", slurp(d + "/rec/imu.yaml") + "imu_model: scale-misalignment\n");
-  for (const std::string& command :
-       {"calibrate " + d + "/rec --out " + d + "/cal",
-        "run --imu spi:" + d + "/no-such-spidev --sensors " + d + "/rec --out " + d + "/run"}) {
-    SCOPED_TRACE(command);
-    const Result r = run_mirrorcal(command, d);
-    EXPECT_EQ(r.code, 2) << r.output;
-    EXPECT_NE(r.output.find("the IMU model scale-misalignment is estimated in stage 1"),
-              std::string::npos)
-        << r.output;
-  }
-  EXPECT_FALSE(std::filesystem::exists(d + "/run"));
+  const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
+  EXPECT_NE(r.output.find("the IMU's intrinsics estimated too (model scale-misalignment)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("camera intrinsics estimated too"), std::string::npos) << r.output;
+  const YAML::Node result = YAML::LoadFile(d + "/cal/mirrorcal-result.yaml");
+  EXPECT_EQ(result["imu"]["model"].as<std::string>(), "scale-misalignment");
+  EXPECT_EQ(result["imu"]["covariance"].size(), 12u);
+  EXPECT_TRUE(result["sigma"]["fu"]);
 }
 
-// Stage 2 assumes an ideal IMU: from a stage 1 that estimated the IMU's intrinsics (a MEMS part)
-// it says consistent: false and why; from a stage 1 of the ideal IMU it does not. A stage 1's
-// result naming an IMU model no one knows is refused, naming the key.
-TEST(Cli, StageTwoFromAStageOneWithTheImuModelSaysItCannotBeTrusted) {
+// Stage 2 after a stage 1 that estimated the IMU's intrinsics: with the same model it starts from
+// them (jointly with the camera's pose) and is trusted; assuming an ideal IMU instead, it says
+// consistent: false and why. A stage 1's result naming an IMU model no one knows is refused,
+// naming the key.
+TEST(Cli, StageTwoFromAStageOneWithTheImuModelStartsFromItsIntrinsics) {
   if (!mirrorcal::imu_model_built(12)) GTEST_SKIP() << "built without scale-misalignment";
   TempDir dir("cli-stage2-imu-model");
   const std::string& d = dir.path;
@@ -262,16 +260,27 @@ TEST(Cli, StageTwoFromAStageOneWithTheImuModelSaysItCannotBeTrusted) {
           .code,
       0);
   ASSERT_EQ(run_mirrorcal("calibrate " + d + "/rec1 --out " + d + "/s1-ideal", d).code, 0);
-  const auto stage2 = [&](const std::string& from) {
-    return run_mirrorcal(
-        "calibrate " + d + "/rec2 --from " + d + "/" + from + " --out " + d + "/s2-" + from, d);
+  const auto stage2 = [&](const std::string& from, const std::string& model) {
+    return run_mirrorcal("calibrate " + d + "/rec2 --from " + d + "/" + from + " --imu-model " +
+                             model + " --out " + d + "/s2-" + from + "-" + model,
+                         d);
   };
   const std::string warning = "that estimated the IMU's scale factors and axes";
-  const Result from_model = stage2("s1-model");
-  EXPECT_EQ(from_model.code, 3) << from_model.output;  // flagged
-  EXPECT_NE(from_model.output.find(warning), std::string::npos) << from_model.output;
-  EXPECT_FALSE(YAML::LoadFile(d + "/s2-s1-model/mirrorcal-result.yaml")["consistent"].as<bool>());
-  const Result from_ideal = stage2("s1-ideal");
+  const Result with_model = stage2("s1-model", "scale-misalignment");
+  EXPECT_EQ(with_model.code, 0) << with_model.output;
+  EXPECT_NE(with_model.output.find("the IMU's intrinsics (scale-misalignment) start from it too"),
+            std::string::npos)
+      << with_model.output;
+  EXPECT_EQ(with_model.output.find(warning), std::string::npos) << with_model.output;
+  const Result ideal = stage2("s1-model", "calibrated");
+  EXPECT_EQ(ideal.code, 3) << ideal.output;  // flagged
+  EXPECT_NE(ideal.output.find(warning), std::string::npos) << ideal.output;
+  EXPECT_NE(ideal.output.find("Calibrate with the same model (--imu-model scale-misalignment"),
+            std::string::npos)
+      << ideal.output;
+  EXPECT_FALSE(
+      YAML::LoadFile(d + "/s2-s1-model-calibrated/mirrorcal-result.yaml")["consistent"].as<bool>());
+  const Result from_ideal = stage2("s1-ideal", "calibrated");
   EXPECT_EQ(from_ideal.code, 0) << from_ideal.output;
   EXPECT_EQ(from_ideal.output.find(warning), std::string::npos) << from_ideal.output;
 

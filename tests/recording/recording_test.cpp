@@ -256,6 +256,60 @@ TEST(CalibrationStart, ResultFileReadsBackBitIdentical) {
   EXPECT_EQ(start.trusted, mc::calibration::consistent(r));  // its self-check's verdict
 }
 
+// With the IMU's intrinsics estimated, the next stage starts from them jointly with the camera's
+// pose (the gyro's axes and the camera's rotation are seen together): the result file carries
+// their rows of the joint covariance, which read back as the same doubles, the intrinsics to the
+// file's twelve decimals; and a joint covariance that is not positive definite is refused.
+TEST(CalibrationStart, TheImuIntrinsicsReadBackWithTheirJointCovariance) {
+  namespace cal = mc::calibration;
+  constexpr int kImu = mc::imu_intrinsics_dim(mc::ImuModel::kScaleMisalignment);
+  cal::CalibrationResult r;
+  r.markers = {Eigen::Vector3d(0.02, -0.03, 0.4), Eigen::Vector3d(0.05, 0.04, 0.4),
+               Eigen::Vector3d(-0.08, 0.06, 0.4)};
+  r.width = 640;
+  r.height = 480;
+  r.params = cal::calibration_params(3, 4);  // stage 2's block: the intrinsics' rows are skipped
+  const int n = static_cast<int>(r.params.size());
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Random(n + kImu, n + kImu);
+  const Eigen::MatrixXd joint =
+      1e-6 * (a * a.transpose() + Eigen::MatrixXd::Identity(n + kImu, n + kImu));
+  r.covariance = joint.topLeftCorner(n, n);
+  for (int j = 0; j < n; ++j) r.sigma.push_back(std::sqrt(r.covariance(j, j)));
+  r.imu.model = mc::ImuModel::kScaleMisalignment;
+  r.imu.intrinsics.d_a << 1.003, 0, 0, 1e-3, 0.998, 0, -2e-3, 5e-4, 1.01;
+  r.imu.intrinsics.d_g << 0.995, 0, 0, -1e-3, 1.002, 0, 3e-3, 2e-3, 0.99;
+  r.imu.covariance = joint.bottomRows(kImu);
+  for (int j = 0; j < kImu; ++j) r.imu.sigma.push_back(std::sqrt(joint(n + j, n + j)));
+  const TempDir tmp("start-imu");
+  std::string err;
+  const auto written = [&](const cal::CalibrationResult& result) {
+    mc::files::OutputSet out;
+    return cal::write_result_yaml(out, tmp.path + "/mirrorcal-result.yaml", result, err) &&
+           out.commit(err);
+  };
+  ASSERT_TRUE(written(r)) << err;
+
+  mc::sim::CalibrationStart start;
+  ASSERT_TRUE(mc::sim::read_calibration_start(tmp.path, 3, start, err)) << err;
+  const mc::sim::CalibrationStart expected = cal::calibration_start(r);
+  ASSERT_EQ(start.imu_model, mc::ImuModel::kScaleMisalignment);
+  ASSERT_EQ(expected.imu_covariance.rows(), kImu);
+  ASSERT_EQ(expected.imu_covariance.cols(), 16 + kImu);  // up to the camera's intrinsics
+  EXPECT_TRUE(start.imu_covariance == expected.imu_covariance);
+  EXPECT_LT((start.imu_intrinsics.d_a - r.imu.intrinsics.d_a).cwiseAbs().maxCoeff(), 1e-11);
+  EXPECT_LT((start.imu_intrinsics.d_g - r.imu.intrinsics.d_g).cwiseAbs().maxCoeff(), 1e-11);
+  EXPECT_EQ(start.imu_intrinsics.d_a(0, 1), 0.0);  // the model's entries only
+  EXPECT_TRUE(start.imu_intrinsics.t_s.isZero());
+
+  // Rows that contradict the calibration block's covariance.
+  r.imu.covariance.leftCols(1).setConstant(1.0);
+  ASSERT_TRUE(written(r)) << err;
+  EXPECT_FALSE(mc::sim::read_calibration_start(tmp.path, 3, start, err));
+  EXPECT_NE(err.find("imu.covariance: is not positive definite with the calibration states'"),
+            std::string::npos)
+      << err;
+}
+
 TEST(CalibrationStart, BadResultFilesAreRefusedWithFileLineAndReason) {
   const std::string head =
       "p_b_c: [0.01, -0.05, 0.1]\nq_b_c_wxyz: [1, 0, 0, 0]\nfeatures_c:\n  - [0, 0, 1]\n";

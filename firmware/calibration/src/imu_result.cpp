@@ -136,6 +136,16 @@ void write_imu_result_yaml(std::FILE* o, const ImuResult& r) {
     std::fprintf(o, "    %s: [%.9g, %.3g, %.3g]  # value, sigma, prior sigma\n", names[j].c_str(),
                  values[j], j < r.sigma.size() ? r.sigma[j] : 0.0,
                  j < r.prior_sigma.size() ? r.prior_sigma[j] : 0.0);
+  if (r.covariance.rows() == 0) return;
+  // A later calibration (--from) starts from them jointly with the camera's pose: the gyro's axes
+  // and the camera's rotation are seen together.
+  std::fprintf(
+      o,
+      "  # the joint covariance's rows of the error state's entries (D = T^-1: D_a's lower "
+      "triangle, D_g's, ...; estimate's order): columns the calibration states (the "
+      "covariance below), then the same entries\n"
+      "  covariance:\n");
+  write_exact_rows(o, r.covariance, "    ");
 }
 
 bool write_openvins_imu_chain(files::OutputSet& out, const std::string& path, const ImuResult& r,

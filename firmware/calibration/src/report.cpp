@@ -108,16 +108,8 @@ ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& 
 
 #define MIRRORCAL_REPORT_DATA_(M, NK, NI) \
   template ReportData report_data<M, NK, NI>(const CalibrationRun<M, NK, NI>&, const std::string&);
-#define MIRRORCAL_REPORT_DATA_CAMERAS_(M) \
-  MIRRORCAL_REPORT_DATA_(M, 0, 0)         \
-  MIRRORCAL_REPORT_DATA_(M, 4, 0)         \
-  MIRRORCAL_REPORT_DATA_(M, 5, 0)         \
-  MIRRORCAL_REPORT_DATA_(M, 8, 0)
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_REPORT_DATA_CAMERAS_)
-#define MIRRORCAL_REPORT_DATA_IMU_(M, NI) MIRRORCAL_REPORT_DATA_(M, 0, NI)
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_REPORT_DATA_IMU_)
-#undef MIRRORCAL_REPORT_DATA_IMU_
-#undef MIRRORCAL_REPORT_DATA_CAMERAS_
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_REPORT_DATA_)
+#undef MIRRORCAL_REPORT_DATA_
 #undef MIRRORCAL_REPORT_DATA_
 
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title) {

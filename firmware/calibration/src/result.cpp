@@ -62,6 +62,15 @@ void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* inden
   }
 }
 
+void write_exact_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent) {
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    std::fprintf(f, "%s- [", indent);
+    for (Eigen::Index j = 0; j < m.cols(); ++j)
+      std::fprintf(f, "%s%.17g", j > 0 ? ", " : "", m(i, j));
+    std::fprintf(f, "]\n");
+  }
+}
+
 // First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
 // refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
 void write_yaml_header(std::FILE* o, const char* what) {
@@ -445,8 +454,8 @@ std::string start_warning(const CalibrationResult& r) {
 
 // A calibration that assumes an ideal IMU, started from one that estimated the IMU's intrinsics
 // (stage 2 after a stage 1 with an IMU model): the IMU is a part whose scale factors and axes
-// are off the ideal by more than this calibration's sigmas can hold (0.3 % of gyro scale made
-// such runs confident and degrees wrong), and stage 2 has no ideal-IMU check of its own.
+// are off the ideal by more than this calibration's sigmas can hold, and stage 2 has no ideal-IMU
+// check of its own.
 std::string start_imu_warning(const CalibrationResult& r) {
   if (r.from_imu_model == ImuModel::kCalibrated || r.imu.estimated()) return {};
   return std::string(
@@ -454,8 +463,9 @@ std::string start_imu_warning(const CalibrationResult& r) {
              "factors and axes (imu model ") +
          to_string(r.from_imu_model) +
          "), and assumes an ideal IMU itself: a MEMS part's errors, which that model was chosen "
-         "for, are not in its sigmas. mirrorcal has no stage 2 with the IMU's intrinsics yet; the "
-         "stage-1 result, with camchain.yaml's camera, is the one to trust.";
+         "for, are not in its sigmas. Calibrate with the same model (--imu-model " +
+         to_string(r.from_imu_model) +
+         ", or imu.yaml's imu_model), which starts from the earlier calibration's intrinsics.";
 }
 
 }  // namespace
@@ -665,12 +675,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
   std::fprintf(o, "# covariance of the calibration states, rows and columns in sigma's order\n");
   std::fprintf(o, "covariance:\n");
-  for (long i = 0; i < r.covariance.rows(); ++i) {
-    std::fprintf(o, "  - [");
-    for (long j = 0; j < r.covariance.cols(); ++j)
-      std::fprintf(o, "%s%.17g", j > 0 ? ", " : "", r.covariance(i, j));
-    std::fprintf(o, "]\n");
-  }
+  write_exact_rows(o, r.covariance, "  ");
   return true;
 }
 
@@ -866,14 +871,7 @@ bool write_features_csv(files::OutputSet& out, const std::string& path,
       files::OutputSet&, const std::string&,                                               \
       const RecordStore<HistoryRow<CalibrationFilter<double, M, NK, NI>>>&, Distortion,    \
       std::string&);
-#define MIRRORCAL_RESULT_CSVS_(M) \
-  MIRRORCAL_RESULT_CSV_(M, 0, 0)  \
-  MIRRORCAL_RESULT_CSV_(M, 4, 0) MIRRORCAL_RESULT_CSV_(M, 5, 0) MIRRORCAL_RESULT_CSV_(M, 8, 0)
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_RESULT_CSVS_)
-#undef MIRRORCAL_RESULT_CSVS_
-#define MIRRORCAL_RESULT_IMU_CSV_(M, NI) MIRRORCAL_RESULT_CSV_(M, 0, NI)
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_RESULT_IMU_CSV_)
-#undef MIRRORCAL_RESULT_IMU_CSV_
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_RESULT_CSV_)
 #undef MIRRORCAL_RESULT_CSV_
 
 }  // namespace mirrorcal::calibration

@@ -969,19 +969,12 @@ CalibrationRun<M, NK, NI> run_single_pass(
     const typename CalibrationRun<M, NK, NI>::State* truth) {
   return run_pass<M, NK, NI>(config, x0, p0, data, truth, {}, LoopHooks<M>{});
 }
-#define MIRRORCAL_INSTANTIATE_RUN_LOOP_(M) \
-  template MIRRORCAL_RUN_LOOP(M, 0, 0);    \
-  template MIRRORCAL_RUN_LOOP(M, 4, 0);    \
-  template MIRRORCAL_RUN_LOOP(M, 5, 0);    \
-  template MIRRORCAL_RUN_LOOP(M, 8, 0);    \
-  template MIRRORCAL_RUN_SINGLE_PASS(M, 0);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_INSTANTIATE_RUN_LOOP_)
+#define MIRRORCAL_INSTANTIATE_RUN_LOOP_(M, NK, NI) template MIRRORCAL_RUN_LOOP(M, NK, NI);
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_INSTANTIATE_RUN_LOOP_)
 #undef MIRRORCAL_INSTANTIATE_RUN_LOOP_
-#define MIRRORCAL_INSTANTIATE_IMU_RUN_LOOP_(M, NI) \
-  template MIRRORCAL_RUN_LOOP(M, 0, NI);           \
-  template MIRRORCAL_RUN_SINGLE_PASS(M, NI);
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_INSTANTIATE_IMU_RUN_LOOP_)
-#undef MIRRORCAL_INSTANTIATE_IMU_RUN_LOOP_
+#define MIRRORCAL_INSTANTIATE_RUN_SINGLE_PASS_(M, NI) template MIRRORCAL_RUN_SINGLE_PASS(M, NI);
+MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_INSTANTIATE_RUN_SINGLE_PASS_)
+#undef MIRRORCAL_INSTANTIATE_RUN_SINGLE_PASS_
 
 sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   sim::CalibrationStart s;
@@ -994,6 +987,12 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   s.covariance = earlier.covariance.topLeftCorner(n, n);
   s.trusted = consistent(earlier);
   s.imu_model = earlier.imu.model;
+  const Eigen::MatrixXd& imu = earlier.imu.covariance;  // columns: the whole block, then theirs
+  if (earlier.imu.estimated() && imu.cols() == earlier.covariance.cols() + imu.rows()) {
+    s.imu_intrinsics = earlier.imu.intrinsics;
+    s.imu_covariance.resize(imu.rows(), n + imu.rows());
+    s.imu_covariance << imu.leftCols(n), imu.rightCols(imu.rows());
+  }
   return s;
 }
 

@@ -101,17 +101,17 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
   return sigma;
 }
 
-template <int M, int NK>
-CalibrationRun<M, NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                               const std::function<void(double)>& progress) {
+template <int M, int NK, int NI>
+CalibrationRun<M, NK, NI> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                                   const std::function<void(double)>& progress) {
   const auto half = [&](double offset) {
     return [&progress, offset](double f) {
       if (progress) progress(offset + 0.5 * f);
     };
   };
-  const CalibrationRun<M, 0> stage1 = run_simulation<M>(s, seed, half(0.0));
+  const CalibrationRun<M, 0, NI> stage1 = run_simulation<M, NI>(s, seed, half(0.0));
 
-  using Run = CalibrationRun<M, NK>;
+  using Run = CalibrationRun<M, NK, NI>;
   using State = typename Run::State;
   const std::uint64_t seed2 = sim::derive_seed(seed, sim::kStage2SeedStream);
   const sim::SimData data = sim::simulate(s, seed2);
@@ -123,41 +123,35 @@ CalibrationRun<M, NK> run_two_stage_simulation(const sim::Scenario& s, std::uint
   const sim::CalibrationStart start = calibration_start(stage1.result);
   start_from(start, x0, p0);
   const State truth = truth_state<State>(s);
-  Run run = run_loop<M, NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
+  Run run = run_loop<M, NK, NI>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));
   note_start(start, run.result);
   run.markers_out_of_image = stage1.markers_out_of_image + data.markers_out_of_image;
   return run;
 }
 
-template <int M, int NK>
-CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                               const std::function<void(double)>& progress) {
-  using Run = CalibrationRun<M, NK>;
+template <int M, int NK, int NI>
+CalibrationRun<M, NK, NI> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
+                                                   const std::function<void(double)>& progress) {
+  using Run = CalibrationRun<M, NK, NI>;
   const sim::SimData data = sim::simulate(s, seed);
   typename Run::State x0;
   typename Run::Filter::Covariance p0;
   initialise(sim::simulation_prior<M>(s, data, seed), x0, p0);
   const typename Run::State truth = truth_state<typename Run::State>(s);
-  Run run = run_loop<M, NK>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
+  Run run = run_loop<M, NK, NI>(scenario_config(s), x0, p0, loop_data(s, data), &truth, progress);
   run.markers_out_of_image = data.markers_out_of_image;
   return run;
 }
 
-#define MIRRORCAL_SIMULATED_RUNS_(M)                                                         \
-  template MIRRORCAL_RUN_SIMULATION(M, 0);                                                   \
-  template std::vector<double> data_limit_sigmas<M, 0>(const sim::Scenario&, std::uint64_t); \
-  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);                      \
-  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);                      \
-  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);                      \
-  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);                      \
-  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);                      \
-  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_SIMULATED_RUNS_)
-#undef MIRRORCAL_SIMULATED_RUNS_
-#define MIRRORCAL_IMU_SIMULATION_(M, NI)    \
+#define MIRRORCAL_SIMULATION_(M, NI)        \
   template MIRRORCAL_RUN_SIMULATION(M, NI); \
   template std::vector<double> data_limit_sigmas<M, NI>(const sim::Scenario&, std::uint64_t);
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_IMU_SIMULATION_)
-#undef MIRRORCAL_IMU_SIMULATION_
+MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_SIMULATION_)
+#undef MIRRORCAL_SIMULATION_
+#define MIRRORCAL_STAGED_SIMULATIONS_(M, NK, NI)                             \
+  template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, NK, NI); \
+  template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, NK, NI);
+MIRRORCAL_FOR_EACH_STAGE2_FILTER(MIRRORCAL_STAGED_SIMULATIONS_)
+#undef MIRRORCAL_STAGED_SIMULATIONS_
 
 }  // namespace mirrorcal::evaluation

@@ -12,17 +12,9 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
   return s;
 }
 
-// For every built M (marker_counts.hpp): stage 1, stage 2 holding skew, stage 2, with the lens.
-#define MIRRORCAL_LOOPS_(M)                     \
-  template class CalibrationLoop<double, M, 0>; \
-  template class CalibrationLoop<double, M, 4>; \
-  template class CalibrationLoop<double, M, 5>; \
-  template class CalibrationLoop<double, M, 8>;
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_LOOPS_)
-#undef MIRRORCAL_LOOPS_
-// Stage 1 with the IMU's intrinsics, for every built IMU model (MIRRORCAL_IMU_MODELS).
-#define MIRRORCAL_IMU_LOOP_(M, NI) template class CalibrationLoop<double, M, 0, NI>;
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_IMU_LOOP_)
-#undef MIRRORCAL_IMU_LOOP_
+// For every filter the product uses (marker_counts.hpp).
+#define MIRRORCAL_LOOP_(M, NK, NI) template class CalibrationLoop<double, M, NK, NI>;
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_LOOP_)
+#undef MIRRORCAL_LOOP_
 
 }  // namespace mirrorcal::firmware

@@ -475,20 +475,12 @@ UpdateResult CalibrationFilter<S, M, NK, NI>::update(const MarkerFrame<M>& frame
 }
 
 // The configurations the product uses are compiled once, in units estimator/CMakeLists.txt
-// generates for every built marker count (NK = 0, 4, 5, 8), and filter_stage1_float.cpp.
-#define MIRRORCAL_EXTERN_FILTERS_(M)                     \
-  extern template class CalibrationFilter<double, M, 0>; \
-  extern template class CalibrationFilter<double, M, 4>; \
-  extern template class CalibrationFilter<double, M, 5>; \
-  extern template class CalibrationFilter<double, M, 8>;
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_FILTERS_)
-#undef MIRRORCAL_EXTERN_FILTERS_
-// Stage 1 with the IMU's intrinsics, for every built marker count and IMU model
-// (MIRRORCAL_IMU_MODELS; marker_counts.hpp).
-#define MIRRORCAL_EXTERN_IMU_FILTER_(M, NI) \
-  extern template class CalibrationFilter<double, M, 0, NI>;
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_FILTER_)
-#undef MIRRORCAL_EXTERN_IMU_FILTER_
+// generates for every built marker count and IMU model (marker_counts.hpp), and
+// filter_stage1_float.cpp.
+#define MIRRORCAL_EXTERN_FILTER_(M, NK, NI) \
+  extern template class CalibrationFilter<double, M, NK, NI>;
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_EXTERN_FILTER_)
+#undef MIRRORCAL_EXTERN_FILTER_
 extern template class CalibrationFilter<float, 3, 0>;
 
 }  // namespace mirrorcal

@@ -272,6 +272,11 @@ struct CalibrationStart {
   // The IMU model it estimated (its imu section's): one with intrinsics says the IMU is a MEMS
   // part whose scale factors and axes an ideal IMU's model does not cover.
   ImuModel imu_model = ImuModel::kCalibrated;
+  // That model's intrinsics and their rows of the joint covariance: columns the calibration block
+  // (covariance's), then the intrinsics (imu_intrinsic_names' order). Empty in results written
+  // before the file carried them, and for the ideal IMU.
+  ImuIntrinsics<double> imu_intrinsics{};
+  Eigen::MatrixXd imu_covariance;  // imu_intrinsics_dim(imu_model) x (layout().size() + that)
 
   // The covariance's rows: the calibration block of these markers, without the intrinsics.
   CalibrationLayout layout() const {

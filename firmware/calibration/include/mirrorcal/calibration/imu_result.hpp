@@ -39,6 +39,9 @@ struct ImuResult {
   ImuIntrinsics<double> intrinsics{};
   std::vector<double> sigma;  // of D_a's, D_g's (and T_s's) entries; T's to first order
   std::vector<double> prior_sigma;
+  // The intrinsics' rows of the joint covariance: columns the calibration block (the result's
+  // covariance), then the intrinsics; a later stage starts from it (run.hpp, start_from).
+  Eigen::MatrixXd covariance;
   ImuNoise noise{};  // imu.yaml's, or the simulation's
   double rate_hz = 200.0;
   std::string rostopic = "/imu0";

@@ -29,16 +29,9 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   bool calibrate_recording<M, NK, NI>(const sim::Recording&, CalibrationRun<M, NK, NI>&, \
                                       std::string&, const std::function<void(double)>&,  \
                                       const sim::CalibrationStart*, Passes)
-#define MIRRORCAL_EXTERN_CALIBRATE_RECORDING_(M)          \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0, 0); \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 4, 0); \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 5, 0); \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 8, 0);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_CALIBRATE_RECORDING_)
+#define MIRRORCAL_EXTERN_CALIBRATE_RECORDING_(M, NK, NI) \
+  extern template MIRRORCAL_CALIBRATE_RECORDING(M, NK, NI);
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_EXTERN_CALIBRATE_RECORDING_)
 #undef MIRRORCAL_EXTERN_CALIBRATE_RECORDING_
-#define MIRRORCAL_EXTERN_IMU_CALIBRATE_RECORDING_(M, NI) \
-  extern template MIRRORCAL_CALIBRATE_RECORDING(M, 0, NI);
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_CALIBRATE_RECORDING_)
-#undef MIRRORCAL_EXTERN_IMU_CALIBRATE_RECORDING_
 
 }  // namespace mirrorcal::calibration

@@ -256,8 +256,11 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.imu.noise = f.config().imu;
   if constexpr (State::kImuIntrinsics > 0) {
     r.imu.intrinsics = x.imu.template cast<double>();
-    for (int j = State::kImu; j < State::kImu + State::kImuIntrinsics; ++j)
-      r.imu.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
+    constexpr int K = State::kImu, NI = State::kImuIntrinsics;
+    for (int j = K; j < K + NI; ++j) r.imu.sigma.push_back(std::sqrt(double(f.covariance()(j, j))));
+    r.imu.covariance.resize(NI, L + NI);
+    r.imu.covariance << f.covariance().template block<NI, L>(K, B).template cast<double>(),
+        f.covariance().template block<NI, NI>(K, K).template cast<double>();
   }
   return r;
 }
@@ -267,6 +270,8 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
 // its rows (as Kalibr writes T_cam_imu and OpenVINS reads it).
 void write_yaml_header(std::FILE* o, const char* what);
 void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent);
+// The same to the last bit (%.17g): covariances, which span many orders of magnitude.
+void write_exact_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent);
 
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's. Read unmodified
 // by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike. A calibration that says

@@ -232,10 +232,10 @@ CalibrationRun<M, NK, NI> run_single_pass(
     const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
     const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
     const typename CalibrationRun<M, NK, NI>::State* truth);
-// The filters the product instantiates for each built M (MIRRORCAL_FOR_EACH_MARKER_COUNT): stage 1
-// (NK = 0), stage 2 (NK = 5), stage 2 with the skew held at the configured value (NK = 4: Kalibr
-// and OpenVINS have no slot for skew), and stage 2 with the lens's coefficients too, skew held
-// (NK = 8, estimate_distortion).
+// The filters the product instantiates for each built M and IMU model (MIRRORCAL_FOR_EACH_FILTER):
+// stage 1 (NK = 0), stage 2 (NK = 5), stage 2 with the skew held at the configured value (NK = 4:
+// Kalibr and OpenVINS have no slot for skew), and stage 2 with the lens's coefficients too, skew
+// held (NK = 8, estimate_distortion).
 #define MIRRORCAL_RUN_LOOP(M, NK, NI)                                              \
   CalibrationRun<M, NK, NI> run_loop<M, NK, NI>(                                   \
       const CalibrationConfig&, const CalibrationRun<M, NK, NI>::State&,           \
@@ -247,20 +247,12 @@ CalibrationRun<M, NK, NI> run_single_pass(
       const CalibrationConfig&, const CalibrationRun<M, 0, NI>::State&,     \
       const CalibrationRun<M, 0, NI>::Filter::Covariance&, const LoopData&, \
       const CalibrationRun<M, 0, NI>::State*)
-#define MIRRORCAL_EXTERN_RUN_LOOP_(M)          \
-  extern template MIRRORCAL_RUN_LOOP(M, 0, 0); \
-  extern template MIRRORCAL_RUN_LOOP(M, 4, 0); \
-  extern template MIRRORCAL_RUN_LOOP(M, 5, 0); \
-  extern template MIRRORCAL_RUN_LOOP(M, 8, 0); \
-  extern template MIRRORCAL_RUN_SINGLE_PASS(M, 0);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_RUN_LOOP_)
+#define MIRRORCAL_EXTERN_RUN_LOOP_(M, NK, NI) extern template MIRRORCAL_RUN_LOOP(M, NK, NI);
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_EXTERN_RUN_LOOP_)
 #undef MIRRORCAL_EXTERN_RUN_LOOP_
-// Stage 1 with the IMU's intrinsics, for every built IMU model (MIRRORCAL_IMU_MODELS).
-#define MIRRORCAL_EXTERN_IMU_RUN_LOOP_(M, NI)   \
-  extern template MIRRORCAL_RUN_LOOP(M, 0, NI); \
-  extern template MIRRORCAL_RUN_SINGLE_PASS(M, NI);
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_RUN_LOOP_)
-#undef MIRRORCAL_EXTERN_IMU_RUN_LOOP_
+#define MIRRORCAL_EXTERN_RUN_SINGLE_PASS_(M, NI) extern template MIRRORCAL_RUN_SINGLE_PASS(M, NI);
+MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_EXTERN_RUN_SINGLE_PASS_)
+#undef MIRRORCAL_EXTERN_RUN_SINGLE_PASS_
 
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
@@ -270,13 +262,14 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier);
 void note_start(const sim::CalibrationStart& earlier, CalibrationResult& r);
 
 // Starts the camera pose, markers and time offset at an earlier calibration's estimate and
-// covariance in place of the prior's guesses; the IMU state and the intrinsics keep the prior's,
-// and so does the time offset if the earlier result has none. The markers must be as many as the
-// state's.
+// covariance in place of the prior's guesses, and the IMU's intrinsics too where it estimated the
+// state's model (jointly with them: the gyro's axes and the camera's rotation are seen together).
+// The IMU's motion state and the camera's intrinsics keep the prior's, and so does the time offset
+// if the earlier result has none. The markers must be as many as the state's.
 template <class State, class Covariance>
 void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0) {
   // The earlier block is the state's calibration block up to the intrinsics.
-  constexpr int B = State::kCalibrationBegin;
+  constexpr int B = State::kCalibrationBegin, K = State::kImu, NI = State::kImuIntrinsics;
   const int l = calibration_layout(State::kMarkers, 0, earlier.has_t_d).size();
   x0.p_b_c = earlier.p_b_c;
   x0.q_b_c = earlier.q_b_c;
@@ -286,6 +279,17 @@ void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0)
   p0.block(B, 0, l, State::kDim).setZero();
   p0.block(0, B, State::kDim, l).setZero();
   p0.block(B, B, l, l) = earlier.covariance;
+  if constexpr (NI > 0) {
+    if (earlier.imu_model != State::kImuModel || earlier.imu_covariance.rows() != NI ||
+        earlier.imu_covariance.cols() != l + NI)
+      return;  // the prior's, independent of the earlier block
+    x0.imu = earlier.imu_intrinsics.template cast<typename State::Scalar>();
+    p0.template block<NI, State::kDim>(K, 0).setZero();
+    p0.template block<State::kDim, NI>(0, K).setZero();
+    p0.template block<NI, NI>(K, K) = earlier.imu_covariance.rightCols(NI);
+    p0.block(K, B, NI, l) = earlier.imu_covariance.leftCols(l);
+    p0.block(B, K, l, NI) = earlier.imu_covariance.leftCols(l).transpose();
+  }
 }
 
 // camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir, and imu.yaml when

@@ -60,41 +60,35 @@ std::vector<double> data_limit_sigmas(const sim::Scenario& s, std::uint64_t seed
 // intrinsics from guesses drawn with the scenario's intrinsics sigma (100 px), the IMU state from
 // its prior. Stage 2's state is what the run reports. NK = 5 estimates the skew; NK = 4 holds it at
 // the scenario camera's (simulate a camera without skew to hold it at zero: sim::without_skew()).
-template <int M, int NK>
-CalibrationRun<M, NK> run_two_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                               const std::function<void(double)>& progress = {});
+// NI: the IMU model's intrinsics, estimated in both stages (stage 2 starts them from stage 1's).
+template <int M, int NK, int NI = 0>
+CalibrationRun<M, NK, NI> run_two_stage_simulation(
+    const sim::Scenario& s, std::uint64_t seed, const std::function<void(double)>& progress = {});
 
 // The paper's "everything at once" mode: one minute of data, the intrinsics estimated with the
 // rest from the prior's guesses (100 px off), the same as `record --intrinsics` then `calibrate`.
-template <int M, int NK>
-CalibrationRun<M, NK> run_one_stage_simulation(const sim::Scenario& s, std::uint64_t seed,
-                                               const std::function<void(double)>& progress = {});
+template <int M, int NK, int NI = 0>
+CalibrationRun<M, NK, NI> run_one_stage_simulation(
+    const sim::Scenario& s, std::uint64_t seed, const std::function<void(double)>& progress = {});
 
-// Compiled in simulated_run.cpp for every built M (NK = 4, 5, 8 for the staged ones).
+// Compiled in simulated_run.cpp for every filter the product uses (marker_counts.hpp).
 #define MIRRORCAL_RUN_SIMULATION(M, NI)                                                          \
   CalibrationRun<M, 0, NI> run_simulation<M, NI>(                                                \
       const sim::Scenario&, std::uint64_t, const std::function<void(double)>&, const FrameMode&, \
       firmware::LoopProfiler*, Passes)
-#define MIRRORCAL_STAGED_SIMULATION(name, M, NK)                         \
-  CalibrationRun<M, NK> name<M, NK>(const sim::Scenario&, std::uint64_t, \
-                                    const std::function<void(double)>&)
-#define MIRRORCAL_EXTERN_SIMULATED_RUNS_(M)                                         \
-  extern template MIRRORCAL_RUN_SIMULATION(M, 0);                                   \
-  extern template std::vector<double> data_limit_sigmas<M, 0>(const sim::Scenario&, \
-                                                              std::uint64_t);       \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 4);      \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 5);      \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, 8);      \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 4);      \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 5);      \
-  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, 8);
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_SIMULATED_RUNS_)
-#undef MIRRORCAL_EXTERN_SIMULATED_RUNS_
-#define MIRRORCAL_EXTERN_IMU_SIMULATION_(M, NI)    \
+#define MIRRORCAL_STAGED_SIMULATION(name, M, NK, NI)                             \
+  CalibrationRun<M, NK, NI> name<M, NK, NI>(const sim::Scenario&, std::uint64_t, \
+                                            const std::function<void(double)>&)
+#define MIRRORCAL_EXTERN_SIMULATION_(M, NI)        \
   extern template MIRRORCAL_RUN_SIMULATION(M, NI); \
   extern template std::vector<double> data_limit_sigmas<M, NI>(const sim::Scenario&, std::uint64_t);
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_SIMULATION_)
-#undef MIRRORCAL_EXTERN_IMU_SIMULATION_
+MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_EXTERN_SIMULATION_)
+#undef MIRRORCAL_EXTERN_SIMULATION_
+#define MIRRORCAL_EXTERN_STAGED_SIMULATIONS_(M, NK, NI)                             \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_two_stage_simulation, M, NK, NI); \
+  extern template MIRRORCAL_STAGED_SIMULATION(run_one_stage_simulation, M, NK, NI);
+MIRRORCAL_FOR_EACH_STAGE2_FILTER(MIRRORCAL_EXTERN_STAGED_SIMULATIONS_)
+#undef MIRRORCAL_EXTERN_STAGED_SIMULATIONS_
 
 // The calibration state a scenario's truth is, with the IMU's intrinsics (the IMU's motion block
 // left at zero).

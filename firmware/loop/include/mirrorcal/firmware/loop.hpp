@@ -134,16 +134,9 @@ class CalibrationLoop {
 // The sample at time t on the straight line between a and b (a.t_ns <= t <= b.t_ns).
 ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns);
 
-// Compiled in loop.cpp for every built M.
-#define MIRRORCAL_EXTERN_LOOPS_(M)                     \
-  extern template class CalibrationLoop<double, M, 0>; \
-  extern template class CalibrationLoop<double, M, 4>; \
-  extern template class CalibrationLoop<double, M, 5>; \
-  extern template class CalibrationLoop<double, M, 8>;
-MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_LOOPS_)
-#undef MIRRORCAL_EXTERN_LOOPS_
-#define MIRRORCAL_EXTERN_IMU_LOOP_(M, NI) extern template class CalibrationLoop<double, M, 0, NI>;
-MIRRORCAL_FOR_EACH_IMU_FILTER(MIRRORCAL_EXTERN_IMU_LOOP_)
-#undef MIRRORCAL_EXTERN_IMU_LOOP_
+// Compiled in loop.cpp for every filter the product uses (marker_counts.hpp).
+#define MIRRORCAL_EXTERN_LOOP_(M, NK, NI) extern template class CalibrationLoop<double, M, NK, NI>;
+MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_EXTERN_LOOP_)
+#undef MIRRORCAL_EXTERN_LOOP_
 
 }  // namespace mirrorcal::firmware
