@@ -98,8 +98,12 @@ std::string marker_count_not_built(int m) {
          "; rebuild with -DMIRRORCAL_MARKERS=\"" + option + std::to_string(m) + "\"";
 }
 
-bool imu_model_option(const Options& o, ImuModel& model, std::string& error) {
-  const std::string name = o.get("imu-model", to_string(kDefaultImuModel));
+ImuModel simulated_imu_model(const sim::Scenario& s) {
+  return sim::has_imu_intrinsics(s) ? kDefaultImuModel : ImuModel::kCalibrated;
+}
+
+bool imu_model_option(const Options& o, ImuModel fallback, ImuModel& model, std::string& error) {
+  const std::string name = o.get("imu-model", to_string(fallback));
   if (!imu_model_from_string(name, model)) {
     error = "--imu-model: '" + name +
             "' is not an IMU model (calibrated, scale-misalignment, scale-misalignment-rotation, "
@@ -144,7 +148,7 @@ bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
                            const std::string& folder, ImuModel& model, std::string& error) {
   model = kDefaultImuModel;
   if (o.flag("imu-model")) {
-    if (!imu_model_option(o, model, error)) return false;
+    if (!imu_model_option(o, kDefaultImuModel, model, error)) return false;
   } else if (sensors.imu_model) {
     model = *sensors.imu_model;
     if (!imu_model_built(imu_intrinsics_dim(model))) {

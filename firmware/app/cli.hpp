@@ -87,11 +87,18 @@ std::string markers_note(const sim::Scenario& s);
 // What a count this build does not have gets told: the counts it has and how to add one.
 std::string marker_count_not_built(int m);
 
-// The IMU model the calibration estimates (imu_intrinsics.hpp) when neither --imu-model nor
-// imu.yaml names one.
-constexpr ImuModel kDefaultImuModel = ImuModel::kCalibrated;
-// --imu-model NAME (default kDefaultImuModel), a model this build has.
-bool imu_model_option(const Options& o, ImuModel& model, std::string& error);
+// The IMU model a user's data are calibrated with (imu_intrinsics.hpp) when neither --imu-model
+// nor imu.yaml names one: a MEMS part's scale factors and axes, as an ordinary board's IMU has
+// them (the ideal IMU's where the build lacks that model).
+constexpr ImuModel kDefaultImuModel =
+    imu_model_built(imu_intrinsics_dim(ImuModel::kScaleMisalignment)) ? ImuModel::kScaleMisalignment
+                                                                      : ImuModel::kCalibrated;
+// The model of a simulated scenario's IMU, which sim, montecarlo and record use by default: the
+// default model for a MEMS part (the mems family), the ideal IMU's for an ideal one (the paper's
+// factory-calibrated ADIS16448, the random family).
+ImuModel simulated_imu_model(const sim::Scenario& s);
+// --imu-model NAME (default: fallback), a model this build has.
+bool imu_model_option(const Options& o, ImuModel fallback, ImuModel& model, std::string& error);
 // What a model not built gets told: the models this build has and how to add one.
 std::string imu_model_not_built(ImuModel model);
 // The IMU model a calibration from the sensors folder `folder` (its imu.yaml read into sensors)

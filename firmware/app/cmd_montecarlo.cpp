@@ -285,7 +285,7 @@ struct Campaign {
   std::optional<std::uint64_t> rig;  // --rig: the family's one rig for every run, by its seed
   FrameMode frames;
   Passes passes;
-  ImuModel imu_model = kDefaultImuModel;  // --imu-model: the IMU's intrinsics estimated
+  ImuModel imu_model = ImuModel::kCalibrated;  // --imu-model, or the scenario's IMU's
   std::uint64_t seed = 0, runs = 0, jobs = 0;
   sim::Scenario scenario;                // the campaign's (the seed's draw, for a family)
   std::vector<sim::Scenario> scenarios;  // each run's rig
@@ -350,7 +350,7 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if (!passes_option(o, c.passes, error)) return false;
   if (c.intrinsics && o.flag("passes"))
     return refuse("--passes applies to stage 1 only (without --intrinsics)");
-  if (!imu_model_option(o, c.imu_model, error)) return false;
+  if (!imu_model_option(o, simulated_imu_model(c.scenario), c.imu_model, error)) return false;
   // --estimate-noise: as sim (the mems family states noise levels 0.5-5x the true ones).
   c.passes.estimate_noise = o.flag("estimate-noise");
   if (c.intrinsics && c.passes.estimate_noise)

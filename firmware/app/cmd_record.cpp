@@ -215,7 +215,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   // The datasheet's tolerances the scenario states, which sim's ideal-IMU check uses too.
   sensors.imu_tolerances = s.priors.imu_intrinsics;
   sensors.imu_tolerances_defaulted = false;
-  sensors.intrinsics = s.truth.intrinsics;  // stage 1 calibrates with a calibrated camera
+  sensors.imu_model = simulated_imu_model(s);  // the model of the IMU simulated
+  sensors.intrinsics = s.truth.intrinsics;     // stage 1 calibrates with a calibrated camera
   if (lens) sensors.intrinsics.coeffs = prior.intrinsics.coeffs;
   sensors.width = s.truth.width;
   sensors.height = s.truth.height;

@@ -172,8 +172,8 @@ int cmd_sim(int argc, char** argv) {
   if (!passes_option(o, passes, error)) fail(error);
   if (intrinsics && o.flag("passes"))
     fail("--passes applies to stage 1 only (without --intrinsics)");
-  ImuModel imu_model = kDefaultImuModel;
-  if (!imu_model_option(o, imu_model, error)) fail(error);
+  ImuModel imu_model = ImuModel::kCalibrated;
+  if (!imu_model_option(o, simulated_imu_model(s), imu_model, error)) fail(error);
   // --estimate-noise: the noise levels from the data, the calibration made again with them.
   passes.estimate_noise = o.flag("estimate-noise");
   if (intrinsics && passes.estimate_noise)

@@ -27,7 +27,8 @@ const std::vector<Command>& commands() {
        "              [--markers M]  (the random rig's number of markers, a count this build\n"
        "              has; default 3, the paper's rig has 3)\n"
        "              [--imu-model calibrated|scale-misalignment|...]  (the IMU's intrinsics\n"
-       "              the calibration estimates; docs/estimator.md)\n"
+       "              the calibration estimates, docs/estimator.md; default the scenario's IMU's:\n"
+       "              scale-misalignment for mems, calibrated for the ideal IMU of the others)\n"
        "              [--timeshift S]  (the camera's stamps S seconds before the IMU's clock:\n"
        "              t_imu = t_cam + S; default 0, the random family draws one in +-30 ms)\n"
        "              [--distortion radtan|equidistant]  (the camera's lens: EuRoC cam0's\n"
@@ -105,8 +106,8 @@ const std::vector<Command>& commands() {
        "              this same recording is refused unless --from-same-data)\n"
        "              (--hold-skew: skew stays at camchain.yaml's intrinsics_skew, 0 if absent)\n"
        "              [--imu-model calibrated|scale-misalignment|...]  (the IMU's intrinsics\n"
-       "              estimated with stage 1; default imu.yaml's imu_model, else calibrated;\n"
-       "              its tolerances from imu.yaml: docs/recordings.md)\n",
+       "              estimated too; default imu.yaml's imu_model, else scale-misalignment, a\n"
+       "              MEMS part's; its tolerances from imu.yaml: docs/recordings.md)\n",
        cmd_calibrate},
       {"run",
        "  run         calibrate on the board's devices\n"

@@ -232,7 +232,11 @@ TEST(Cli, TheImuModelBesideTheCameraIntrinsicsEstimatesBoth) {
   const std::string& d = dir.path;
   ASSERT_EQ(run_mirrorcal("record --seed 9 --intrinsics --duration 5 --out " + d + "/rec", d).code,
             0);
-  spit(d + "/rec/imu.yaml", slurp(d + "/rec/imu.yaml") + "imu_model: scale-misalignment\n");
+  std::string imu_yaml = slurp(d + "/rec/imu.yaml");  // record's: the ideal IMU it simulated
+  const std::string ideal = "imu_model: calibrated";
+  ASSERT_NE(imu_yaml.find(ideal), std::string::npos) << imu_yaml;
+  spit(d + "/rec/imu.yaml",
+       imu_yaml.replace(imu_yaml.find(ideal), ideal.size(), "imu_model: scale-misalignment"));
   const Result r = run_mirrorcal("calibrate " + d + "/rec --out " + d + "/cal", d);
   EXPECT_NE(r.output.find("the IMU's intrinsics estimated too (model scale-misalignment)"),
             std::string::npos)
@@ -310,7 +314,8 @@ TEST(Cli, TheImuYamlWithEstimatedNoiseKeepsTheModelAndTolerances) {
   std::string imu_yaml;  // the recording's, its gyro's scale tolerance the user's own
   std::istringstream lines(slurp(d + "/rec/imu.yaml"));
   for (std::string line; std::getline(lines, line);)
-    if (line.rfind("gyroscope_scale_tolerance:", 0) != 0) imu_yaml += line + "\n";
+    if (line.rfind("gyroscope_scale_tolerance:", 0) != 0 && line.rfind("imu_model:", 0) != 0)
+      imu_yaml += line + "\n";
   spit(d + "/rec/imu.yaml",
        imu_yaml + "imu_model: scale-misalignment\ngyroscope_scale_tolerance: 0.007\n");
   const Result r = run_mirrorcal("calibrate " + d + "/rec --estimate-noise --out " + d + "/cal", d);

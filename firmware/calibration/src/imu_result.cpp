@@ -145,7 +145,7 @@ void write_imu_result_yaml(std::FILE* o, const ImuResult& r) {
       "triangle, D_g's, ...; estimate's order): columns the calibration states (the "
       "covariance below), then the same entries\n"
       "  covariance:\n");
-  write_exact_rows(o, r.covariance, "    ");
+  write_matrix_rows(o, r.covariance, "    ", true);
 }
 
 bool write_openvins_imu_chain(files::OutputSet& out, const std::string& path, const ImuResult& r,

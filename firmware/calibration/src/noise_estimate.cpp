@@ -114,7 +114,7 @@ std::string estimated_imu_yaml(const NoiseEstimate& n) {
   sim::SensorInfo sensors;
   sensors.imu = n.imu;
   sensors.imu_rate_hz = n.imu_rate_hz;
-  if (n.imu_model != ImuModel::kCalibrated) sensors.imu_model = n.imu_model;
+  sensors.imu_model = n.imu_model;  // the one it was estimated with, the ideal IMU's included
   sensors.imu_tolerances = n.imu_tolerances;
   sensors.imu_tolerances_defaulted = false;  // written out, the defaults included
   std::string y = sim::imu_yaml_text(sensors);

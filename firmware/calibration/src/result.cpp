@@ -53,20 +53,11 @@ std::vector<ParamInfo> calibration_params(int markers, int intrinsics, Distortio
   return p;
 }
 
-void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent) {
+void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent, bool exact) {
   for (Eigen::Index i = 0; i < m.rows(); ++i) {
     std::fprintf(f, "%s- [", indent);
     for (Eigen::Index j = 0; j < m.cols(); ++j)
-      std::fprintf(f, "%s%.12f", j > 0 ? ", " : "", m(i, j));
-    std::fprintf(f, "]\n");
-  }
-}
-
-void write_exact_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent) {
-  for (Eigen::Index i = 0; i < m.rows(); ++i) {
-    std::fprintf(f, "%s- [", indent);
-    for (Eigen::Index j = 0; j < m.cols(); ++j)
-      std::fprintf(f, "%s%.17g", j > 0 ? ", " : "", m(i, j));
+      std::fprintf(f, exact ? "%s%.17g" : "%s%.12f", j > 0 ? ", " : "", m(i, j));
     std::fprintf(f, "]\n");
   }
 }
@@ -675,7 +666,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
     std::fprintf(o, "  %s: %.9g\n", r.params[j].name.c_str(), r.sigma[j]);
   std::fprintf(o, "# covariance of the calibration states, rows and columns in sigma's order\n");
   std::fprintf(o, "covariance:\n");
-  write_exact_rows(o, r.covariance, "  ");
+  write_matrix_rows(o, r.covariance, "  ", true);
   return true;
 }
 

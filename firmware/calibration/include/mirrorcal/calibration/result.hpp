@@ -269,9 +269,10 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
 // directive, a document start and a comment saying what the file is), and a matrix as a list of
 // its rows (as Kalibr writes T_cam_imu and OpenVINS reads it).
 void write_yaml_header(std::FILE* o, const char* what);
-void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent);
-// The same to the last bit (%.17g): covariances, which span many orders of magnitude.
-void write_exact_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent);
+// Twelve decimals, or to the last bit with exact (%.17g: covariances, which span many orders of
+// magnitude).
+void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* indent,
+                       bool exact = false);
 
 // Kalibr's camchain-imucam.yaml: T_cam_imu maps IMU coordinates into the camera's. Read unmodified
 // by Kalibr (PyYAML) and OpenVINS (OpenCV's FileStorage) alike. A calibration that says
