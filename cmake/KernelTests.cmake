@@ -69,7 +69,8 @@ function(mirrorcal_guest_program name)
       set(MIRRORCAL_AARCH64_CXX aarch64-linux-gnu-g++)  # the test reports it missing
     endif()
     set(sysroot "${MIRRORCAL_KERNEL_CACHE}/arm64/root")
-    set(out "${CMAKE_CURRENT_BINARY_DIR}/${name}")
+    # In a folder of its own: the custom target of the same name is a path of its own to Ninja.
+    set(out "${CMAKE_CURRENT_BINARY_DIR}/arm64/${name}")
     set(sources "")
     foreach(s IN LISTS G_SOURCES)
       get_filename_component(abs "${s}" ABSOLUTE)
