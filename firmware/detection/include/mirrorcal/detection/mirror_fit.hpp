@@ -29,7 +29,8 @@ struct RigGeometry {
 struct MirrorFit {
   bool made = false;  // at least two markers labelled, and a plane found that shows them
   // Sum of the squared residuals over their variances: chi-square with 2 n - 3 degrees of freedom
-  // for n markers at the right labels and the right plane.
+  // for n markers at the right labels and the right plane. 0 with fewer than two markers (any
+  // mirror shows one), infinite when no plane in front of the camera shows them.
   double cost = 0.0;
   MirrorInCamera<double> mirror{Eigen::Vector3d(0, 0, -1), 0.5};
 };
