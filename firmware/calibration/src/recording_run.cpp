@@ -1,5 +1,7 @@
 #include "mirrorcal/calibration/recording_run.hpp"
 
+#include <memory>
+
 namespace mirrorcal::calibration {
 
 CalibrationConfig recording_config(const sim::Recording& r) {
@@ -32,9 +34,11 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   if (!sim::to_prior(r.priors, prior, error)) return false;
   prior.sigma_imu_intrinsics = r.sensors.imu_tolerances;
   typename CalibrationRun<M, NK, NI>::State x0;
-  typename CalibrationRun<M, NK, NI>::Filter::Covariance p0;
-  initialise(prior, x0, p0);
-  if (from != nullptr) start_from(*from, x0, p0);  // read_calibration_start checked its M
+  // On the heap: beside the run the pipeline returns, the largest filters' covariance (M = 6 with
+  // the lens and the IMU's intrinsics) outgrew the 64 KiB a stack frame is held to.
+  const auto p0 = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>();
+  initialise(prior, x0, *p0);
+  if (from != nullptr) start_from(*from, x0, *p0);  // read_calibration_start checked its M
   // A simulated recording's truth: each history row gets the error and NEES against it.
   typename CalibrationRun<M, NK, NI>::State truth;
   if (r.has_truth) {
@@ -59,7 +63,7 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   }
   const LoopData data = recording_loop_data(r);
   passes.imu_tolerances = r.sensors.imu_tolerances;  // the ideal-IMU check's prior
-  run = run_loop<M, NK, NI>(recording_config(r), x0, p0, data, r.has_truth ? &truth : nullptr,
+  run = run_loop<M, NK, NI>(recording_config(r), x0, *p0, data, r.has_truth ? &truth : nullptr,
                             progress, {}, passes);
   if (from != nullptr) note_start(*from, run.result);
   if (r.streams && !r.streams->error().empty()) {

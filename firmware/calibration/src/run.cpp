@@ -278,15 +278,22 @@ LoopData first_stretch(const LoopData& data) {
 // The prior's covariance with the calibration block replaced by a pass's (and no correlation
 // between the two blocks): a pass from it holds the calibration near that pass's estimate.
 template <int M, int NK, int NI>
-typename CalibrationRun<M, NK, NI>::Filter::Covariance calibration_held(
-    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
-    const CalibrationRun<M, NK, NI>& pass) {
+void hold_calibration(const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                      const CalibrationRun<M, NK, NI>& pass,
+                      typename CalibrationRun<M, NK, NI>::Filter::Covariance& p) {
   using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
-  typename CalibrationRun<M, NK, NI>::Filter::Covariance p = p0;
+  p = p0;
   p.template block<L, State::kDim>(B, 0).setZero();
   p.template block<State::kDim, L>(0, B).setZero();
   p.template block<L, L>(B, B) = pass.covariance.template block<L, L>(B, B);
+}
+template <int M, int NK, int NI>
+typename CalibrationRun<M, NK, NI>::Filter::Covariance calibration_held(
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+    const CalibrationRun<M, NK, NI>& pass) {
+  typename CalibrationRun<M, NK, NI>::Filter::Covariance p;
+  hold_calibration<M, NK, NI>(p0, pass, p);
   return p;
 }
 
@@ -307,8 +314,12 @@ bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK,
   start.q_n_b = x.q_n_b;
   start.b_a = x.b_a;
   start.b_g = x.b_g;
-  const CalibrationRun<M, NK, NI> fit = run_pass<M, NK, NI>(
-      config, start, calibration_held<M, NK, NI>(p0, pass), stretch, nullptr, {}, LoopHooks<M>{});
+  // The held covariance on the heap: beside the stretch's run, the largest filters' (M = 6 with the
+  // lens and the IMU's intrinsics) outgrew the 64 KiB a stack frame is held to.
+  const auto held = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>();
+  hold_calibration<M, NK, NI>(p0, pass, *held);
+  const CalibrationRun<M, NK, NI> fit =
+      run_pass<M, NK, NI>(config, start, *held, stretch, nullptr, {}, LoopHooks<M>{});
   if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
   State back = fit.history.back().state;
   for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
