@@ -694,7 +694,7 @@ int cmd_montecarlo(int argc, char** argv) {
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
               "outliers", "label-swaps", "rig", "imu-model"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion",
-              "estimate-noise"},
+              "estimate-noise", "identical-leds"},
              o, error) ||
       !campaign_options(o, c, error))
     fail(error);

@@ -38,6 +38,11 @@ bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) 
     }
     return true;
   };
+  frames.identical_leds = o.flag("identical-leds");
+  if (frames.identical_leds && !frames.enabled) {
+    error = "--identical-leds applies to --frames only";
+    return false;
+  }
   return pixels("spot-noise", frames.spot_noise_px, true) &&
          pixels("pixel-sigma", frames.pixel_sigma, false);
 }

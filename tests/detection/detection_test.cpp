@@ -545,3 +545,55 @@ TEST(MarkerIdentifier, SpotsCutByTheImageEdgeAreWithheld) {
   EXPECT_LT((f.uv[2] - truth[2]).norm(), 0.1);
   EXPECT_EQ(counts.refused, 2u);
 }
+
+// Identical LEDs under the random family's loose priors, without a filter: the reflections are
+// tracked, the rig's shape fitted to a window of them names the tracks (shape_bootstrap.hpp), and
+// from then on every labelled reflection is the LED its name went to; most are labelled.
+TEST(ShapeBootstrap, TrackedReflectionsOfIdenticalLedsAreNamedWithoutAFilter) {
+  constexpr int M = 3;
+  mc::sim::Scenario s = mc::sim::random_scenario(1);
+  s.duration_s = 15.0;
+  const mc::sim::SimData data = mc::sim::simulate(s, 1);
+  const mc::Prior<M> prior = mc::sim::simulation_prior<M>(s, data, 1);
+  mc::sim::RenderConfig render;
+  render.spot_noise_px = s.pixel_sigma;
+  render.brightness = {120.0};
+  mc::sim::RenderedFrameSource frames(s, render, 5);
+  mc::detection::DetectionConfig<M> c;
+  c.identify.brightness = {1.0, 1.0, 1.0};
+  c.bootstrap_shape = true;
+  c.prior = mc::detection::prior_geometry<M>(prior, s.truth.intrinsics, s.pixel_sigma);
+  mc::detection::DetectingMarkerSource<M> detect(frames, c, s.truth.width, s.truth.height);
+  std::array<int, M> naming{-1, -1, -1};
+  int visible = 0, labelled = 0, wrong = 0;
+  mc::MarkerFrame<M> f;
+  while (detect.poll(f) == mc::hal::SourceStatus::kOk) {
+    if (!detect.bootstrap().named()) {
+      for (const bool seen : f.seen) EXPECT_FALSE(seen);  // no label before the names
+      continue;
+    }
+    const mc::sim::RenderedTruth& truth = frames.truth();
+    for (int i = 0; i < M; ++i) {
+      visible += truth.visible[std::size_t(i)] ? 1 : 0;
+      if (!f.seen[std::size_t(i)]) continue;
+      ++labelled;
+      int nearest = -1;
+      double best = 1e9;
+      for (int k = 0; k < M; ++k)
+        if (truth.visible[std::size_t(k)] &&
+            (f.uv[std::size_t(i)] - truth.uv[std::size_t(k)]).norm() < best) {
+          best = (f.uv[std::size_t(i)] - truth.uv[std::size_t(k)]).norm();
+          nearest = k;
+        }
+      if (naming[std::size_t(i)] < 0) naming[std::size_t(i)] = nearest;  // the name's LED
+      wrong += nearest != naming[std::size_t(i)] ? 1 : 0;
+    }
+  }
+  const auto& counters = detect.bootstrap().counters();
+  std::printf("named after %.1f s (%llu windows tried): %d of %d reflections labelled, %d wrong\n",
+              1e-9 * static_cast<double>(counters.made_at_ns),
+              (unsigned long long)counters.windows_tried, labelled, visible, wrong);
+  ASSERT_TRUE(detect.bootstrap().named());
+  EXPECT_EQ(wrong, 0);
+  EXPECT_GE(labelled, visible * 95 / 100);
+}

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <numeric>
 
 namespace mirrorcal::evaluation {
 
@@ -48,19 +49,62 @@ void print_detection(const DetectionReport& d, hal::PixelFormat format) {
 }
 
 template <int M>
-detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render) {
+detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
+                                               const detection::RigGeometry<M>& prior) {
   detection::DetectionConfig<M> c;
   for (int i = 0; i < M; ++i)
     c.identify.brightness[static_cast<std::size_t>(i)] =
         render.brightness[static_cast<std::size_t>(i) % render.brightness.size()];
+  c.bootstrap_shape = std::all_of(render.brightness.begin(), render.brightness.end(),
+                                  [&](double b) { return b == render.brightness.front(); });
+  c.prior = prior;
   return c;
 }
 
 template <int M>
 RenderedMarkers<M>::RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
-                                    std::uint64_t seed)
+                                    const detection::RigGeometry<M>& prior, std::uint64_t seed,
+                                    const TrackNames<M>& names_ahead)
     : frames_(s, render, seed),
-      detect_(frames_, detection_config<M>(render), s.truth.width, s.truth.height) {}
+      detect_(
+          frames_,
+          [&] {
+            detection::DetectionConfig<M> c = detection_config<M>(render, prior);
+            c.names_ahead = names_ahead;
+            return c;
+          }(),
+          s.truth.width, s.truth.height) {
+  std::iota(naming_.begin(), naming_.end(), 0);
+}
+
+template <int M>
+hal::SourceStatus RenderedMarkers<M>::poll(MarkerFrame<M>& frame) {
+  const hal::SourceStatus st = detect_.poll(frame);
+  if (st == hal::SourceStatus::kOk && !named_ && detect_.bootstrap().named()) record_naming();
+  return st;
+}
+
+// In the frame whose window gave the names: each named blob is the LED drawn nearest to it.
+template <int M>
+void RenderedMarkers<M>::record_naming() {
+  int n = 0;
+  const detection::Blob* blobs = detect_.last_blobs(n);
+  const int* labels = detect_.bootstrap().blob_labels();
+  const sim::RenderedTruth& truth = frames_.truth();
+  for (int b = 0; b < n; ++b) {
+    if (labels[b] < 0) continue;
+    double best = INFINITY;
+    for (int k = 0; k < M; ++k) {
+      const auto kk = static_cast<std::size_t>(k);
+      const double d = (Eigen::Vector2d(blobs[b].u, blobs[b].v) - truth.uv[kk]).norm();
+      if (truth.visible[kk] && d < best) {
+        best = d;
+        naming_[static_cast<std::size_t>(labels[b])] = k;
+      }
+    }
+  }
+  named_ = true;
+}
 
 template <int M>
 void RenderedMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction,
@@ -86,13 +130,13 @@ void RenderedMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction,
         nearest = k;
       }
     }
-    if (nearest != i) {
+    if (nearest != naming_[ii]) {
       ++report_.wrong_labels;
       continue;
     }
     sum_sq_ += best * best;
-    sum_u_ += frame.uv[ii].x() - truth.uv[ii].x();
-    sum_v_ += frame.uv[ii].y() - truth.uv[ii].y();
+    sum_u_ += frame.uv[ii].x() - truth.uv[static_cast<std::size_t>(nearest)].x();
+    sum_v_ += frame.uv[ii].y() - truth.uv[static_cast<std::size_t>(nearest)].y();
     report_.centroid_max_px = std::max(report_.centroid_max_px, best);
   }
 }
@@ -112,9 +156,10 @@ DetectionReport RenderedMarkers<M>::report() const {
   return r;
 }
 
-#define MIRRORCAL_RENDERED_MARKERS_(M) \
-  template class RenderedMarkers<M>;   \
-  template detection::DetectionConfig<M> detection_config<M>(const sim::RenderConfig&);
+#define MIRRORCAL_RENDERED_MARKERS_(M)                                                 \
+  template class RenderedMarkers<M>;                                                   \
+  template detection::DetectionConfig<M> detection_config<M>(const sim::RenderConfig&, \
+                                                             const detection::RigGeometry<M>&);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_RENDERED_MARKERS_)
 #undef MIRRORCAL_RENDERED_MARKERS_
 

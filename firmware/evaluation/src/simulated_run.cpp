@@ -28,6 +28,31 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
+// The scenario with its markers in the order the detection names them. Identical LEDs are named
+// by the rig's shape fitted to their tracks and the priors' guesses, which cannot always tell
+// them apart: the name i may be given to another LED than the truth's i, and the estimate of
+// marker i is then that LED's. A look at the first seconds of frames finds the names (names:
+// which track got each), and every pass then labels those tracks from their first frame: the
+// filter would otherwise go the seconds of the fit's window without a marker.
+template <int M>
+sim::Scenario named_as_detected(const sim::Scenario& s, const FrameMode& frames,
+                                const sim::RenderConfig& render,
+                                const detection::RigGeometry<M>& geometry, std::uint64_t seed,
+                                TrackNames<M>& names) {
+  names = no_track_names<M>();
+  if (!frames.enabled || !frames.identical_leds) return s;
+  RenderedMarkers<M> look(s, render, geometry, seed);
+  MarkerFrame<M> frame;
+  while (!look.named() && look.poll(frame) == hal::SourceStatus::kOk) {
+  }
+  names = look.track_names();
+  sim::Scenario named = s;
+  for (int i = 0; i < M; ++i)
+    named.truth.markers[static_cast<std::size_t>(i)] =
+        s.truth.markers[static_cast<std::size_t>(look.naming()[static_cast<std::size_t>(i)])];
+  return named;
+}
+
 template <int M, int NI>
 CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                                         const std::function<void(double)>& progress,
@@ -39,7 +64,18 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   typename Run::State x0;
   typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
-  const typename Run::State truth = truth_state<typename Run::State>(s);
+  CalibrationConfig config = scenario_config(s);
+  if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
+  sim::RenderConfig render;
+  render.format = frames.format;
+  render.spot_noise_px = frames.spot_noise_px >= 0.0 ? frames.spot_noise_px : s.pixel_sigma;
+  if (frames.identical_leds) render.brightness = {render.brightness[1]};
+  const detection::RigGeometry<M> geometry =
+      detection::prior_geometry(prior, config.intrinsics, config.pixel_sigma);
+  const std::uint64_t render_seed = sim::derive_seed(seed, 200);
+  TrackNames<M> names;
+  const typename Run::State truth = truth_state<typename Run::State>(
+      named_as_detected<M>(s, frames, render, geometry, render_seed, names));
   // With frames, every pass renders and detects them afresh (detection follows the prediction).
   std::optional<RenderedMarkers<M>> rendered;
   std::uint64_t wrong_labels_before = 0;
@@ -48,18 +84,13 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
     // The timing of one pass: the last of those always made.
     if (pass == passes.min - 1) h.profiler = profiler;
     if (frames.enabled) {
-      sim::RenderConfig render;
-      render.format = frames.format;
-      render.spot_noise_px = frames.spot_noise_px >= 0.0 ? frames.spot_noise_px : s.pixel_sigma;
       if (rendered) wrong_labels_before += rendered->report().wrong_labels;
-      rendered.emplace(s, render, sim::derive_seed(seed, 200));
+      rendered.emplace(s, render, geometry, render_seed, names);
       h.source = &*rendered;
       h.relabeler = &*rendered;
     }
     return h;
   };
-  CalibrationConfig config = scenario_config(s);
-  if (frames.enabled && frames.pixel_sigma > 0.0) config.pixel_sigma = frames.pixel_sigma;
   passes.imu_tolerances = s.priors.imu_intrinsics;  // the ideal-IMU check's prior
   Run run = run_loop<M, 0, NI>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;

@@ -36,6 +36,13 @@ struct Blob {
   bool truncated = false;
 };
 
+// A blob that may hold two spots (spread beyond max_spread_px2), whose centroid a neighbour's tail
+// can pull, or whose spot the image's edge cuts is no marker's to measure: a frame without it
+// costs less than a biased or swapped position.
+inline bool single_spot(const Blob& b, double max_spread_px2) {
+  return !b.crowded && !b.truncated && b.spread <= max_spread_px2;
+}
+
 struct BlobCounters {
   std::uint64_t frames = 0;
   std::uint64_t blobs = 0;

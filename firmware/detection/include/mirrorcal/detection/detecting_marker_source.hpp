@@ -10,6 +10,7 @@
 
 #include "mirrorcal/detection/blob_detector.hpp"
 #include "mirrorcal/detection/marker_identifier.hpp"
+#include "mirrorcal/detection/shape_bootstrap.hpp"
 #include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/hal/sources.hpp"
 
@@ -19,6 +20,19 @@ template <int M>
 struct DetectionConfig {
   BlobConfig blobs{};
   IdentifierConfig<M> identify{};
+  // Identical LEDs (identify.brightness all equal) under loose priors: the rig's shape fitted to
+  // reflections tracked over the first seconds names the tracks, and each blob is labelled by its
+  // track's name until the prediction is sharp (shape_bootstrap.hpp). prior holds the priors'
+  // guesses of the markers, their sigma, the camera and the pixel noise.
+  bool bootstrap_shape = false;
+  RigGeometry<M> prior{};
+  // With bootstrap_shape: the names an earlier look at the same frames gave its tracks
+  // (ShapeBootstrap::track_of_label; all -1: none), so that they label from the first frame.
+  std::array<int, M> names_ahead = [] {
+    std::array<int, M> a{};
+    a.fill(-1);
+    return a;
+  }();
 };
 
 struct DetectionCounters {
@@ -35,7 +49,15 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
                         int max_height)
       : frames_(frames),
         detector_(config.blobs, max_width, max_height),
-        identifier_(config.identify) {}
+        identifier_(config.identify),
+        bootstrap_shape_(config.bootstrap_shape),
+        bootstrap_(config.prior, config.identify.max_spread_px2) {
+    for (const int id : config.names_ahead)
+      if (id >= 0) {
+        bootstrap_.name_ahead(config.names_ahead);
+        break;
+      }
+  }
 
   hal::SourceStatus poll(MarkerFrame<M>& frame) override {
     hal::FrameView view;
@@ -48,8 +70,9 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
     last_view_ = view;
     const auto t0 = std::chrono::steady_clock::now();
     blob_count_ = detector_.detect(view, blobs_.data(), static_cast<int>(blobs_.size()));
+    if (bootstrap_shape_) bootstrap_.feed(view.t_ns, blobs_.data(), blob_count_);
     committed_ += last_;  // the previous frame's labelling is final now
-    last_ = identifier_.identify(blobs_.data(), blob_count_, nullptr, frame);
+    last_ = identifier_.identify(blobs_.data(), blob_count_, nullptr, frame, track_labels());
     frame.t_ns = view.t_ns;
     const double seconds = seconds_since(t0);
     last_detection_ns_ = static_cast<std::int64_t>(seconds * 1e9);
@@ -60,7 +83,12 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
 
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override {
     const auto t0 = std::chrono::steady_clock::now();
-    last_ = identifier_.identify(blobs_.data(), blob_count_, &prediction, frame);
+    last_ = identifier_.identify(blobs_.data(), blob_count_, &prediction, frame, track_labels());
+    if (bootstrap_shape_) {
+      std::array<int, M> blob_of_marker;
+      for (int i = 0; i < M; ++i) blob_of_marker[std::size_t(i)] = identifier_.blob_of(i);
+      bootstrap_.confirm(blob_of_marker);
+    }
     counters_.detect_seconds += seconds_since(t0);
     ++counters_.relabelled;
   }
@@ -77,6 +105,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
     return c;
   }
   hal::FrameCounters frame_counters() const { return frames_.counters(); }
+  // The shape's bootstrap and the tracks' names, with bootstrap_shape.
+  const ShapeBootstrap<M>& bootstrap() const { return bootstrap_; }
   // The image of the last frame delivered (record --images keeps it), valid until the next poll.
   const hal::FrameView& last_frame() const { return last_view_; }
   // The blobs of the last frame (for diagnostics and tests).
@@ -86,6 +116,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   }
 
  private:
+  const int* track_labels() const { return bootstrap_shape_ ? bootstrap_.blob_labels() : nullptr; }
+
   static double seconds_since(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
@@ -93,6 +125,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   hal::FrameSource& frames_;
   BlobDetector detector_;
   MarkerIdentifier<M> identifier_;
+  bool bootstrap_shape_;
+  ShapeBootstrap<M> bootstrap_;
   std::array<Blob, MarkerIdentifier<M>::kMaxBlobs> blobs_{};
   int blob_count_ = 0;
   hal::FrameView last_view_{};

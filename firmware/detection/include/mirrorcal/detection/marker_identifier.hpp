@@ -1,9 +1,10 @@
-// Which marker is which blob. Three cues: where the filter predicts each marker's reflection (a
+// Which marker is which blob. Four cues: where the filter predicts each marker's reflection (a
 // Mahalanobis gate on the predicted covariance), how bright each marker is relative to the others
 // (the rig's markers differ in brightness, 1 : 1.5 : 2.25 by default, so the ratio of two blobs'
-// fluxes names them even while the prediction is still vague), and, where the markers' places on
-// the rig are known to about a centimetre, whether one plane mirror shows the labelled blobs
-// (mirror_fit.hpp: identical LEDs told apart without a prediction). Every assignment of blobs
+// fluxes names them even while the prediction is still vague), where the markers' places on the
+// rig are known to about a centimetre, whether one plane mirror shows the labelled blobs
+// (mirror_fit.hpp), and for identical LEDs under loose priors, the name of each blob's track, from
+// the rig's shape fitted over frames (shape_bootstrap.hpp). Every assignment of blobs
 // to markers within the gates is scored; the best wins, and a marker that some other assignment
 // within a margin of the best labels differently is dropped, as are markers whose predictions lie
 // on top of each other (crossing), and blobs too spread out to be one spot (two merged reflections)
@@ -46,6 +47,10 @@ struct IdentifierConfig {
   // about a centimetre (mirror_fit_test: 99 % of frames told apart at 1 cm, 69 % at 2 cm).
   bool use_geometry = false;
   RigGeometry<M> geometry{};
+  // The track cue (shape_bootstrap.hpp): naming a blob otherwise than its track's name costs
+  // this much. More than the ambiguity margin, so that a track's name decides where nothing else
+  // does; less than a sharp prediction's disagreement, which overrules it.
+  double track_cost = 12.0;
 
   static constexpr std::array<double, M> default_brightness() {
     std::array<double, M> b{};
@@ -90,12 +95,14 @@ class MarkerIdentifier {
   }
 
   // Labels blobs[0..n) into frame (seen/uv; t_ns is the caller's) and says what it met.
-  // prediction may be null: then brightness alone decides.
+  // prediction may be null: then brightness alone decides. track_labels, if given, names each
+  // blob by its track (a marker, or -1).
   IdentifierCounters identify(const Blob* blobs, int n, const hal::MarkerPrediction<M>* prediction,
-                              MarkerFrame<M>& frame) {
+                              MarkerFrame<M>& frame, const int* track_labels = nullptr) {
     IdentifierCounters counters;
     counters.frames = 1;
     frame.seen.fill(false);
+    labelled_.fill(-1);
     if (n > kMaxBlobs) n = kMaxBlobs;
     blobs_ = blobs;
 
@@ -105,7 +112,13 @@ class MarkerIdentifier {
       count_[i] = 0;
       const bool predicted =
           prediction == nullptr || prediction->valid[static_cast<std::size_t>(i)];
-      if (!predicted) continue;
+      if (!predicted) {
+        // No prediction of this marker (its sigma points leave the image: the filter has had no
+        // marker for a while): its track's blob, if a track is named after it.
+        for (int j = 0; j < n && track_labels != nullptr; ++j)
+          if (track_labels[j] == i && single_spot(blobs[j])) insert_candidate(i, j, 0.0, 0.0);
+        continue;
+      }
       Eigen::Matrix2d info = Eigen::Matrix2d::Identity();
       if (prediction != nullptr) {
         const Eigen::Matrix2d c =
@@ -115,17 +128,23 @@ class MarkerIdentifier {
       }
       for (int j = 0; j < n; ++j) {
         if (!single_spot(blobs[j])) continue;
+        const double against_track =
+            track_labels != nullptr && track_labels[j] >= 0 && track_labels[j] != i
+                ? config_.track_cost
+                : 0.0;
         if (prediction == nullptr) {
           // Without a prediction every blob is as near as any other: the brightest are the
           // candidates (markers are the scene's bright spots), whatever their order in the image.
-          insert_candidate(i, j, 0.0, -blobs[j].flux);
+          // and a blob whose track is named i first of all.
+          const bool tracked_as_i = track_labels != nullptr && track_labels[j] == i;
+          insert_candidate(i, j, against_track, (tracked_as_i ? -1e30 : 0.0) - blobs[j].flux);
           continue;
         }
         const Eigen::Vector2d r =
             Eigen::Vector2d(blobs[j].u, blobs[j].v) - prediction->uv[static_cast<std::size_t>(i)];
         const double d2 = r.dot(info * r);
         if (!(d2 <= config_.gate_chi2)) continue;
-        insert_candidate(i, j, d2, d2);
+        insert_candidate(i, j, d2 + against_track, d2 + against_track);
       }
     }
     for (int j = 0; j < n; ++j)
@@ -153,6 +172,7 @@ class MarkerIdentifier {
       }
       frame.seen[static_cast<std::size_t>(i)] = true;
       frame.uv[static_cast<std::size_t>(i)] = Eigen::Vector2d(blobs[j].u, blobs[j].v);
+      labelled_[static_cast<std::size_t>(i)] = j;
       ++labelled;
     }
     counters.identified += static_cast<std::uint64_t>(labelled);
@@ -164,12 +184,19 @@ class MarkerIdentifier {
 
   const IdentifierConfig<M>& config() const { return config_; }
 
+  // The blob the last identify() labelled marker i with, or -1.
+  int blob_of(int i) const { return labelled_[static_cast<std::size_t>(i)]; }
+
+  // The mirror's cue from now on, with this geometry (a shape fitted over frames:
+  // shape_bootstrap.hpp).
+  void use_geometry(const RigGeometry<M>& geometry) {
+    config_.geometry = geometry;
+    config_.use_geometry = true;
+  }
+
  private:
-  // A blob that may hold two spots, whose centroid a neighbour's tail can pull, or whose spot
-  // the image's edge cuts (its centroid pulled inwards by up to a pixel) is no marker's: a frame
-  // without it costs less than a biased or swapped position.
   bool single_spot(const Blob& b) const {
-    return !b.crowded && !b.truncated && b.spread <= config_.max_spread_px2;
+    return detection::single_spot(b, config_.max_spread_px2);
   }
 
   // Keeps marker i's kCandidates blobs of lowest rank, each with its cost d2.
@@ -279,7 +306,7 @@ class MarkerIdentifier {
   double cand_d2_[M][kCandidates]{};
   double cand_rank_[M][kCandidates]{};
   std::array<bool, kMaxBlobs> used_{};
-  std::array<int, M> current_{}, best_{};
+  std::array<int, M> current_{}, best_{}, labelled_{};
   std::array<double, M> alt_cost_{};
   double best_cost_ = 0.0;
 };

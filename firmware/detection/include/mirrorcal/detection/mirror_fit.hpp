@@ -6,6 +6,7 @@
 // (marker_identifier.hpp). Header-only; nothing allocates.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -13,6 +14,7 @@
 #include <Eigen/Cholesky>
 
 #include "mirrorcal/estimator/mirror_model.hpp"
+#include "mirrorcal/estimator/prior.hpp"
 
 namespace mirrorcal::detection {
 
@@ -25,6 +27,21 @@ struct RigGeometry {
   Pinhole<double> camera{};
   double pixel_sigma = 1.0;
 };
+
+// The geometry the priors give: their guesses of the markers, the largest sigma of any of their
+// coordinates, the camera the filter assumes and the pixel noise.
+template <int M>
+RigGeometry<M> prior_geometry(const Prior<M>& prior, const Pinhole<double>& camera,
+                              double pixel_sigma) {
+  RigGeometry<M> g;
+  g.markers_c = prior.markers;
+  g.marker_sigma_m = 0.0;
+  for (const Eigen::Vector3d& s : prior.sigma_markers)
+    g.marker_sigma_m = std::max(g.marker_sigma_m, s.maxCoeff());
+  g.camera = camera;
+  g.pixel_sigma = pixel_sigma;
+  return g;
+}
 
 struct MirrorFit {
   bool made = false;  // at least two markers labelled, and a plane found that shows them

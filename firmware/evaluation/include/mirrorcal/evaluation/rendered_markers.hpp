@@ -23,9 +23,21 @@ DetectionReport combine(const std::vector<DetectionReport>& runs);
 void print_detection(const DetectionReport& d, hal::PixelFormat format);
 
 // The detection settings for frames drawn with the given renderer settings: its brightness
-// ratios are the identification's second cue.
+// ratios are the identification's second cue; where they are all equal (identical LEDs), the
+// rig's shape bootstrapped from the priors' geometry (detection/shape_bootstrap.hpp) is.
 template <int M>
-detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render);
+detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
+                                               const detection::RigGeometry<M>& prior);
+
+// Identical LEDs: which track each name went to (ShapeBootstrap::track_of_label), all -1 for none.
+template <int M>
+using TrackNames = std::array<int, M>;
+template <int M>
+TrackNames<M> no_track_names() {
+  TrackNames<M> t{};
+  t.fill(-1);
+  return t;
+}
 
 // The marker source of a run with frames: renders frame after frame and detects the markers in
 // them; the loop relabels each with its prediction (give it this object with set_identifier),
@@ -33,17 +45,30 @@ detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render);
 template <int M>
 class RenderedMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
-  RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render, std::uint64_t seed);
-  hal::SourceStatus poll(MarkerFrame<M>& frame) override { return detect_.poll(frame); }
+  // names_ahead: identical LEDs' names from an earlier look at the same frames (naming_look).
+  RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
+                  const detection::RigGeometry<M>& prior, std::uint64_t seed,
+                  const TrackNames<M>& names_ahead = no_track_names<M>());
+  hal::SourceStatus poll(MarkerFrame<M>& frame) override;
   std::int64_t detection_ns() const override { return detect_.detection_ns(); }
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override;
   DetectionReport report() const;
+  // Identical LEDs: the marker each name stands for, naming()[i] the true id of the LED the
+  // bootstrap named i (the priors' guesses cannot always tell identical LEDs apart, so the names
+  // may be a permutation of the truth's); the identity until the names are given. named(): given.
+  const std::array<int, M>& naming() const { return naming_; }
+  bool named() const { return named_; }
+  const TrackNames<M>& track_names() const { return detect_.bootstrap().track_of_label(); }
 
  private:
+  void record_naming();
+
   sim::RenderedFrameSource frames_;
   detection::DetectingMarkerSource<M> detect_;
   DetectionReport report_{};
   double sum_sq_ = 0.0, sum_u_ = 0.0, sum_v_ = 0.0;
+  std::array<int, M> naming_{};
+  bool named_ = false;
 };
 // Compiled in rendered_markers.cpp for every built M.
 #define MIRRORCAL_EXTERN_RENDERED_MARKERS_(M) extern template class RenderedMarkers<M>;

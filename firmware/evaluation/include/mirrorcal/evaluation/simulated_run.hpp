@@ -26,6 +26,9 @@ struct FrameMode {
   hal::PixelFormat format = hal::PixelFormat::kGrey;
   double spot_noise_px = -1.0;  // the noise drawn into the frames, px; < 0: the scenario's
   double pixel_sigma = -1.0;    // the pixel noise the filter assumes, px; < 0: the scenario's
+  // Every LED drawn equally bright: no brightness code, the labels come from the rig's shape
+  // fitted to reflections tracked over frames (detection/shape_bootstrap.hpp).
+  bool identical_leds = false;
 };
 
 // The calibration configuration a scenario implies (the filter is told the true noise levels and,

@@ -1,0 +1,287 @@
+// Identical LEDs under loose priors: before the filter's prediction is sharp, no single frame
+// says which reflection is which marker. The reflections are tracked from frame to frame (nearest
+// neighbour, constant velocity); every `spacing` seconds the tracks' places are taken down; and
+// once kWindow such snapshots hold M tracks throughout, the rig's shape is fitted to them
+// (rig_shape.hpp). A set of tracks that is not one rig's reflections (a room light, a ghost, two
+// tracks swapped where reflections crossed) does not fit, and the next snapshot tries again. The
+// fit names its tracks, and a track keeps its name while it lives: the identifier's track cue
+// (marker_identifier.hpp) labels each frame's blobs by their tracks' names until the filter's
+// prediction is sharp. A new track takes the name the identifier gives its blob with the
+// prediction (confirm), if no live track holds it. Header-only; nothing allocates.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+
+#include "mirrorcal/detection/blob_detector.hpp"
+#include "mirrorcal/detection/rig_shape.hpp"
+
+namespace mirrorcal::detection {
+
+struct ShapeBootstrapCounters {
+  std::uint64_t windows_tried = 0;    // windows of tracks fitted
+  std::uint64_t windows_refused = 0;  // of those, not one rig's reflections
+  std::int64_t made_at_ns = -1;       // the frame whose window gave the shape (-1: not yet)
+  std::uint64_t names_confirmed = 0;  // tracks named later by the identifier's labels
+};
+
+template <int M>
+class ShapeBootstrap {
+ public:
+  static constexpr int kWindow = 16;
+  static constexpr int kMaxTracks = 12;
+  static constexpr int kMaxBlobs = 32;
+  // Combinations of M among the snapshots' common tracks tried per window, brightest first.
+  static constexpr int kMaxSubsets = 20;
+
+  // prior: the guesses (their names and scale), the camera and pixel noise. max_spread_px2: the
+  // identifier's bound on one spot's spread. spacing_s: the time between snapshots (the rig must
+  // turn between them for the shape to be seen).
+  ShapeBootstrap(const RigGeometry<M>& prior, double max_spread_px2, double spacing_s = 0.5)
+      : prior_(prior),
+        max_spread_px2_(max_spread_px2),
+        spacing_ns_(static_cast<std::int64_t>(spacing_s * 1e9)) {
+    blob_track_.fill(-1);
+    blob_labels_.fill(-1);
+  }
+
+  // The names an earlier look at the same frames gave (track_of_label[i]: the track named i, by
+  // the order tracks are started in; -1: none). Tracking the same frames starts the same tracks,
+  // so each is named from its first frame, where the look had to wait for its window to fill.
+  void name_ahead(const std::array<int, M>& track_of_label) {
+    track_of_label_ = track_of_label;
+    named_ahead_ = true;
+  }
+  // The names given, as name_ahead() takes them.
+  const std::array<int, M>& track_of_label() const { return track_of_label_; }
+  bool named() const { return shape_.made || named_ahead_; }
+
+  // One frame's blobs (single spots only are tracked); until the shape is fitted, a window tried
+  // at each snapshot. Then blob_labels() names this frame's blobs by their tracks.
+  void feed(std::int64_t t_ns, const Blob* blobs, int n) {
+    track(t_ns, blobs, n);
+    if (!named() && t_ns - last_snapshot_ns_ >= spacing_ns_) {
+      take_snapshot(t_ns);
+      if (snapshots_ >= kWindow) try_window(t_ns);
+    }
+    for (int b = 0; b < kMaxBlobs; ++b) {
+      const int t = blob_track_[std::size_t(b)];
+      blob_labels_[std::size_t(b)] = b < n && t >= 0 ? tracks_[std::size_t(t)].label : -1;
+    }
+  }
+
+  // The identifier's labels of the last frame fed (blob_of_marker[i]: marker i's blob, or -1):
+  // an unnamed track takes its blob's label if no live track holds that name.
+  void confirm(const std::array<int, M>& blob_of_marker) {
+    if (!named()) return;
+    for (int i = 0; i < M; ++i) {
+      const int b = blob_of_marker[std::size_t(i)];
+      if (b < 0 || b >= kMaxBlobs) continue;
+      const int t = blob_track_[std::size_t(b)];
+      if (t < 0 || tracks_[std::size_t(t)].label >= 0 || named(i)) continue;
+      tracks_[std::size_t(t)].label = i;
+      ++counters_.names_confirmed;
+    }
+  }
+
+  // Per blob of the last frame, its track's name (a marker), or -1.
+  const int* blob_labels() const { return blob_labels_.data(); }
+  const RigShape<M>& shape() const { return shape_; }
+  const ShapeBootstrapCounters& counters() const { return counters_; }
+
+ private:
+  struct Track {
+    int id = -1;  // -1: free
+    Eigen::Vector2d uv = Eigen::Vector2d::Zero(), velocity = Eigen::Vector2d::Zero();
+    double flux = 0.0;
+    int missed = 0;  // frames since last seen
+    std::int64_t t_ns = 0;
+    int label = -1;  // the marker it is, once named
+  };
+  struct Snapshot {
+    int n = 0;
+    std::array<int, kMaxTracks> id{};
+    std::array<Eigen::Vector2d, kMaxTracks> uv{};
+  };
+
+  // Greedy nearest-neighbour association on the tracks' predicted places: the closest pairs
+  // first, within a gate that widens with the track's speed. Unmatched blobs start tracks; a
+  // track missed for three frames ends.
+  void track(std::int64_t t_ns, const Blob* blobs, int n) {
+    n = std::min(n, kMaxBlobs);
+    std::array<bool, kMaxBlobs> taken{};
+    blob_track_.fill(-1);
+    std::array<bool, kMaxTracks> matched{};
+    for (;;) {
+      double best = 0.0;
+      int bt = -1, bb = -1;
+      for (int t = 0; t < kMaxTracks; ++t) {
+        const Track& tr = tracks_[std::size_t(t)];
+        if (tr.id < 0 || matched[std::size_t(t)]) continue;
+        const double dt = 1e-9 * static_cast<double>(t_ns - tr.t_ns);
+        const Eigen::Vector2d predicted = tr.uv + dt * tr.velocity;
+        const double gate = 15.0 + 0.5 * dt * tr.velocity.norm();
+        for (int b = 0; b < n; ++b) {
+          if (taken[std::size_t(b)] || !single_spot(blobs[b], max_spread_px2_)) continue;
+          const double d = (Eigen::Vector2d(blobs[b].u, blobs[b].v) - predicted).norm();
+          if (d < gate && (bt < 0 || d < best)) {
+            best = d;
+            bt = t;
+            bb = b;
+          }
+        }
+      }
+      if (bt < 0) break;
+      Track& tr = tracks_[std::size_t(bt)];
+      const Eigen::Vector2d uv(blobs[bb].u, blobs[bb].v);
+      const double dt = 1e-9 * static_cast<double>(t_ns - tr.t_ns);
+      if (dt > 0.0) tr.velocity = (uv - tr.uv) / dt;
+      tr.uv = uv;
+      tr.flux = blobs[bb].flux;
+      tr.missed = 0;
+      tr.t_ns = t_ns;
+      matched[std::size_t(bt)] = taken[std::size_t(bb)] = true;
+      blob_track_[std::size_t(bb)] = bt;
+    }
+    for (int t = 0; t < kMaxTracks; ++t) {
+      Track& tr = tracks_[std::size_t(t)];
+      if (tr.id >= 0 && !matched[std::size_t(t)] && ++tr.missed > 3) tr.id = -1;
+    }
+    for (int b = 0; b < n; ++b) {
+      if (taken[std::size_t(b)] || !single_spot(blobs[b], max_spread_px2_)) continue;
+      for (int t = 0; t < kMaxTracks; ++t)
+        if (tracks_[std::size_t(t)].id < 0) {
+          tracks_[std::size_t(t)] = Track{next_id_,
+                                          Eigen::Vector2d(blobs[b].u, blobs[b].v),
+                                          Eigen::Vector2d::Zero(),
+                                          blobs[b].flux,
+                                          0,
+                                          t_ns,
+                                          named_ahead_ ? label_ahead(next_id_) : -1};
+          ++next_id_;
+          blob_track_[std::size_t(b)] = t;
+          break;
+        }
+    }
+  }
+
+  // The tracks seen in this frame, into the ring of snapshots.
+  void take_snapshot(std::int64_t t_ns) {
+    Snapshot& s = ring_[std::size_t(head_)];
+    s.n = 0;
+    for (const Track& tr : tracks_)
+      if (tr.id >= 0 && tr.missed == 0) {
+        s.id[std::size_t(s.n)] = tr.id;
+        s.uv[std::size_t(s.n)] = tr.uv;
+        ++s.n;
+      }
+    head_ = (head_ + 1) % kWindow;
+    snapshots_ = std::min(snapshots_ + 1, kWindow);
+    last_snapshot_ns_ = t_ns;
+  }
+
+  // The places of track id in snapshot s, if it was seen there.
+  static bool place(const Snapshot& s, int id, Eigen::Vector2d& uv) {
+    for (int i = 0; i < s.n; ++i)
+      if (s.id[std::size_t(i)] == id) {
+        uv = s.uv[std::size_t(i)];
+        return true;
+      }
+    return false;
+  }
+
+  // The tracks seen in every snapshot of the window, brightest first; each combination of M of
+  // them fitted as the rig until one fits.
+  void try_window(std::int64_t t_ns) {
+    std::array<int, kMaxTracks> common{};
+    int nc = 0;
+    const Snapshot& newest = ring_[std::size_t((head_ + kWindow - 1) % kWindow)];
+    for (int i = 0; i < newest.n; ++i) {
+      const int id = newest.id[std::size_t(i)];
+      bool everywhere = true;
+      Eigen::Vector2d uv;
+      for (const Snapshot& s : ring_) everywhere = everywhere && place(s, id, uv);
+      if (everywhere) common[std::size_t(nc++)] = id;
+    }
+    if (nc < M) return;
+    std::sort(common.begin(), common.begin() + nc,
+              [this](int a, int b) { return flux_of(a) > flux_of(b); });
+    std::array<int, M> pick{};
+    for (int j = 0; j < M; ++j) pick[std::size_t(j)] = j;
+    for (int tried = 0; tried < kMaxSubsets; ++tried) {
+      TrackWindow<M, kWindow> w;
+      for (int k = 0; k < kWindow; ++k)
+        for (int j = 0; j < M; ++j)
+          place(ring_[std::size_t((head_ + k) % kWindow)],
+                common[std::size_t(pick[std::size_t(j)])], w.uv[std::size_t(k)][std::size_t(j)]);
+      ++counters_.windows_tried;
+      const RigShape<M> shape = fit_rig_shape<M, kWindow>(prior_, w);
+      if (shape.made) {
+        shape_ = shape;
+        counters_.made_at_ns = t_ns;
+        for (int j = 0; j < M; ++j) {
+          const int id = common[std::size_t(pick[std::size_t(j)])];
+          track_of_label_[std::size_t(shape.label_of_track[std::size_t(j)])] = id;
+          for (Track& tr : tracks_)
+            if (tr.id == id) tr.label = shape.label_of_track[std::size_t(j)];
+        }
+        return;
+      }
+      ++counters_.windows_refused;
+      if (!next_combination(pick, nc)) return;
+    }
+  }
+
+  int label_ahead(int id) const {
+    for (int i = 0; i < M; ++i)
+      if (track_of_label_[std::size_t(i)] == id) return i;
+    return -1;
+  }
+
+  bool named(int label) const {
+    for (const Track& tr : tracks_)
+      if (tr.id >= 0 && tr.label == label) return true;
+    return false;
+  }
+
+  double flux_of(int id) const {
+    for (const Track& tr : tracks_)
+      if (tr.id == id) return tr.flux;
+    return 0.0;
+  }
+
+  // The next combination of M indices out of n, in lexicographic order.
+  static bool next_combination(std::array<int, M>& pick, int n) {
+    for (int j = M - 1; j >= 0; --j)
+      if (pick[std::size_t(j)] < n - M + j) {
+        ++pick[std::size_t(j)];
+        for (int k = j + 1; k < M; ++k) pick[std::size_t(k)] = pick[std::size_t(k - 1)] + 1;
+        return true;
+      }
+    return false;
+  }
+
+  RigGeometry<M> prior_;
+  double max_spread_px2_;
+  std::int64_t spacing_ns_;
+  std::array<Track, kMaxTracks> tracks_{};
+  std::array<int, kMaxBlobs> blob_track_{};   // per blob of the last frame, its track's slot
+  std::array<int, kMaxBlobs> blob_labels_{};  // per blob of the last frame, its track's name
+  int next_id_ = 0;
+  std::array<Snapshot, kWindow> ring_{};
+  int head_ = 0, snapshots_ = 0;
+  std::int64_t last_snapshot_ns_ = -(std::int64_t{1} << 62);
+  RigShape<M> shape_{};
+  std::array<int, M> track_of_label_ = no_tracks();
+  bool named_ahead_ = false;
+  ShapeBootstrapCounters counters_{};
+
+  static std::array<int, M> no_tracks() {
+    std::array<int, M> a{};
+    a.fill(-1);
+    return a;
+  }
+};
+
+}  // namespace mirrorcal::detection
