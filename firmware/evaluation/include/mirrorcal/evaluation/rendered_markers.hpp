@@ -24,10 +24,11 @@ void print_detection(const DetectionReport& d, hal::PixelFormat format);
 
 // The detection settings for frames drawn with the given renderer settings: its brightness
 // ratios are the identification's second cue; where they are all equal (identical LEDs), the
-// rig's shape bootstrapped from the priors' geometry (detection/shape_bootstrap.hpp) is.
+// rig's shape bootstrapped from the priors' geometry (detection/shape_bootstrap.hpp) is (prior:
+// needed for identical LEDs only).
 template <int M>
 detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
-                                               const detection::RigGeometry<M>& prior);
+                                               const detection::RigGeometry<M>& prior = {});
 
 // Identical LEDs: which track each name went to (ShapeBootstrap::track_of_label), all -1 for none.
 template <int M>
