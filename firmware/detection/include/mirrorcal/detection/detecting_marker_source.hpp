@@ -125,6 +125,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   hal::FrameSource& frames_;
   BlobDetector detector_;
   MarkerIdentifier<M> identifier_;
+  static_assert(ShapeBootstrap<M>::kMaxBlobs == MarkerIdentifier<M>::kMaxBlobs,
+                "the bootstrap names the identifier's blobs");
   bool bootstrap_shape_;
   ShapeBootstrap<M> bootstrap_;
   std::array<Blob, MarkerIdentifier<M>::kMaxBlobs> blobs_{};

@@ -352,8 +352,8 @@ RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& 
   for (int h = 0; h < kHypotheses; ++h)
     if (h != h_best) runner_up = std::min(runner_up, cost[std::size_t(h)]);
   best.naming_margin = runner_up - best.cost;
-  // One rig's reflections fit to their chi-square; a track that is no marker (a room light, a
-  // ghost taken for a reflection) does not (mean plus four standard deviations).
+  // One rig's reflections fit to their chi-square; a track that is no marker's (a room light
+  // drifting across the image) does not (mean plus four standard deviations).
   if (!(best.cost < best.dof + 4.0 * std::sqrt(2.0 * best.dof))) return best;
   d::Fit<M, K> final_fit = chosen;
   Eigen::Matrix<double, 3 * M, 3 * M> information;

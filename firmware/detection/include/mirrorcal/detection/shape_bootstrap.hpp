@@ -2,12 +2,12 @@
 // says which reflection is which marker. The reflections are tracked from frame to frame (nearest
 // neighbour, constant velocity); every `spacing` seconds the tracks' places are taken down; and
 // once kWindow such snapshots hold M tracks throughout, the rig's shape is fitted to them
-// (rig_shape.hpp). A set of tracks that is not one rig's reflections (a room light, a ghost, two
-// tracks swapped where reflections crossed) does not fit, and the next snapshot tries again. The
-// fit names its tracks, and a track keeps its name while it lives: the identifier's track cue
-// (marker_identifier.hpp) labels each frame's blobs by their tracks' names until the filter's
-// prediction is sharp. A new track takes the name the identifier gives its blob with the
-// prediction (confirm), if no live track holds it. Header-only; nothing allocates.
+// (rig_shape.hpp). A set of tracks that is not one rig's reflections (a room light drifting
+// across the image, two tracks swapped where reflections crossed) does not fit, and the next
+// snapshot tries again. The fit names its tracks, and a track keeps its name while it lives: the
+// identifier's track cue (marker_identifier.hpp) labels each frame's blobs by their tracks' names
+// until the filter's prediction is sharp. A new track takes the name the identifier gives its
+// blob with the prediction (confirm), if no live track holds it. Header-only; nothing allocates.
 #pragma once
 
 #include <algorithm>
