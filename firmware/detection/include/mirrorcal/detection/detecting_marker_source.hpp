@@ -28,11 +28,7 @@ struct DetectionConfig {
   RigGeometry<M> prior{};
   // With bootstrap_shape: the names an earlier look at the same frames gave its tracks
   // (ShapeBootstrap::track_of_label; all -1: none), so that they label from the first frame.
-  std::array<int, M> names_ahead = [] {
-    std::array<int, M> a{};
-    a.fill(-1);
-    return a;
-  }();
+  TrackNames<M> names_ahead = no_track_names<M>();
 };
 
 struct DetectionCounters {
@@ -52,11 +48,7 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
         identifier_(config.identify),
         bootstrap_shape_(config.bootstrap_shape),
         bootstrap_(config.prior, config.identify.max_spread_px2) {
-    for (const int id : config.names_ahead)
-      if (id >= 0) {
-        bootstrap_.name_ahead(config.names_ahead);
-        break;
-      }
+    bootstrap_.name_ahead(config.names_ahead);
   }
 
   hal::SourceStatus poll(MarkerFrame<M>& frame) override {

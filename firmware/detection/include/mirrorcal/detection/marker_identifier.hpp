@@ -187,13 +187,6 @@ class MarkerIdentifier {
   // The blob the last identify() labelled marker i with, or -1.
   int blob_of(int i) const { return labelled_[static_cast<std::size_t>(i)]; }
 
-  // The mirror's cue from now on, with this geometry (a shape fitted over frames:
-  // shape_bootstrap.hpp).
-  void use_geometry(const RigGeometry<M>& geometry) {
-    config_.geometry = geometry;
-    config_.use_geometry = true;
-  }
-
  private:
   bool single_spot(const Blob& b) const {
     return detection::single_spot(b, config_.max_spread_px2);

@@ -1,12 +1,11 @@
 // The rig's shape from its mirror images alone, for identical LEDs under loose priors. Over K
 // frames of the same M reflections, tracked from frame to frame but not yet named, the markers'
 // places in the camera frame and each frame's plane mirror are fitted jointly (bundle adjustment
-// over 3 M + 3 K unknowns). The mirror images fix the shape to millimetres where the priors knew it
-// to centimetres, but not its scale: the rig twice as large before a mirror twice as far looks the
-// same. The scale, and the names, come from the priors: the tracks are named by the permutation
-// whose scaled shape lies nearest the guesses. The per-frame mirror cue (mirror_fit.hpp) is scale
-// free, so the fitted shape then names the reflections in every frame. Header-only; nothing
-// allocates.
+// over 3 M + 3 K unknowns). The mirror images alone do not fix the rig's scale (the rig twice as
+// large before a mirror twice as far looks the same), nor which track is which marker: both come
+// from the priors' guesses. Each hypothesis of the names is fitted with its guesses as the prior,
+// and the likeliest names the tracks (shape_bootstrap.hpp keeps the names over frames).
+// Header-only; nothing allocates.
 #pragma once
 
 #include <algorithm>
@@ -31,7 +30,8 @@ struct TrackWindow {
 template <int M>
 struct RigShape {
   bool made = false;  // the fit converged and explains the tracks as one rig's reflections
-  // The fit's chi-square over its degrees of freedom (2 M K - 3 M - 3 K + 1, the scale fixed).
+  // The fit's chi-square (reprojections and the priors' term) and its degrees of freedom
+  // (2 M K - 3 K: 2 M K residuals and 3 M priors, less 3 M markers and 3 K mirrors).
   double cost = std::numeric_limits<double>::infinity();
   int dof = 0;
   // label_of_track[j]: the marker track j is, by the priors' guesses.

@@ -19,11 +19,20 @@
 
 namespace mirrorcal::detection {
 
+// Which track each name went to (track_of_label[i]: the track named i, by the order tracks are
+// started in), -1 for a name not given.
+template <int M>
+using TrackNames = std::array<int, M>;
+template <int M>
+TrackNames<M> no_track_names() {
+  TrackNames<M> t{};
+  t.fill(-1);
+  return t;
+}
+
 struct ShapeBootstrapCounters {
-  std::uint64_t windows_tried = 0;    // windows of tracks fitted
-  std::uint64_t windows_refused = 0;  // of those, not one rig's reflections
-  std::int64_t made_at_ns = -1;       // the frame whose window gave the shape (-1: not yet)
-  std::uint64_t names_confirmed = 0;  // tracks named later by the identifier's labels
+  std::uint64_t windows_tried = 0;  // windows of tracks fitted
+  std::int64_t made_at_ns = -1;     // the frame whose window gave the names (-1: not yet)
 };
 
 template <int M>
@@ -46,15 +55,16 @@ class ShapeBootstrap {
     blob_labels_.fill(-1);
   }
 
-  // The names an earlier look at the same frames gave (track_of_label[i]: the track named i, by
-  // the order tracks are started in; -1: none). Tracking the same frames starts the same tracks,
-  // so each is named from its first frame, where the look had to wait for its window to fill.
-  void name_ahead(const std::array<int, M>& track_of_label) {
+  // The names an earlier look at the same frames gave (none: no_track_names()). Tracking the same
+  // frames starts the same tracks, so each is named from its first frame, where the look had to
+  // wait for its window to fill.
+  void name_ahead(const TrackNames<M>& track_of_label) {
     track_of_label_ = track_of_label;
-    named_ahead_ = true;
+    named_ahead_ =
+        std::any_of(track_of_label.begin(), track_of_label.end(), [](int id) { return id >= 0; });
   }
   // The names given, as name_ahead() takes them.
-  const std::array<int, M>& track_of_label() const { return track_of_label_; }
+  const TrackNames<M>& track_of_label() const { return track_of_label_; }
   bool named() const { return shape_.made || named_ahead_; }
 
   // One frame's blobs (single spots only are tracked); until the shape is fitted, a window tried
@@ -81,7 +91,6 @@ class ShapeBootstrap {
       const int t = blob_track_[std::size_t(b)];
       if (t < 0 || tracks_[std::size_t(t)].label >= 0 || named(i)) continue;
       tracks_[std::size_t(t)].label = i;
-      ++counters_.names_confirmed;
     }
   }
 
@@ -228,7 +237,6 @@ class ShapeBootstrap {
         }
         return;
       }
-      ++counters_.windows_refused;
       if (!next_combination(pick, nc)) return;
     }
   }
@@ -273,15 +281,9 @@ class ShapeBootstrap {
   int head_ = 0, snapshots_ = 0;
   std::int64_t last_snapshot_ns_ = -(std::int64_t{1} << 62);
   RigShape<M> shape_{};
-  std::array<int, M> track_of_label_ = no_tracks();
+  TrackNames<M> track_of_label_ = no_track_names<M>();
   bool named_ahead_ = false;
   ShapeBootstrapCounters counters_{};
-
-  static std::array<int, M> no_tracks() {
-    std::array<int, M> a{};
-    a.fill(-1);
-    return a;
-  }
 };
 
 }  // namespace mirrorcal::detection

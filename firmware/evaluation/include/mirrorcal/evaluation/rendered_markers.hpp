@@ -30,15 +30,8 @@ template <int M>
 detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
                                                const detection::RigGeometry<M>& prior = {});
 
-// Identical LEDs: which track each name went to (ShapeBootstrap::track_of_label), all -1 for none.
-template <int M>
-using TrackNames = std::array<int, M>;
-template <int M>
-TrackNames<M> no_track_names() {
-  TrackNames<M> t{};
-  t.fill(-1);
-  return t;
-}
+using detection::no_track_names;
+using detection::TrackNames;
 
 // The marker source of a run with frames: renders frame after frame and detects the markers in
 // them; the loop relabels each with its prediction (give it this object with set_identifier),
