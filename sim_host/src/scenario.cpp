@@ -119,10 +119,18 @@ class Draw {
   double normal(double sigma) { return sigma * std::normal_distribution<double>()(rng_); }
   bool chance(double p) { return uniform(0.0, 1.0) < p; }
   double phase() { return uniform(0.0, 2.0 * M_PI); }
+  // The draws of a vector or quaternion are sequenced, last coordinate first: a function's
+  // arguments are evaluated in an unspecified order (GCC's last first, clang's first first), and
+  // the random family's rigs must not depend on the compiler. Last first keeps the rigs every
+  // committed figure was measured on.
   // A rotation uniform over SO(3): a unit quaternion from four normal draws.
   Eigen::Quaterniond rotation() {
-    Eigen::Quaterniond q(normal(1.0), normal(1.0), normal(1.0), normal(1.0));
-    return q.normalized();
+    const double z = normal(1.0), y = normal(1.0), x = normal(1.0), w = normal(1.0);
+    return Eigen::Quaterniond(w, x, y, z).normalized();
+  }
+  Eigen::Vector3d uniform3(double lo, double hi) {
+    const double z = uniform(lo, hi), y = uniform(lo, hi), x = uniform(lo, hi);
+    return {x, y, z};
   }
 
  private:
@@ -169,7 +177,7 @@ Scenario random_scenario(std::uint64_t seed, int markers) {
 
   Rig& r = s.truth;
   r.q_b_c = d.rotation();
-  r.p_b_c = Eigen::Vector3d(d.uniform(-0.08, 0.08), d.uniform(-0.08, 0.08), d.uniform(-0.08, 0.08));
+  r.p_b_c = d.uniform3(-0.08, 0.08);
   r.markers = draw_markers(d, markers);
   r.width = 640;
   r.height = 480;
