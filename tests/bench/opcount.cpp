@@ -67,8 +67,10 @@ constexpr unsigned char kPaint = 0xA5;
 [[gnu::noinline]] std::uintptr_t paint_stack() {
   unsigned char region[kProbeBytes];
   std::memset(region, kPaint, sizeof region);
-  asm volatile("" : : "r"(region) : "memory");  // the painting must happen
-  return reinterpret_cast<std::uintptr_t>(region);
+  // The painting must happen; the address leaves as a number (the region is dead by then).
+  std::uintptr_t address = reinterpret_cast<std::uintptr_t>(region);
+  asm volatile("" : "+r"(address) : : "memory");
+  return address;
 }
 
 [[gnu::noinline]] std::size_t stack_used_since(std::uintptr_t painted) {

@@ -21,7 +21,6 @@ namespace mirrorcal {
 namespace {
 
 constexpr int kCalibrationStates = MirrorState<double, 3, 0>::kCalibrationDim;  // 16
-constexpr int kScaleMisalignment = imu_intrinsics_dim(ImuModel::kScaleMisalignment);
 
 int rigs(int by_default) {
   const char* n = std::getenv("MIRRORCAL_NOISE_RIGS");
@@ -229,6 +228,8 @@ TEST(NoiseEstimation, FourRigsToldTheWrongNoiseCalibrateConsistently) {
 }
 
 #else
+
+constexpr int kScaleMisalignment = imu_intrinsics_dim(ImuModel::kScaleMisalignment);
 
 // Sixteen rigs of the random family told 0.5-5 times their noise (seeds 101-116: not those the
 // figures were measured on): with the noise estimated, consistent.

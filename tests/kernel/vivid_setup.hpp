@@ -43,15 +43,30 @@ inline std::uint32_t find_control(int fd, const char* name) {
   return 0;
 }
 
+// 640x480p59.94. The kernel's macro mixes designated and positional initializers: valid C, an
+// extension in C++ that clang warns of.
+inline v4l2_dv_timings vga_timings() {
+#ifdef __clang__
+#pragma clang diagnostic push
+#pragma clang diagnostic ignored "-Wc99-designator"
+#pragma clang diagnostic ignored "-Wmissing-field-initializers"
+#endif
+  v4l2_dv_timings timings = V4L2_DV_BT_CEA_640X480P59_94;
+#ifdef __clang__
+#pragma clang diagnostic pop
+#endif
+  return timings;
+}
+
 // Same DV timings (640x480p59.94) on both nodes, text off, loop on (or not), drops as asked:
 // before any stream starts.
 inline bool configure_vivid(bool loop, int percent_dropped) {
   const int cap = open(kVividCapture, O_RDWR);
   const int out = open(kVividOutput, O_RDWR);
   bool ok = GUEST_CHECK(cap >= 0 && out >= 0);
-  v4l2_dv_timings timings = V4L2_DV_BT_CEA_640X480P59_94;
+  v4l2_dv_timings timings = vga_timings();
   ok = ok && GUEST_CHECK(ioctl(cap, VIDIOC_S_DV_TIMINGS, &timings) == 0);
-  timings = V4L2_DV_BT_CEA_640X480P59_94;
+  timings = vga_timings();
   ok = ok && GUEST_CHECK(ioctl(out, VIDIOC_S_DV_TIMINGS, &timings) == 0);
   ok = ok && GUEST_CHECK(set_control(cap, kOsdTextMode, 2));
   ok = ok && GUEST_CHECK(set_control(cap, kLoopVideo, loop ? 1 : 0));
