@@ -520,8 +520,10 @@ void carry_estimate(const CalibrationConfig& config, const CalibrationRun<M, NK,
 
 // The free passes: passes.min of them, and more while the last gated too many (Passes); each
 // after the first starts where the one before ended (carry_estimate), and so would the next.
+// Not inlined, nor are refine and check_ideal_imu: inlined into run_loop, their matrices shared
+// one stack frame (clang: 52.8 KB at M = 3; the stack_frames test holds every frame within 64 KiB).
 template <int M, int NK, int NI>
-CalibrationRun<M, NK, NI> free_passes(
+[[gnu::noinline]] CalibrationRun<M, NK, NI> free_passes(
     const CalibrationConfig& config,
     const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
     const typename CalibrationRun<M, NK, NI>::State* truth,
@@ -683,14 +685,19 @@ std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
 // linearised one's) and their estimate lies further from the truth than the data allow. How
 // much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
 template <int M, int NK, int NI>
-void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK, NI>::State& x0,
-            const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0, const LoopData& data,
-            const typename CalibrationRun<M, NK, NI>::State* truth,
-            const std::function<LoopHooks<M>(int pass)>& hooks,
-            typename CalibrationRun<M, NK, NI>::State& start, CalibrationRun<M, NK, NI>& run) {
+[[gnu::noinline]] void refine(const CalibrationConfig& config,
+                              const typename CalibrationRun<M, NK, NI>::State& x0,
+                              const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                              const LoopData& data,
+                              const typename CalibrationRun<M, NK, NI>::State* truth,
+                              const std::function<LoopHooks<M>(int pass)>& hooks,
+                              typename CalibrationRun<M, NK, NI>::State& start,
+                              CalibrationRun<M, NK, NI>& run) {
   using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int B = State::kCalibrationBegin;
-  const typename CalibrationRun<M, NK, NI>::Filter::Covariance own = run.covariance;
+  // The free passes' variances, for sigma_ratio (the diagonal alone: a covariance is 29 KB at M =
+  // 6).
+  const Eigen::Matrix<double, State::kDim, 1> own = run.covariance.diagonal();
   const int free_passes = run.result.passes;
   // Their markers come from where the passes' did (rendered frames through detection with
   // sim --frames): hooks numbered on from the passes'.
@@ -744,7 +751,7 @@ void refine(const CalibrationConfig& config, const typename CalibrationRun<M, NK
   if (taken) step(tangent);
   double lowest = INFINITY;
   for (int i = B; i < State::kDim; ++i)
-    lowest = std::min(lowest, std::sqrt(own(i, i) / run.covariance(i, i)));
+    lowest = std::min(lowest, std::sqrt(own(i) / run.covariance(i, i)));
   run.result.sigma_ratio = lowest;
 }
 
@@ -843,13 +850,12 @@ bool wald_statistic(const CalibrationRun<M, 0, NI>& check,
 // beyond a 99.9 % bound: its covariance over-confident) nor a pass along the ideal model's own
 // trajectory (1 % lost its way; on MEMS rigs the refinement took no step to linearise along) did.
 template <int M>
-void check_ideal_imu(const CalibrationConfig& config,
-                     const typename CalibrationRun<M, 0, 0>::State& x0,
-                     const typename CalibrationRun<M, 0, 0>::Filter::Covariance& p0,
-                     const CalibrationRun<M, 0, 0>& run,
-                     const typename CalibrationRun<M, 0, 0>::State& start, const LoopData& data,
-                     const std::function<LoopHooks<M>(int pass)>& hooks,
-                     const ImuIntrinsicsSigma& tolerances, IdealImuCheck& out) {
+[[gnu::noinline]] void check_ideal_imu(
+    const CalibrationConfig& config, const typename CalibrationRun<M, 0, 0>::State& x0,
+    const typename CalibrationRun<M, 0, 0>::Filter::Covariance& p0,
+    const CalibrationRun<M, 0, 0>& run, const typename CalibrationRun<M, 0, 0>::State& start,
+    const LoopData& data, const std::function<LoopHooks<M>(int pass)>& hooks,
+    const ImuIntrinsicsSigma& tolerances, IdealImuCheck& out) {
   constexpr int NI = imu_intrinsics_dim(ImuModel::kScaleMisalignment);
   using Run = CalibrationRun<M, 0, NI>;
   typename CalibrationRun<M, 0, 0>::State from = run.history.back().state;
