@@ -1075,10 +1075,6 @@ TEST(Cli, ARunThatUsedFewOfTheMarkersObservedIsFlagged) {
   ASSERT_EQ(mc::calibration::result_warnings(r).size(), 1u);
 }
 
-// A refinement whose last Gauss-Newton step still moved the calibration far, in its own sigmas,
-// has not converged: its estimate and sigmas are not to be trusted (sim_run.cpp measures the step;
-// runs 78, 71 and 132 of `montecarlo --scenario random --seed 3` end with steps of 70, 2800
-// and 6400 sigmas).
 // Detection that saw blobs but told few markers apart is named as the cause, first, whatever else
 // the self-check then finds (its advice would send the user the wrong way); many spare blobs
 // beside well-labelled markers (room lights, ghosts) or an empty view are not this.
@@ -1168,6 +1164,10 @@ TEST(Cli, WrongBlobsInARecordingAreWithheldAndCounted) {
   }
 }
 
+// A refinement whose last Gauss-Newton step still moved the calibration far, in its own sigmas,
+// has not converged: its estimate and sigmas are not to be trusted (calibration/src/run.cpp
+// measures the step; runs 78, 71 and 132 of `montecarlo --scenario random --seed 3` end with steps
+// of 70, 2800 and 6400 sigmas).
 TEST(Cli, ARefinementThatHasNotConvergedIsFlagged) {
   mc::calibration::CalibrationResult r;
   r.markers_observed = r.markers_used = 8700;

@@ -157,7 +157,7 @@ TEST(FrameStores, TheCalibrationIsTheSameThroughTheFileAsInMemory) {
 }
 
 // A recording three times as long calibrates in nearly the same memory: what is kept per frame,
-// the history and the report's series and residuals too (calibration_report.hpp), is in temporary
+// the history and the report's series and residuals too (report.hpp), is in temporary
 // files, and the report's medians are found in passes over them (kth_smallest). With the report's
 // series in memory (0.56 KB a frame measured: 7.1 MB for 15 s of the paper scenario, 10.6 MB for
 // 120 s) the 2400 frames (60 Hz) the long recording has more took about 1.3 MB more; before the

@@ -683,7 +683,7 @@ std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
 // linearised along the estimates they passed through, and where those were far off, their
 // covariance holds information the data do not (random family: sigmas down to a third of the
 // linearised one's) and their estimate lies further from the truth than the data allow. How
-// much smaller the free passes' sigmas were is the self-check's sigma_ratio (outputs.hpp).
+// much smaller the free passes' sigmas were is the self-check's sigma_ratio (result.hpp).
 template <int M, int NK, int NI>
 [[gnu::noinline]] void refine(const CalibrationConfig& config,
                               const typename CalibrationRun<M, NK, NI>::State& x0,

@@ -86,7 +86,7 @@ class CalibrationFilter {
   }
   // The states to linearise frames at (linearise_along): count() points, the k-th for the frame
   // stamped stamp(k), stamps increasing. The filter asks for them in increasing k only, so that
-  // they can be read from a file as they are needed (sim_run.cpp).
+  // they can be read from a file as they are needed (calibration/src/run.cpp).
   class LinearisationPoints {
    public:
     virtual ~LinearisationPoints() = default;
@@ -111,8 +111,8 @@ class CalibrationFilter {
   // becomes the Kalman filter of the measurements linearised along that trajectory, whose final
   // estimate of the constant calibration is the batch solution of the linearised problem and
   // whose covariance is what the data hold along the trajectory, whatever estimates it passed
-  // through (a Gauss-Newton step over the whole recording; sim_run.hpp). points must outlive the
-  // filter's updates.
+  // through (a Gauss-Newton step over the whole recording; calibration/run.hpp). points must
+  // outlive the filter's updates.
   void linearise_along(LinearisationPoints* points) {
     along_ = points;
     along_arrays_ = false;
@@ -141,12 +141,12 @@ class CalibrationFilter {
 
   const State& state() const { return filter_.mean(); }
   // The estimate the latest update started from: the state before its frame, which holds none of
-  // that frame's noise (the point to linearise that frame at again: sim_run.cpp).
+  // that frame's noise (the point to linearise that frame at again: calibration/src/run.cpp).
   const State& predicted() const { return predicted_; }
 
-  // What a smoother over a pass needs (sim_run.cpp), kept when keep_motion_steps(true): from the
-  // update before the latest to the latest, the motion block's transition (the product of the
-  // predicts' F; zero across a restart) and its covariance before the latest update. Off by
+  // What a smoother over a pass needs (calibration/src/run.cpp), kept when keep_motion_steps(true):
+  // from the update before the latest to the latest, the motion block's transition (the product of
+  // the predicts' F; zero across a restart) and its covariance before the latest update. Off by
   // default: the board's loop does not pay the 15x15 product per predict.
   static constexpr int kMotionDim = State::kDynamicDim;
   using MotionMatrix = Eigen::Matrix<S, kMotionDim, kMotionDim>;

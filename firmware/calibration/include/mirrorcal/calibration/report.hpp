@@ -1,5 +1,5 @@
 // The report a user judges a calibration by, without ground truth. report.txt opens with the
-// verdict (the calibration, its sigmas, and whether the self-check of outputs.hpp trusts it), then
+// verdict (the calibration, its sigmas, and whether the self-check of result.hpp trusts it), then
 // the reprojection residuals, the normalised innovation squared against its chi-square band, the
 // IMU biases and the excitation the data had; report.html holds the same text and its plots
 // (base64 PNG: one self-contained file); residuals.csv the residuals the statistics are of.

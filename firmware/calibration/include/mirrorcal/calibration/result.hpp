@@ -42,7 +42,7 @@ struct CalibrationResult {
   // the refinement found it an outlier at its converged solution (run.cpp, find_outliers).
   std::vector<std::uint64_t> markers_screened;
   std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
-  int passes = 1;                     // passes over the data (sim_run.hpp)
+  int passes = 1;                     // passes over the data (run.hpp)
   bool from_untrusted = false;  // started from an earlier calibration that said consistent: false
   // The IMU model of the calibration it started from (--from): one with intrinsics found the IMU
   // a MEMS part, which a calibration assuming an ideal IMU (stage 2) cannot account for.
@@ -53,10 +53,10 @@ struct CalibrationResult {
   double nis_per_dof = 0.0;
   std::uint64_t nis_dof = 0;
   // The smallest ratio, over the calibration states, of the filter's own sigma to the reported
-  // one, linearised along the final estimate (sim_run.cpp): about 1 when the filter's path left
+  // one, linearised along the final estimate (run.cpp): about 1 when the filter's path left
   // no false information.
   double sigma_ratio = 1.0;
-  // The last Gauss-Newton step of the refinement (sim_run.cpp), the distance it moved the
+  // The last Gauss-Newton step of the refinement (run.cpp), the distance it moved the
   // calibration in the reported covariance's sigmas (Mahalanobis): well under one when the
   // iteration has converged; 0 without a refinement.
   double refinement_step_sigmas = 0.0;
@@ -117,7 +117,7 @@ inline double estimated_camera_parameter(const CalibrationResult& r, int j) {
 // likely locked onto a wrong solution: after two passes, 3 of 100 one-stage runs with intrinsics
 // guesses 100 px off (161, 465 and 3783 gated) and run 11 of the frames campaign (64, NEES 322)
 // did, against at most 20 in the 400 good runs of the campaigns. Such a pass is followed by another
-// (sim_run.hpp, Passes), which brought all four back; a result that still gated too many is
+// (run.hpp, Passes), which brought all four back; a result that still gated too many is
 // flagged.
 constexpr double kSuspectGatedFraction = 0.005;
 // More than kSuspectGatedFraction of the markers offered to the filter were gated or could not be
@@ -127,7 +127,7 @@ bool gated_too_many(const CalibrationResult& r);
 // innovation squared per degree of freedom above 1 + max(kSuspectNisExcess, 5 sqrt(2 / dof)) (a
 // consistent filter's is within a few hundredths of 1, a little below it as the gate cuts the
 // tail: 0.97-1.03 over the paper campaign's 100 runs). It catches runs locked onto a wrong
-// solution (over 200 rigs of the random family, before the Gauss-Newton step of sim_run.cpp: 6 of
+// solution (over 200 rigs of the random family, before the Gauss-Newton step of run.cpp: 6 of
 // the 8 runs worse than 10 sigma), not merely over-confident ones, which fit as well as good runs.
 constexpr double kSuspectNisExcess = 0.05;
 bool innovations_too_large(const CalibrationResult& r);

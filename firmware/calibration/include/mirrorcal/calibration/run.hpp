@@ -140,9 +140,9 @@ constexpr int kMaxPasses = 4;
 // hold-skew run that used no marker, then converge (NEES 1.2-4.6 of 16-21 states at 8x and 16x;
 // not at 3x).
 constexpr double kAnnealedPixelNoise = 10.0;
-// The stretch of data a later pass's IMU start is found from (sim_run.cpp, imu_start_from): up to
+// The stretch of data a later pass's IMU start is found from (run.cpp, imu_start_from): up to
 // the kImuStartFrames-th frame with markers, at most kImuStartMaxS seconds.
-// Gauss-Newton refinements after the passes (sim_run.cpp): each a tracking pass along the estimate,
+// Gauss-Newton refinements after the passes (run.cpp): each a tracking pass along the estimate,
 // smoothed, and a pass linearised along it, repeated until a step moves the calibration by less
 // than kConvergedStepSigmas of its sigmas (Mahalanobis), at most kMaxRefinements times. A second
 // step moves the linearisation point from the free passes' estimate to the first step's solution:

@@ -18,7 +18,7 @@ using calibration::LoopData;
 using calibration::Passes;
 
 // mirrorcal sim --frames: find the markers in rendered frames with the board's detection code
-// (sim_frames.hpp) instead of taking the listed reflections. By default the frames carry the
+// (rendered_markers.hpp) instead of taking the listed reflections. By default the frames carry the
 // scenario's pixel noise (each spot drawn displaced by it, as the listed reflections are) and the
 // filter assumes it: the paper's scenario with detection and identification in the loop.
 struct FrameMode {
