@@ -41,8 +41,8 @@ int largest_axis(const Eigen::Vector3d& d) {
 }
 
 // The IMU group of an intrinsic: D_a's entries the accelerometer's, D_g's the gyroscope's, T_s's
-// the g-sensitivity's.
-FeedbackGroup imu_group(ImuIntrinsics<double>::Matrix m) {
+// the g-sensitivity's. Unused in a build with the ideal IMU's model only.
+[[maybe_unused]] FeedbackGroup imu_group(ImuIntrinsics<double>::Matrix m) {
   return m == ImuIntrinsics<double>::kDa   ? FeedbackGroup::kAccelerometer
          : m == ImuIntrinsics<double>::kDg ? FeedbackGroup::kGyroscope
                                            : FeedbackGroup::kGSensitivity;
