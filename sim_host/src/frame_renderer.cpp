@@ -114,11 +114,15 @@ void FrameRenderer::finish(std::uint64_t frame_index, std::uint8_t* image) {
 
 void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::uint8_t* image,
                            RenderedTruth& truth) {
-  draw_scene_spots(t_ns, truth);
+  std::uint32_t lit = ~std::uint32_t{0};
+  const int m = static_cast<int>(scenario_.truth.markers.size());
+  const int dark = config_.blink.dark_marker(static_cast<std::uint32_t>(frame_index), m);
+  if (dark >= 0) lit &= ~(std::uint32_t{1} << dark);
+  draw_scene_spots(t_ns, lit, truth);
   finish(frame_index, image);
 }
 
-void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
+void FrameRenderer::draw_scene_spots(std::int64_t t_ns, std::uint32_t lit, RenderedTruth& truth) {
   drawn_.clear();
   const auto m = scenario_.truth.markers.size();
   truth.t_ns = t_ns;
@@ -131,7 +135,7 @@ void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
   for (std::size_t i = 0; i < m; ++i) {
     const double du = n01(rng), dv = n01(rng);
     Eigen::Vector2d uv;
-    if (!true_pixel(scenario_, t_ns, static_cast<int>(i), uv)) continue;
+    if ((lit >> i & 1u) == 0 || !true_pixel(scenario_, t_ns, static_cast<int>(i), uv)) continue;
     uv += config_.spot_noise_px * Eigen::Vector2d(du, dv);
     truth.visible[i] = true;
     truth.uv[i] = uv;
@@ -141,7 +145,7 @@ void FrameRenderer::draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth) {
 }
 
 void FrameRenderer::update_spots(std::int64_t t_ns, const std::uint8_t* still, std::uint8_t* image,
-                                 RenderedTruth& truth) {
+                                 RenderedTruth& truth, std::uint32_t lit) {
   const int step = hal::bytes_per_pixel(config_.format);
   const auto stride = static_cast<std::size_t>(bytes_per_line());
   for (const Window& w : drawn_)
@@ -151,7 +155,7 @@ void FrameRenderer::update_spots(std::int64_t t_ns, const std::uint8_t* still, s
       std::copy(still + at, still + at + static_cast<std::size_t>((w.x1 - w.x0 + 1) * step),
                 image + at);
     }
-  draw_scene_spots(t_ns, truth);
+  draw_scene_spots(t_ns, lit, truth);
   // Spots that overlap are summed in the canvas: write each window once, then clear them all.
   for (const Window& w : drawn_)
     for (int y = w.y0; y <= w.y1; ++y)

@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "mirrorcal/hal/blink_code.hpp"
 #include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
 
@@ -26,6 +27,9 @@ struct RenderConfig {
   // projection by a fresh normal draw per frame (the same whenever that frame is drawn again), as
   // the listed reflections carry the scenario's pixel noise. 0: spots at the true projections.
   double spot_noise_px = 0.0;
+  // LEDs that blink their names: marker i is not drawn in the frames the code darkens it in (the
+  // frame index is the code's sequence number).
+  hal::BlinkCode blink{};
 };
 
 // What was drawn in one frame: the pixel each marker's spot was drawn at, if it is in the image
@@ -59,9 +63,10 @@ class FrameRenderer {
   // For feeders that must keep up with a real clock on a slow machine: the spots of the scene at
   // t_ns drawn into image over `still`, a frame rendered with no spots in view (the same size and
   // format), touching only the pixels around the spots; those around the previous call's spots
-  // are restored from `still` first. The noise is the still frame's, frozen.
+  // are restored from `still` first. The noise is the still frame's, frozen. lit: bit i set for
+  // each marker whose LED is on (LED lines read back from the board).
   void update_spots(std::int64_t t_ns, const std::uint8_t* still, std::uint8_t* image,
-                    RenderedTruth& truth);
+                    RenderedTruth& truth, std::uint32_t lit = ~std::uint32_t{0});
 
  private:
   struct Window {
@@ -69,9 +74,9 @@ class FrameRenderer {
   };
   // The pixels a spot at (u, v) reaches (its PSF to 4 sigma), clipped to the image.
   Window spot_window(double u, double v) const;
-  // Adds the spots of the scene at t_ns to the canvas, says where they are in truth, and keeps
-  // their windows in drawn_.
-  void draw_scene_spots(std::int64_t t_ns, RenderedTruth& truth);
+  // Adds the spots of the scene at t_ns of the markers lit (bit i: marker i) to the canvas, says
+  // where they are in truth, and keeps their windows in drawn_.
+  void draw_scene_spots(std::int64_t t_ns, std::uint32_t lit, RenderedTruth& truth);
 
   const Scenario& scenario_;
   RenderConfig config_;

@@ -8,6 +8,7 @@
 #include <array>
 #include <chrono>
 
+#include "mirrorcal/detection/blink_names.hpp"
 #include "mirrorcal/detection/blob_detector.hpp"
 #include "mirrorcal/detection/marker_identifier.hpp"
 #include "mirrorcal/detection/shape_bootstrap.hpp"
@@ -29,6 +30,9 @@ struct DetectionConfig {
   // With bootstrap_shape: the names an earlier look at the same frames gave its tracks
   // (ShapeBootstrap::track_of_label; all -1: none), so that they label from the first frame.
   TrackNames<M> names_ahead = no_track_names<M>();
+  // LEDs that blink their names (hal/blink_code.hpp), on the frames' sequence numbers: each
+  // track is named by the frames it goes dark in (blink_names.hpp), in place of the bootstrap.
+  hal::BlinkCode blink{};
 };
 
 struct DetectionCounters {
@@ -46,8 +50,10 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
       : frames_(frames),
         detector_(config.blobs, max_width, max_height),
         identifier_(config.identify),
-        bootstrap_shape_(config.bootstrap_shape),
-        bootstrap_(config.prior, config.identify.max_spread_px2) {
+        bootstrap_shape_(config.bootstrap_shape && !config.blink.on()),
+        bootstrap_(config.prior, config.identify.max_spread_px2),
+        blink_on_(config.blink.on()),
+        blink_(config.blink, config.identify.max_spread_px2) {
     bootstrap_.name_ahead(config.names_ahead);
   }
 
@@ -63,8 +69,10 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
     const auto t0 = std::chrono::steady_clock::now();
     blob_count_ = detector_.detect(view, blobs_.data(), static_cast<int>(blobs_.size()));
     if (bootstrap_shape_) bootstrap_.feed(view.t_ns, blobs_.data(), blob_count_);
+    if (blink_on_) blink_.feed(view.t_ns, view.sequence, blobs_.data(), blob_count_);
     committed_ += last_;  // the previous frame's labelling is final now
-    last_ = identifier_.identify(blobs_.data(), blob_count_, nullptr, frame, track_labels());
+    last_ = identifier_.identify(blobs_.data(), blob_count_, nullptr, frame, track_labels(),
+                                 dark_marker());
     frame.t_ns = view.t_ns;
     const double seconds = seconds_since(t0);
     last_detection_ns_ = static_cast<std::int64_t>(seconds * 1e9);
@@ -75,7 +83,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
 
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override {
     const auto t0 = std::chrono::steady_clock::now();
-    last_ = identifier_.identify(blobs_.data(), blob_count_, &prediction, frame, track_labels());
+    last_ = identifier_.identify(blobs_.data(), blob_count_, &prediction, frame, track_labels(),
+                                 dark_marker());
     if (bootstrap_shape_) {
       std::array<int, M> blob_of_marker;
       for (int i = 0; i < M; ++i) blob_of_marker[std::size_t(i)] = identifier_.blob_of(i);
@@ -99,6 +108,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   hal::FrameCounters frame_counters() const { return frames_.counters(); }
   // The shape's bootstrap and the tracks' names, with bootstrap_shape.
   const ShapeBootstrap<M>& bootstrap() const { return bootstrap_; }
+  // The blink code's names, with DetectionConfig::blink.
+  const BlinkNames<M>& blink_names() const { return blink_; }
   // The image of the last frame delivered (record --images keeps it), valid until the next poll.
   const hal::FrameView& last_frame() const { return last_view_; }
   // The blobs of the last frame (for diagnostics and tests).
@@ -108,7 +119,11 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   }
 
  private:
-  const int* track_labels() const { return bootstrap_shape_ ? bootstrap_.blob_labels() : nullptr; }
+  const int* track_labels() const {
+    if (blink_on_) return blink_.blob_labels();
+    return bootstrap_shape_ ? bootstrap_.blob_labels() : nullptr;
+  }
+  int dark_marker() const { return blink_on_ ? blink_.dark_marker() : -1; }
 
   static double seconds_since(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -121,6 +136,8 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
                 "the bootstrap names the identifier's blobs");
   bool bootstrap_shape_;
   ShapeBootstrap<M> bootstrap_;
+  bool blink_on_;
+  BlinkNames<M> blink_;
   std::array<Blob, MarkerIdentifier<M>::kMaxBlobs> blobs_{};
   int blob_count_ = 0;
   hal::FrameView last_view_{};

@@ -96,9 +96,11 @@ class MarkerIdentifier {
 
   // Labels blobs[0..n) into frame (seen/uv; t_ns is the caller's) and says what it met.
   // prediction may be null: then brightness alone decides. track_labels, if given, names each
-  // blob by its track (a marker, or -1).
+  // blob by its track (a marker, or -1). dark_marker: a marker whose LED the blink code darkened
+  // in this frame (hal/blink_code.hpp), which no blob is labelled as; -1: none.
   IdentifierCounters identify(const Blob* blobs, int n, const hal::MarkerPrediction<M>* prediction,
-                              MarkerFrame<M>& frame, const int* track_labels = nullptr) {
+                              MarkerFrame<M>& frame, const int* track_labels = nullptr,
+                              int dark_marker = -1) {
     IdentifierCounters counters;
     counters.frames = 1;
     frame.seen.fill(false);
@@ -110,6 +112,7 @@ class MarkerIdentifier {
     std::array<bool, M> crossing{};
     for (int i = 0; i < M; ++i) {
       count_[i] = 0;
+      if (i == dark_marker) continue;
       const bool predicted =
           prediction == nullptr || prediction->valid[static_cast<std::size_t>(i)];
       if (!predicted) {

@@ -1,6 +1,6 @@
 // Identical LEDs under loose priors: before the filter's prediction is sharp, no single frame
-// says which reflection is which marker. The reflections are tracked from frame to frame (nearest
-// neighbour, constant velocity); every `spacing` seconds the tracks' places are taken down; and
+// says which reflection is which marker. The reflections are tracked from frame to frame
+// (blob_tracker.hpp); every `spacing` seconds the tracks' places are taken down; and
 // once kWindow such snapshots hold M tracks throughout, the rig's shape is fitted to them
 // (rig_shape.hpp). A set of tracks that is not one rig's reflections (a room light drifting
 // across the image, two tracks swapped where reflections crossed) does not fit, and the next
@@ -15,6 +15,7 @@
 #include <cstdint>
 
 #include "mirrorcal/detection/blob_detector.hpp"
+#include "mirrorcal/detection/blob_tracker.hpp"
 #include "mirrorcal/detection/rig_shape.hpp"
 
 namespace mirrorcal::detection {
@@ -39,8 +40,8 @@ template <int M>
 class ShapeBootstrap {
  public:
   static constexpr int kWindow = 16;
-  static constexpr int kMaxTracks = 12;
-  static constexpr int kMaxBlobs = 32;
+  static constexpr int kMaxTracks = BlobTracker::kMaxTracks;
+  static constexpr int kMaxBlobs = BlobTracker::kMaxBlobs;
   // Combinations of M among the snapshots' common tracks tried per window, brightest first.
   static constexpr int kMaxSubsets = 20;
 
@@ -49,9 +50,8 @@ class ShapeBootstrap {
   // turn between them for the shape to be seen).
   ShapeBootstrap(const RigGeometry<M>& prior, double max_spread_px2, double spacing_s = 0.5)
       : prior_(prior),
-        max_spread_px2_(max_spread_px2),
+        tracker_(max_spread_px2),
         spacing_ns_(static_cast<std::int64_t>(spacing_s * 1e9)) {
-    blob_track_.fill(-1);
     blob_labels_.fill(-1);
   }
 
@@ -70,15 +70,12 @@ class ShapeBootstrap {
   // One frame's blobs (single spots only are tracked); until the shape is fitted, a window tried
   // at each snapshot. Then blob_labels() names this frame's blobs by their tracks.
   void feed(std::int64_t t_ns, const Blob* blobs, int n) {
-    track(t_ns, blobs, n);
+    tracker_.track(t_ns, blobs, n, [this](int id) { return named_ahead_ ? label_ahead(id) : -1; });
     if (!named() && t_ns - last_snapshot_ns_ >= spacing_ns_) {
       take_snapshot(t_ns);
       if (snapshots_ >= kWindow) try_window(t_ns);
     }
-    for (int b = 0; b < kMaxBlobs; ++b) {
-      const int t = blob_track_[std::size_t(b)];
-      blob_labels_[std::size_t(b)] = b < n && t >= 0 ? tracks_[std::size_t(t)].label : -1;
-    }
+    tracker_.blob_labels(n, blob_labels_.data());
   }
 
   // The identifier's labels of the last frame fed (blob_of_marker[i]: marker i's blob, or -1):
@@ -88,9 +85,9 @@ class ShapeBootstrap {
     for (int i = 0; i < M; ++i) {
       const int b = blob_of_marker[std::size_t(i)];
       if (b < 0 || b >= kMaxBlobs) continue;
-      const int t = blob_track_[std::size_t(b)];
-      if (t < 0 || tracks_[std::size_t(t)].label >= 0 || named(i)) continue;
-      tracks_[std::size_t(t)].label = i;
+      const int t = tracker_.track_of_blob(b);
+      if (t < 0 || tracker_.tracks()[std::size_t(t)].label >= 0 || tracker_.named(i)) continue;
+      tracker_.tracks()[std::size_t(t)].label = i;
     }
   }
 
@@ -100,86 +97,17 @@ class ShapeBootstrap {
   const ShapeBootstrapCounters& counters() const { return counters_; }
 
  private:
-  struct Track {
-    int id = -1;  // -1: free
-    Eigen::Vector2d uv = Eigen::Vector2d::Zero(), velocity = Eigen::Vector2d::Zero();
-    double flux = 0.0;
-    int missed = 0;  // frames since last seen
-    std::int64_t t_ns = 0;
-    int label = -1;  // the marker it is, once named
-  };
   struct Snapshot {
     int n = 0;
     std::array<int, kMaxTracks> id{};
     std::array<Eigen::Vector2d, kMaxTracks> uv{};
   };
 
-  // Greedy nearest-neighbour association on the tracks' predicted places: the closest pairs
-  // first, within a gate that widens with the track's speed. Unmatched blobs start tracks; a
-  // track missed for three frames ends.
-  void track(std::int64_t t_ns, const Blob* blobs, int n) {
-    n = std::min(n, kMaxBlobs);
-    std::array<bool, kMaxBlobs> taken{};
-    blob_track_.fill(-1);
-    std::array<bool, kMaxTracks> matched{};
-    for (;;) {
-      double best = 0.0;
-      int bt = -1, bb = -1;
-      for (int t = 0; t < kMaxTracks; ++t) {
-        const Track& tr = tracks_[std::size_t(t)];
-        if (tr.id < 0 || matched[std::size_t(t)]) continue;
-        const double dt = 1e-9 * static_cast<double>(t_ns - tr.t_ns);
-        const Eigen::Vector2d predicted = tr.uv + dt * tr.velocity;
-        const double gate = 15.0 + 0.5 * dt * tr.velocity.norm();
-        for (int b = 0; b < n; ++b) {
-          if (taken[std::size_t(b)] || !single_spot(blobs[b], max_spread_px2_)) continue;
-          const double d = (Eigen::Vector2d(blobs[b].u, blobs[b].v) - predicted).norm();
-          if (d < gate && (bt < 0 || d < best)) {
-            best = d;
-            bt = t;
-            bb = b;
-          }
-        }
-      }
-      if (bt < 0) break;
-      Track& tr = tracks_[std::size_t(bt)];
-      const Eigen::Vector2d uv(blobs[bb].u, blobs[bb].v);
-      const double dt = 1e-9 * static_cast<double>(t_ns - tr.t_ns);
-      if (dt > 0.0) tr.velocity = (uv - tr.uv) / dt;
-      tr.uv = uv;
-      tr.flux = blobs[bb].flux;
-      tr.missed = 0;
-      tr.t_ns = t_ns;
-      matched[std::size_t(bt)] = taken[std::size_t(bb)] = true;
-      blob_track_[std::size_t(bb)] = bt;
-    }
-    for (int t = 0; t < kMaxTracks; ++t) {
-      Track& tr = tracks_[std::size_t(t)];
-      if (tr.id >= 0 && !matched[std::size_t(t)] && ++tr.missed > 3) tr.id = -1;
-    }
-    for (int b = 0; b < n; ++b) {
-      if (taken[std::size_t(b)] || !single_spot(blobs[b], max_spread_px2_)) continue;
-      for (int t = 0; t < kMaxTracks; ++t)
-        if (tracks_[std::size_t(t)].id < 0) {
-          tracks_[std::size_t(t)] = Track{next_id_,
-                                          Eigen::Vector2d(blobs[b].u, blobs[b].v),
-                                          Eigen::Vector2d::Zero(),
-                                          blobs[b].flux,
-                                          0,
-                                          t_ns,
-                                          named_ahead_ ? label_ahead(next_id_) : -1};
-          ++next_id_;
-          blob_track_[std::size_t(b)] = t;
-          break;
-        }
-    }
-  }
-
   // The tracks seen in this frame, into the ring of snapshots.
   void take_snapshot(std::int64_t t_ns) {
     Snapshot& s = ring_[std::size_t(head_)];
     s.n = 0;
-    for (const Track& tr : tracks_)
+    for (const BlobTrack& tr : tracker_.tracks())
       if (tr.id >= 0 && tr.missed == 0) {
         s.id[std::size_t(s.n)] = tr.id;
         s.uv[std::size_t(s.n)] = tr.uv;
@@ -232,7 +160,7 @@ class ShapeBootstrap {
         for (int j = 0; j < M; ++j) {
           const int id = common[std::size_t(pick[std::size_t(j)])];
           track_of_label_[std::size_t(shape.label_of_track[std::size_t(j)])] = id;
-          for (Track& tr : tracks_)
+          for (BlobTrack& tr : tracker_.tracks())
             if (tr.id == id) tr.label = shape.label_of_track[std::size_t(j)];
         }
         return;
@@ -247,14 +175,8 @@ class ShapeBootstrap {
     return -1;
   }
 
-  bool named(int label) const {
-    for (const Track& tr : tracks_)
-      if (tr.id >= 0 && tr.label == label) return true;
-    return false;
-  }
-
   double flux_of(int id) const {
-    for (const Track& tr : tracks_)
+    for (const BlobTrack& tr : tracker_.tracks())
       if (tr.id == id) return tr.flux;
     return 0.0;
   }
@@ -271,12 +193,9 @@ class ShapeBootstrap {
   }
 
   RigGeometry<M> prior_;
-  double max_spread_px2_;
+  BlobTracker tracker_;
   std::int64_t spacing_ns_;
-  std::array<Track, kMaxTracks> tracks_{};
-  std::array<int, kMaxBlobs> blob_track_{};   // per blob of the last frame, its track's slot
   std::array<int, kMaxBlobs> blob_labels_{};  // per blob of the last frame, its track's name
-  int next_id_ = 0;
   std::array<Snapshot, kWindow> ring_{};
   int head_ = 0, snapshots_ = 0;
   std::int64_t last_snapshot_ns_ = -(std::int64_t{1} << 62);
