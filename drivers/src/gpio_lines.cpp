@@ -100,25 +100,26 @@ hal::SourceStatus GpioDataReady::wait_rising(std::int64_t timeout_ns, std::int64
   }
 }
 
-GpioTrigger::GpioTrigger(const LineSpec& spec, bool active_low, const char* consumer)
+GpioOutput::GpioOutput(const LineSpec& spec, bool active_low, const char* consumer,
+                       bool initially_active)
     : spec_(spec) {
   line_ = find_line(spec, chip_);
   const int flags = active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
-  if (gpiod_line_request_output_flags(line_, consumer, flags, 0) != 0)
+  if (gpiod_line_request_output_flags(line_, consumer, flags, initially_active ? 1 : 0) != 0)
     request_failed(spec, chip_, line_, errno);
 }
 
-GpioTrigger::~GpioTrigger() {
+GpioOutput::~GpioOutput() {
   if (chip_ != nullptr) gpiod_chip_close(chip_);
 }
 
-bool GpioTrigger::set(bool active) {
+bool GpioOutput::set(bool active) {
   if (gpiod_line_set_value(line_, active ? 1 : 0) == 0) return true;
   error_.set("%s: setting the line failed: %s", spec_.text.c_str(), std::strerror(errno));
   return false;
 }
 
-bool GpioTrigger::get() {
+bool GpioOutput::get() {
   const int v = gpiod_line_get_value(line_);
   if (v < 0)
     error_.set("%s: reading the line failed: %s", spec_.text.c_str(), std::strerror(errno));

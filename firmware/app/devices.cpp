@@ -158,7 +158,7 @@ bool open_devices(const RunSettings& s, int markers, int width, int height, doub
   }
   try {
     if (!s.trigger.empty())
-      d.trigger = std::make_unique<drivers::GpioTrigger>(drivers::parse_line_spec(s.trigger));
+      d.trigger = std::make_unique<drivers::GpioOutput>(drivers::parse_line_spec(s.trigger));
     d.camera = open_camera(s, markers, width, height);
     const drivers::ImuSpec spec = drivers::parse_imu_spec(s.imu);
     if (!s.drdy.empty())

@@ -60,7 +60,7 @@ struct Devices {
   std::unique_ptr<drivers::GpioDataReady> drdy;
   std::unique_ptr<hal::ImuSource> imu;
   std::unique_ptr<Camera> camera;                       // null without one
-  std::unique_ptr<drivers::GpioTrigger> trigger;        // null without one
+  std::unique_ptr<drivers::GpioOutput> trigger;        // null without one
   std::unique_ptr<firmware::TriggeringImu> triggering;  // the IMU driving the trigger, with one
 
   // The IMU stream a command reads: the one that drives the camera's trigger when there is one.

@@ -3,6 +3,7 @@
 // ending the stream with its own message.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <string>
 #include <utility>
 #include <vector>
@@ -29,7 +30,7 @@ struct CountingImu final : mc::hal::ImuSource {
 
 // Every write, with the number of samples the IMU had delivered when it came; fails from the
 // write numbered fail_from on.
-struct RecordingLine final : mc::hal::TriggerLine {
+struct RecordingLine final : mc::hal::OutputLine {
   const CountingImu* imu = nullptr;
   std::vector<std::pair<int, bool>> writes;
   int fail_from = -1;
@@ -114,4 +115,60 @@ TEST(TriggeringImu, TheImusOwnEndAndErrorsPassThrough) {
   EXPECT_EQ(triggering.next(s), mc::hal::SourceStatus::kOk);
   EXPECT_EQ(triggering.next(s), mc::hal::SourceStatus::kError);
   EXPECT_EQ(std::string(triggering.error()), "spi:/dev/spidev0.0: stops answering");
+}
+
+// The markers' LEDs blinking their names: before pulse n rises, each LED is as the code has it in
+// frame n (hal/blink_code.hpp), only the lines that change written; a failing LED line ends the
+// stream with its own message.
+TEST(TriggeringImu, SetsTheLedsAsTheirCodeHasItBeforeEachPulse) {
+  constexpr int kLeds = 3;
+  CountingImu imu;
+  imu.count = 4 * 12;
+  RecordingLine trigger;
+  trigger.imu = &imu;
+  std::array<RecordingLine, kLeds> leds;
+  std::array<mc::hal::OutputLine*, kLeds> lines{};
+  for (int i = 0; i < kLeds; ++i) {
+    leds[std::size_t(i)].imu = &imu;
+    lines[std::size_t(i)] = &leds[std::size_t(i)];
+  }
+  const mc::hal::BlinkCode code{5};
+  mc::firmware::BlinkingLeds blinking(lines.data(), kLeds, code);
+  TriggeringImu triggering(imu, trigger, 4, &blinking);
+  mc::ImuSample s;
+  while (triggering.next(s) == mc::hal::SourceStatus::kOk) {
+  }
+  ASSERT_EQ(triggering.pulses(), 12u);
+  // The level of each LED when each pulse rose (the LEDs start lit).
+  for (std::uint32_t pulse = 0; pulse < 12; ++pulse) {
+    const int rose_with = static_cast<int>(4 * pulse + 1);  // samples delivered at the rising edge
+    for (int i = 0; i < kLeds; ++i) {
+      bool lit = true;
+      for (const auto& [delivered, level] : leds[std::size_t(i)].writes)
+        if (delivered <= rose_with) lit = level;
+      EXPECT_EQ(lit, code.lit(i, kLeds, pulse)) << "LED " << i << ", pulse " << pulse;
+    }
+  }
+  // Each LED dark once and lit again once per period of five pulses: two writes per period.
+  for (const RecordingLine& led : leds) EXPECT_LE(led.writes.size(), 2u * (12 / 5 + 1));
+}
+
+TEST(TriggeringImu, AnLedLineThatFailsEndsTheStreamWithItsMessage) {
+  struct FailingLed final : mc::hal::OutputLine {
+    bool set(bool) override { return false; }
+    const char* error() const override { return "gpiochip0:5: setting the line failed: EBUSY"; }
+  };
+  CountingImu imu;
+  imu.count = 100;
+  RecordingLine trigger;
+  trigger.imu = &imu;
+  FailingLed led;
+  mc::hal::OutputLine* line = &led;
+  mc::firmware::BlinkingLeds blinking(&line, 1, mc::hal::BlinkCode{4});
+  TriggeringImu triggering(imu, trigger, 2, &blinking);
+  mc::ImuSample s;
+  int ok = 0;
+  while (triggering.next(s) == mc::hal::SourceStatus::kOk) ++ok;
+  EXPECT_EQ(ok, 2);  // pulse 1 (LED 0 dark) fails, with the third sample
+  EXPECT_EQ(std::string(triggering.error()), "gpiochip0:5: setting the line failed: EBUSY");
 }

@@ -67,9 +67,9 @@ int main() {
     guest::expect_driver_error("busy", Fault::kBusy,
                                [] { GpioDataReady again(parse_line_spec("gpiochip0:3")); });
     guest::expect_driver_error("busy trigger", Fault::kBusy,
-                               [] { GpioTrigger trigger(parse_line_spec("gpiochip0:3")); });
+                               [] { GpioOutput trigger(parse_line_spec("gpiochip0:3")); });
 
-    GpioTrigger trigger(parse_line_spec("/dev/gpiochip0:0"));
+    GpioOutput trigger(parse_line_spec("/dev/gpiochip0:0"));
     for (const bool level : {true, false, true, false}) {
       GUEST_CHECK(trigger.set(level));
       GUEST_CHECK(trigger.get() == level);

@@ -1,7 +1,8 @@
 // GPIO lines through libgpiod 1.6 (Debian 12): the IMU's data-ready output as rising-edge events
 // with the kernel's timestamps (CLOCK_MONOTONIC for the character device's line events since
-// Linux 5.7), and an output line for the camera's trigger. Opening throws DriverError: no such
-// chip or line (missing), the line held by someone else (busy, naming the holder).
+// Linux 5.7), and output lines: the camera's trigger, the markers' LEDs. Opening throws
+// DriverError: no such chip or line (missing), the line held by someone else (busy, naming the
+// holder).
 #pragma once
 
 #include <cstdint>
@@ -35,13 +36,14 @@ class GpioDataReady final : public hal::DataReadyLine {
   ErrorText error_;
 };
 
-class GpioTrigger final : public hal::TriggerLine {
+class GpioOutput final : public hal::OutputLine {
  public:
-  explicit GpioTrigger(const LineSpec& spec, bool active_low = false,
-                       const char* consumer = "mirrorcal-trigger");
-  ~GpioTrigger() override;
-  GpioTrigger(const GpioTrigger&) = delete;
-  GpioTrigger& operator=(const GpioTrigger&) = delete;
+  // The line starts active if initially_active (a marker's LED lit), else inactive.
+  explicit GpioOutput(const LineSpec& spec, bool active_low = false,
+                      const char* consumer = "mirrorcal-trigger", bool initially_active = false);
+  ~GpioOutput() override;
+  GpioOutput(const GpioOutput&) = delete;
+  GpioOutput& operator=(const GpioOutput&) = delete;
 
   bool set(bool active) override;
   // The line's level as the chip reads it back (true: active); false on failure too.

@@ -1,6 +1,7 @@
 // Digital lines the loop may use beside the sensor streams: the IMU's data-ready output (the loop
-// wakes on its rising edges, timestamped by the kernel) and a camera trigger input driven by the
-// board. Implemented by drivers/ (libgpiod) on the board and by fakes in tests; no Linux headers.
+// wakes on its rising edges, timestamped by the kernel), and outputs the board drives: a camera's
+// trigger input, the markers' LEDs (hal/blink_code.hpp). Implemented by drivers/ (libgpiod) on the
+// board and by fakes in tests; no Linux headers.
 #pragma once
 
 #include <cstdint>
@@ -21,10 +22,10 @@ class DataReadyLine {
   virtual const char* error() const { return ""; }
 };
 
-// An output line, e.g. the camera's trigger input.
-class TriggerLine {
+// An output line: the camera's trigger input, a marker's LED.
+class OutputLine {
  public:
-  virtual ~TriggerLine() = default;
+  virtual ~OutputLine() = default;
   // Drives the line (true: active); false when the line failed (error() says why).
   virtual bool set(bool active) = 0;
   virtual const char* error() const { return ""; }
