@@ -326,7 +326,8 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
     if (c.hold_skew) scenario = sim::without_skew(scenario);
     return true;
   };
-  if (!parse_count(o, "seed", 1, 0, c.seed, error) || !scenario_for(c.seed, c.scenario))
+  if (!parse_count(o, "seed", 1, 0, c.seed, error) || !scenario_for(c.seed, c.scenario) ||
+      !blink_fits(c.frames, static_cast<int>(c.scenario.truth.markers.size()), error))
     return false;
   c.family = c.scenario.name == "random" || c.scenario.name == "mems";
   // --rig SEED: one rig of the family for every run; each run draws its own noise and guesses.
@@ -692,7 +693,7 @@ int cmd_montecarlo(int argc, char** argv) {
   if (!parse(argc, argv, 2,
              {"runs", "jobs", "seed", "out", "scenario", "format", "pixel-sigma", "spot-noise",
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
-              "outliers", "label-swaps", "rig", "imu-model"},
+              "outliers", "label-swaps", "rig", "imu-model", "blink"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion",
               "estimate-noise", "identical-leds"},
              o, error) ||

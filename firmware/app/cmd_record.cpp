@@ -128,8 +128,8 @@ int record_devices(const Options& o, const std::string& dir) {
   if (!marker_count_built(int(markers))) fail(marker_count_not_built(int(markers)));
   Devices devices;
   int exit_code = 1;
-  if (!open_devices(s, int(markers), sensors.sensors.width, sensors.sensors.height, imu_rate_hz,
-                    devices, error, exit_code))
+  if (!open_devices(s, int(markers), sensors.priors.leds, sensors.sensors.width,
+                    sensors.sensors.height, imu_rate_hz, devices, error, exit_code))
     fail(error, exit_code);
   RecordingFolder folder(dir, o.flag("force"));
 

@@ -291,7 +291,7 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   // The devices; anything missing, busy or of the wrong kind ends the run here, with its reason.
   Devices devices;
   int exit_code = 1;
-  if (!open_devices(s, M, sensors.sensors.width, sensors.sensors.height,
+  if (!open_devices(s, M, sensors.priors.leds, sensors.sensors.width, sensors.sensors.height,
                     sensors.sensors.imu_rate_hz, devices, error, exit_code))
     fail(error, exit_code);
   if (!create_out_dir(s.out, error)) fail(error, 1);

@@ -139,12 +139,12 @@ bool check_stage_options(const Options& o, const FrameMode& frames, std::string&
 }  // namespace
 
 int cmd_sim(int argc, char** argv) {
-  std::vector<std::string> with_value = {"scenario",   "seed",        "out",
-                                         "format",     "pixel-sigma", "imu-model",
-                                         "spot-noise", "passes",      "timeshift",
-                                         "distortion", "line-delay",  "filter-line-delay",
-                                         "markers",    "duration",    "outliers",
-                                         "label-swaps"},
+  std::vector<std::string> with_value = {"scenario",    "seed",        "out",
+                                         "format",      "pixel-sigma", "imu-model",
+                                         "spot-noise",  "passes",      "timeshift",
+                                         "distortion",  "line-delay",  "filter-line-delay",
+                                         "markers",     "duration",    "outliers",
+                                         "label-swaps", "blink"},
                            flags = {"no-plots",       "frames",        "intrinsics",
                                     "hold-skew",      "one-stage",     "estimate-distortion",
                                     "estimate-noise", "identical-leds"};
@@ -163,7 +163,8 @@ int cmd_sim(int argc, char** argv) {
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero.
   std::uint64_t seed = 0;
   sim::Scenario s;
-  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
+  if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error) ||
+      !blink_fits(frames, static_cast<int>(s.truth.markers.size()), error))
     fail(error);
   if (o.flag("hold-skew")) s = sim::without_skew(s);
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the

@@ -8,6 +8,7 @@
 #include <type_traits>
 
 #include "cli.hpp"
+#include "mirrorcal/calibration/image_markers.hpp"
 #include "mirrorcal/drivers/can_imu.hpp"
 #include "mirrorcal/drivers/device_spec.hpp"
 #include "mirrorcal/drivers/driver_error.hpp"
@@ -24,7 +25,8 @@ namespace {
 // Frame buffers the camera gets: a few frames of slack while the loop is busy with an update.
 constexpr int kCameraBuffers = 8;
 
-std::unique_ptr<Camera> open_camera(const RunSettings& s, int markers, int width, int height) {
+std::unique_ptr<Camera> open_camera(const RunSettings& s, int markers, const sim::MarkerLeds& leds,
+                                    int width, int height) {
   if (s.camera.empty()) return nullptr;
   const drivers::CameraSpec spec = drivers::parse_camera_spec(s.camera);
   auto camera = std::make_unique<Camera>();
@@ -44,7 +46,7 @@ std::unique_ptr<Camera> open_camera(const RunSettings& s, int markers, int width
   with_marker_count(markers, [&](auto count) {
     constexpr int M = decltype(count)::value;
     camera->detection = std::make_unique<detection::DetectingMarkerSource<M>>(
-        *camera->watchdog, detection::DetectionConfig<M>{}, width, height);
+        *camera->watchdog, calibration::marker_detection_config<M>(leds), width, height);
   });
   return camera;
 }
@@ -149,17 +151,28 @@ bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error)
          sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error);
 }
 
-bool open_devices(const RunSettings& s, int markers, int width, int height, double imu_rate_hz,
-                  Devices& d, std::string& error, int& exit_code) {
+bool open_devices(const RunSettings& s, int markers, const sim::MarkerLeds& leds, int width,
+                  int height, double imu_rate_hz, Devices& d, std::string& error, int& exit_code) {
   if (!s.trigger.empty() && s.camera.empty()) {
     error = "--trigger " + s.trigger + ": a camera trigger needs a camera (--camera DEV)";
+    exit_code = 2;
+    return false;
+  }
+  if (!leds.lines.empty() && s.trigger.empty()) {
+    error =
+        "mirrorcal.yaml: led_lines: LEDs that blink their names need a camera trigger "
+        "(--trigger CHIP:LINE): each exposure's pulse sets them, so that frame n shows "
+        "their code's frame n";
     exit_code = 2;
     return false;
   }
   try {
     if (!s.trigger.empty())
       d.trigger = std::make_unique<drivers::GpioOutput>(drivers::parse_line_spec(s.trigger));
-    d.camera = open_camera(s, markers, width, height);
+    for (const std::string& line : leds.lines)
+      d.leds.push_back(std::make_unique<drivers::GpioOutput>(drivers::parse_line_spec(line), false,
+                                                             "mirrorcal-led", true));
+    d.camera = open_camera(s, markers, leds, width, height);
     const drivers::ImuSpec spec = drivers::parse_imu_spec(s.imu);
     if (!s.drdy.empty())
       d.drdy = std::make_unique<drivers::GpioDataReady>(drivers::parse_line_spec(s.drdy));
@@ -184,7 +197,14 @@ bool open_devices(const RunSettings& s, int markers, int width, int height, doub
       every = std::max(
           2, static_cast<int>(std::ceil(static_cast<double>(frame) * 1e-9 * imu_rate_hz - 1e-6)));
     }
-    d.triggering = std::make_unique<firmware::TriggeringImu>(*d.imu, *d.trigger, every);
+    if (!d.leds.empty()) {
+      std::vector<hal::OutputLine*> lines;
+      for (const auto& led : d.leds) lines.push_back(led.get());
+      d.blinking = std::make_unique<firmware::BlinkingLeds>(
+          lines.data(), static_cast<int>(lines.size()), hal::BlinkCode{leds.blink_period});
+    }
+    d.triggering =
+        std::make_unique<firmware::TriggeringImu>(*d.imu, *d.trigger, every, d.blinking.get());
   }
   return true;
 }
@@ -195,7 +215,12 @@ std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_
   char text[160];
   std::snprintf(text, sizeof text, ", camera trigger %s every %d IMU samples (%.4g Hz)",
                 s.trigger.c_str(), every, imu_rate_hz / every);
-  return text;
+  std::string described = text;
+  if (d.blinking)
+    described += ", " + std::to_string(d.blinking->count()) +
+                 " LEDs blinking their names (a code of " +
+                 std::to_string(d.blinking->code().period) + " frames)";
+  return described;
 }
 
 std::string describe_camera(const RunSettings& s, const Devices& d) {

@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 #include <variant>
+#include <vector>
 
 #include "cli.hpp"
 #include "mirrorcal/calibration/run.hpp"
@@ -59,9 +60,11 @@ bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error)
 struct Devices {
   std::unique_ptr<drivers::GpioDataReady> drdy;
   std::unique_ptr<hal::ImuSource> imu;
-  std::unique_ptr<Camera> camera;                       // null without one
-  std::unique_ptr<drivers::GpioOutput> trigger;        // null without one
-  std::unique_ptr<firmware::TriggeringImu> triggering;  // the IMU driving the trigger, with one
+  std::unique_ptr<Camera> camera;                          // null without one
+  std::unique_ptr<drivers::GpioOutput> trigger;            // null without one
+  std::vector<std::unique_ptr<drivers::GpioOutput>> leds;  // the markers' LED lines, if given
+  std::unique_ptr<firmware::BlinkingLeds> blinking;        // their code, with them
+  std::unique_ptr<firmware::TriggeringImu> triggering;     // the IMU driving the trigger, with one
 
   // The IMU stream a command reads: the one that drives the camera's trigger when there is one.
   hal::ImuSource& imu_stream() const {
@@ -70,13 +73,14 @@ struct Devices {
 };
 
 // Opens the devices s names into d, the camera (streaming, width x height, detecting `markers`
-// markers: a built count) first. A device that is
-// missing, busy or of the wrong kind, or a malformed specification, is an error naming it with
-// exit_code 1; a trigger without a camera one with exit_code 2. imu_rate_hz sets how many IMU
-// samples a camera trigger pulse takes when --trigger-every does not (one frame interval's worth,
-// 20 Hz where none is reported).
-bool open_devices(const RunSettings& s, int markers, int width, int height, double imu_rate_hz,
-                  Devices& d, std::string& error, int& exit_code);
+// markers, a built count, whose LEDs leds describes) first; and the LEDs' lines (leds.lines), which
+// the trigger sets in their blink code for each exposure. A device that is missing, busy or of the
+// wrong kind, or a malformed specification, is an error naming it with exit_code 1; a trigger
+// without a camera, or LED lines without a trigger, one with exit_code 2. imu_rate_hz sets how
+// many IMU samples a camera trigger pulse takes when --trigger-every does not (one frame
+// interval's worth, 20 Hz where none is reported).
+bool open_devices(const RunSettings& s, int markers, const sim::MarkerLeds& leds, int width,
+                  int height, double imu_rate_hz, Devices& d, std::string& error, int& exit_code);
 
 // ", camera trigger gpiochip0:18 every 4 IMU samples (50 Hz)", or "" without a trigger.
 std::string describe_trigger(const RunSettings& s, const Devices& d, double imu_rate_hz);

@@ -43,8 +43,31 @@ bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) 
     error = "--identical-leds applies to --frames only";
     return false;
   }
+  if (o.flag("blink")) {
+    const std::string text = o.get("blink", "");
+    char* end = nullptr;
+    const long period = std::strtol(text.c_str(), &end, 10);
+    if (!frames.enabled) {
+      error = "--blink applies to --frames only";
+      return false;
+    }
+    if (end == text.c_str() || *end != '\0' || period < 2 || period > hal::BlinkCode::kMaxPeriod) {
+      error = "--blink: '" + text + "' is not a whole number of frames from 2 to " +
+              std::to_string(hal::BlinkCode::kMaxPeriod);
+      return false;
+    }
+    frames.blink_period = static_cast<int>(period);
+  }
   return pixels("spot-noise", frames.spot_noise_px, true) &&
          pixels("pixel-sigma", frames.pixel_sigma, false);
+}
+
+bool blink_fits(const FrameMode& frames, int markers, std::string& error) {
+  if (frames.blink_period == 0 || frames.blink_period > markers) return true;
+  error = "--blink " + std::to_string(frames.blink_period) + ": " + std::to_string(markers) +
+          " markers need a period of at least " + std::to_string(markers + 1) +
+          " frames (each marker dark in one, and one with all lit)";
+  return false;
 }
 
 }  // namespace mirrorcal::app

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <initializer_list>
 
+#include "mirrorcal/hal/blink_code.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 #include "text_io.hpp"
@@ -408,6 +409,49 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
   return read_camera(cam, "intrinsics_skew", out);
 }
 
+namespace {
+
+// The markers' LEDs (led_brightness, blink_period, led_lines): each list one entry per marker.
+bool read_leds(const YamlMap& y, RecordingPriors& r) {
+  const std::size_t m = r.features_c.size();
+  const auto per_marker = [&](const char* key, const YAML::Node& n) {
+    return (n.IsSequence() && n.size() == m) ||
+           y.fail(n, key, "expected a list of " + std::to_string(m) + " entries, one per marker");
+  };
+  if (y.has("led_brightness")) {
+    if (!per_marker("led_brightness", y.node("led_brightness"))) return false;
+    r.leds.brightness.assign(m, 0.0);
+    if (!y.numbers("led_brightness", m, r.leds.brightness.data())) return false;
+    if (*std::min_element(r.leds.brightness.begin(), r.leds.brightness.end()) <= 0.0)
+      return y.fail(y.node("led_brightness"), "led_brightness", "every brightness must be > 0");
+  }
+  if (y.has("blink_period")) {
+    std::int64_t period = 0;
+    if (!y.integer(y.node("blink_period"), "blink_period", period)) return false;
+    if (period < static_cast<std::int64_t>(m) + 1 || period > hal::BlinkCode::kMaxPeriod)
+      return y.fail(y.node("blink_period"), "blink_period",
+                    "must be " + std::to_string(m + 1) + ".." +
+                        std::to_string(hal::BlinkCode::kMaxPeriod) + " frames (each of the " +
+                        std::to_string(m) + " markers dark in one, one with all lit)");
+    r.leds.blink_period = static_cast<int>(period);
+  }
+  if (y.has("led_lines")) {
+    const YAML::Node n = y.node("led_lines");
+    if (!per_marker("led_lines", n)) return false;
+    for (const YAML::Node& line : n) {
+      if (!line.IsScalar() || line.Scalar().empty())
+        return y.fail(line, "led_lines", "expected a GPIO line, CHIP:LINE (gpiochip0:17)");
+      r.leds.lines.push_back(line.Scalar());
+    }
+    if (r.leds.blink_period == 0)
+      return y.fail(n, "led_lines",
+                    "needs blink_period: the LEDs on these lines blink their names in that code");
+  }
+  return true;
+}
+
+}  // namespace
+
 bool parse_priors_yaml(std::string_view text, const std::string& file,
                        const Pinhole<double>& camera, RecordingPriors& out,
                        std::vector<std::string>& notes, std::string& error) {
@@ -438,7 +482,10 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                   "timeshift_cam_imu",
                   "sigma_timeshift_cam_imu",
                   "estimate_distortion",
-                  "sigma_distortion"});
+                  "sigma_distortion",
+                  "led_brightness",
+                  "blink_period",
+                  "led_lines"});
   RecordingPriors r;
   if (!y.vec3("gravity_n", r.gravity_n) || !y.vec3("p_n_b", r.p_n_b) ||
       !y.sigma3("sigma_p_n_b", kStartPositionSigma, r.sigma_p_n_b) || !y.vec3("v_n_b", r.v_n_b) ||
@@ -548,6 +595,7 @@ bool parse_priors_yaml(std::string_view text, const std::string& file,
                                              ? "0.05 each (k1..k4)"
                                              : "0.2, 0.1, 0.002, 0.002 (k1, k2, p1, p2)");
   }
+  if (!read_leds(y, r)) return false;
   out = std::move(r);
   return true;
 }
@@ -598,6 +646,18 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   if (r.estimate_distortion) {
     t += "estimate_distortion: true  # the lens's coefficients too, from camchain.yaml's\n";
     t += "sigma_distortion: " + list(r.sigma_distortion.data(), 4) + "\n";
+  }
+  if (!r.leds.brightness.empty())
+    t += "led_brightness: " + list(r.leds.brightness.data(), r.leds.brightness.size()) +
+         "  # relative, one per marker; all equal: identical LEDs\n";
+  if (r.leds.blink_period > 0)
+    t += "blink_period: " + std::to_string(r.leds.blink_period) +
+         "  # frames: marker i's LED dark in frame i + 1 of each period\n";
+  if (!r.leds.lines.empty()) {
+    t += "led_lines: [";
+    for (std::size_t i = 0; i < r.leds.lines.size(); ++i)
+      t += (i > 0 ? ", " : "") + r.leds.lines[i];
+    t += "]  # marker i's LED, CHIP:LINE\n";
   }
   return files::write_file(dir + "/mirrorcal.yaml", t, error);
 }

@@ -40,8 +40,8 @@ TEST(BlinkCode, EachMarkerIsDarkInOneFrameOfEachPeriodAndFrameZeroShowsAll) {
 }
 
 // Three identical LEDs moving across the image, a room light that never blinks and a blob that
-// flickers at random: the LEDs' tracks are named after two periods, each as its own marker; the
-// room light and the flicker never are.
+// flickers at random: the LEDs' tracks are named within two periods, each as its own marker; the
+// room light and the flicker never are, and no blob is ever labelled as another's marker.
 TEST(BlinkNames, TracksAreNamedByTheFramesTheyGoDarkInAndSteadyLightsNever) {
   const mc::hal::BlinkCode code{6};
   mc::detection::BlinkNames<M> names(code, 4.0);
@@ -72,8 +72,9 @@ TEST(BlinkNames, TracksAreNamedByTheFramesTheyGoDarkInAndSteadyLightsNever) {
     if (first_all_named < 0 && names.named(0) && names.named(1) && names.named(2))
       first_all_named = int(k);
   }
-  // Each marker's second dark frame is frame 6 + i + 1; the last marker's is frame 9.
-  EXPECT_EQ(first_all_named, 9);
+  // Each marker is named in its first dark frame after it was seen lit in every other marker's:
+  // marker 2 in frame 3, marker 0 in frame 7, marker 1 in frame 8.
+  EXPECT_EQ(first_all_named, 8);
   EXPECT_EQ(names.counters().named, 3u);
   EXPECT_EQ(names.counters().unnamed, 0u);
 }

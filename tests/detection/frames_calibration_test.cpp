@@ -87,3 +87,39 @@ TEST(IdenticalLeds, RenderedFramesOfRandomRigsAreLabelledAndCalibrated) {
   }
   EXPECT_GE(unflagged, 2);
 }
+
+// Identical LEDs that blink their names (sim --frames --identical-leds --blink 8): each track is
+// named by the frames it goes dark in (detection/blink_names.hpp), so the names are the truth's
+// from the first periods, with no shape to fit and no look ahead. On three random rigs: at most one
+// label in a thousand wrong in the last pass, most reflections drawn labelled, and the calibration
+// as the self-check says, its NEES within the 99.9 % quantile when unflagged.
+TEST(IdenticalLeds, ThatBlinkTheirNamesAreLabelledFromTheStartAndCalibrated) {
+  int unflagged = 0;
+  for (std::uint64_t seed = 4; seed <= 6; ++seed) {
+    mc::sim::Scenario s = mc::sim::random_scenario(seed);
+    s.duration_s = 15.0;
+    mc::evaluation::FrameMode mode;
+    mode.enabled = true;
+    mode.identical_leds = true;
+    mode.blink_period = 8;
+    const auto run = mc::evaluation::run_simulation<3>(s, seed, {}, mode);
+    const mc::calibration::DetectionReport& d = run.detection;
+    const double nees = run.history.back().nees;
+    const bool consistent = mc::calibration::consistent(run.result);
+    std::printf(
+        "seed %llu: %llu of %llu reflections labelled, %llu wrong (%llu before the last pass), "
+        "NEES %.1f, %s\n",
+        (unsigned long long)seed, (unsigned long long)d.markers_labelled,
+        (unsigned long long)d.markers_drawn, (unsigned long long)d.wrong_labels,
+        (unsigned long long)d.wrong_labels_before, nees, consistent ? "consistent" : "flagged");
+    // Measured: rigs 5 and 6 none wrong in any pass; rig 4, whose reflections leave the image
+    // and cross often, 1 of 1,711 in the last pass (the bar is none: a name carried onto
+    // a crossing reflection is caught only at its marker's next dark frame).
+    EXPECT_LE(d.wrong_labels * 1000, d.markers_labelled) << "seed " << seed;
+    EXPECT_GE(d.markers_labelled, d.markers_drawn * 85 / 100) << "seed " << seed;
+    if (!consistent) continue;
+    ++unflagged;
+    EXPECT_LT(nees, 37.7) << "seed " << seed;  // chi-square, 15 dof, 99.9 %
+  }
+  EXPECT_GE(unflagged, 2);
+}

@@ -10,6 +10,7 @@
 
 #include <sys/stat.h>
 
+#include "mirrorcal/sim_host/files.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -508,6 +509,56 @@ TEST_F(BadInput, EstimateDistortionWithoutALensOrTheIntrinsicsIsRefused) {
   EXPECT_EQ(r.priors.sigma_distortion, (std::array<double, 4>{0.1, 0.05, 0.001, 0.002}));
   EXPECT_EQ(r.priors.intrinsics_guess.distortion, mc::Distortion::kRadtan);
   EXPECT_EQ(r.priors.intrinsics_guess.coeffs[0], -0.28);  // camchain.yaml's coefficients
+}
+
+// The markers' LEDs (led_brightness, blink_period, led_lines): a list that is not one entry per
+// marker, a brightness that is not positive, a code too short for every marker to go dark in its
+// own frame, and LED lines without a code are each refused at their line; given right, they are
+// read, and written back as they were read.
+TEST_F(BadInput, MarkerLedsThatCannotBeDrivenOrToldApartAreRefused) {
+  const std::vector<std::string> original = lines_of(priors());
+  const auto with = [&](const std::vector<std::string>& extra) {
+    auto l = original;
+    const std::string at = std::to_string(l.size() + 1);
+    l.insert(l.end(), extra.begin(), extra.end());
+    write_lines(priors(), l);
+    return priors() + ":" + at + ": ";
+  };
+  std::string at = with({"led_brightness: [1, 1]"});
+  expect_error({at + "led_brightness: expected a list of 3 entries, one per marker"});
+  at = with({"led_brightness: [1, 0, 1]"});
+  expect_error({at + "led_brightness: every brightness must be > 0"});
+  at = with({"blink_period: 3"});
+  expect_error({at + "blink_period: must be 4..64 frames"});
+  at = with({"blink_period: 8.5"});
+  expect_error({at + "blink_period: expected an integer"});
+  at = with({"led_lines: [gpiochip0:5, gpiochip0:6, gpiochip0:13]"});
+  expect_error({at + "led_lines: needs blink_period"});
+  at = with({"blink_period: 8", "led_lines: [gpiochip0:5, gpiochip0:6]"});
+  expect_error({"led_lines: expected a list of 3 entries, one per marker"});
+
+  with({"led_brightness: [1, 1, 1]", "blink_period: 8",
+        "led_lines: [gpiochip0:5, gpiochip0:6, gpiochip0:13]"});
+  mc::sim::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::sim::read_recording(dir(), 3, r, err)) << err;
+  EXPECT_EQ(r.priors.leds.brightness, (std::vector<double>{1, 1, 1}));
+  EXPECT_EQ(r.priors.leds.blink_period, 8);
+  EXPECT_EQ(r.priors.leds.lines,
+            (std::vector<std::string>{"gpiochip0:5", "gpiochip0:6", "gpiochip0:13"}));
+  const std::string again = dir() + "/again";
+  ASSERT_EQ(::mkdir(again.c_str(), 0755), 0);
+  ASSERT_TRUE(mc::sim::write_priors_yaml(again, r.priors, err)) << err;
+  mc::sim::RecordingPriors read_back;
+  std::string text;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(mc::files::read_file(again + "/mirrorcal.yaml", text, err)) << err;
+  ASSERT_TRUE(
+      mc::sim::parse_priors_yaml(text, "again", r.sensors.intrinsics, read_back, notes, err))
+      << err;
+  EXPECT_EQ(read_back.leds.brightness, r.priors.leds.brightness);
+  EXPECT_EQ(read_back.leds.blink_period, 8);
+  EXPECT_EQ(read_back.leds.lines, r.priors.leds.lines);
 }
 
 // A rolling shutter's line_delay is seconds per row: microseconds given as seconds, or a negative

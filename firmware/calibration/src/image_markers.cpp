@@ -6,9 +6,9 @@ namespace mirrorcal::calibration {
 
 template <int M>
 ImageMarkers<M>::ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
-                              DetectionReport* report)
+                              DetectionReport* report, const sim::MarkerLeds& leds)
     : frames_(std::move(frames)),
-      detect_(*frames_, detection::DetectionConfig<M>{}, width, height),
+      detect_(*frames_, marker_detection_config<M>(leds), width, height),
       report_(report) {}
 
 template <int M>

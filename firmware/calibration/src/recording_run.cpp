@@ -23,6 +23,7 @@ LoopData recording_loop_data(const sim::Recording& r) {
   d.width = r.sensors.width;
   d.height = r.sensors.height;
   if (r.from_images) d.image_detection = std::make_shared<DetectionReport>();
+  d.leds = r.priors.leds;
   return d;
 }
 

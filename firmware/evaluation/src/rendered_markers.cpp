@@ -58,6 +58,7 @@ detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
   c.bootstrap_shape = std::all_of(render.brightness.begin(), render.brightness.end(),
                                   [&](double b) { return b == render.brightness.front(); });
   c.prior = prior;
+  c.blink = render.blink;
   return c;
 }
 

@@ -40,7 +40,8 @@ sim::Scenario named_as_detected(const sim::Scenario& s, const FrameMode& frames,
                                 const detection::RigGeometry<M>& geometry, std::uint64_t seed,
                                 TrackNames<M>& names) {
   names = no_track_names<M>();
-  if (!frames.enabled || !frames.identical_leds) return s;
+  // LEDs that blink their names are named as the truth's markers.
+  if (!frames.enabled || !frames.identical_leds || frames.blink_period > 0) return s;
   RenderedMarkers<M> look(s, render, geometry, seed);
   MarkerFrame<M> frame;
   while (!look.named() && look.poll(frame) == hal::SourceStatus::kOk) {
@@ -70,6 +71,7 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   render.format = frames.format;
   render.spot_noise_px = frames.spot_noise_px >= 0.0 ? frames.spot_noise_px : s.pixel_sigma;
   if (frames.identical_leds) render.brightness = {render.brightness[1]};
+  render.blink.period = frames.blink_period;
   const detection::RigGeometry<M> geometry =
       detection::prior_geometry(prior, config.intrinsics, config.pixel_sigma);
   const std::uint64_t render_seed = sim::derive_seed(seed, 200);

@@ -12,6 +12,8 @@
 namespace mirrorcal::hal {
 
 struct BlinkCode {
+  static constexpr int kMaxPeriod = 64;  // frames: a longer code names its LEDs too slowly
+
   // Frames per period; 0: the LEDs stay lit (no code). At least M + 1 for M markers: every
   // marker one dark frame, and one frame with all lit.
   int period = 0;

@@ -66,6 +66,17 @@ struct SensorInfo : CameraInfo {
 
 // What mirrorcal.yaml says is known before calibrating. SI units, rotations in rad; quaternions
 // Hamilton, w first in the file. Markers are as many as the file lists.
+// The markers' LEDs, for the detection in frames (mirrorcal.yaml's led_brightness, blink_period
+// and led_lines, all optional): their relative brightness, one per marker (empty: 1 : 1.5 :
+// 2.25 ..., the brightness code; all equal: identical LEDs); the blink code's period in frames
+// (hal/blink_code.hpp; 0: the LEDs stay lit); and the GPIO line of each marker's LED, CHIP:LINE,
+// which run and record drive in that code.
+struct MarkerLeds {
+  std::vector<double> brightness;
+  int blink_period = 0;
+  std::vector<std::string> lines;
+};
+
 struct RecordingPriors {
   Eigen::Vector3d gravity_n = Eigen::Vector3d::Zero();
   double pixel_sigma = 1.0;
@@ -89,6 +100,7 @@ struct RecordingPriors {
   // distortion_coeffs (intrinsics_guess.coeffs), their 1-sigma sigma_distortion.
   bool estimate_distortion = false;
   std::array<double, 4> sigma_distortion = default_sigma_distortion(Distortion::kRadtan);
+  MarkerLeds leds;
 };
 
 // What is true, known only for simulated recordings (truth.yaml, optional): lets calibrate report

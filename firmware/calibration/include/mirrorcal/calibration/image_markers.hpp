@@ -10,16 +10,30 @@
 
 namespace mirrorcal::calibration {
 
+// The detection of the markers whose LEDs are described by leds (mirrorcal.yaml's keys): by their
+// brightness code (the default 1 : 1.5 : 2.25 ..., or led_brightness), and by their blink code
+// where they blink their names (blink_period). `calibrate` from images, `run` and `record` use it.
+template <int M>
+detection::DetectionConfig<M> marker_detection_config(const sim::MarkerLeds& leds) {
+  detection::DetectionConfig<M> c;
+  if (leds.brightness.size() == static_cast<std::size_t>(M))
+    for (int i = 0; i < M; ++i)
+      c.identify.brightness[static_cast<std::size_t>(i)] =
+          leds.brightness[static_cast<std::size_t>(i)];
+  c.blink.period = leds.blink_period;
+  return c;
+}
+
 // The marker source of a calibration from a recording's images: the board's detection on each
-// image (the default DetectionConfig, as `run` and `record` on the board use), labelled by
-// brightness when polled and by the filter's prediction when the loop relabels it. On destruction
+// image (marker_detection_config, as `run` and `record` on the board use), labelled by its cues
+// when polled and by the filter's prediction too when the loop relabels it. On destruction
 // it leaves how detection went in report, if it met at least as many frames as the one before
 // (so report ends with the last pass over all the data, not a shorter stretch of it).
 template <int M>
 class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
   ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
-               DetectionReport* report);
+               DetectionReport* report, const sim::MarkerLeds& leds = {});
   ~ImageMarkers() override;
   hal::SourceStatus poll(MarkerFrame<M>& frame) override;
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override;

@@ -87,6 +87,7 @@ struct LoopData {
   // board's detection, labelled with the filter's prediction, in every pass; it gets how that went
   // in the last pass over all the data.
   std::shared_ptr<DetectionReport> image_detection;
+  sim::MarkerLeds leds;  // the markers' LEDs, as the detection in images needs them
 
   std::size_t imu_samples() const { return streams ? stats.imu_samples : imu.size(); }
   std::size_t frame_count() const { return streams ? stats.frames : frames.size(); }

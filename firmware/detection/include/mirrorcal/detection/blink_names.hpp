@@ -21,6 +21,7 @@ struct BlinkCounters {
   std::uint64_t named = 0;     // tracks named by the code
   std::uint64_t unnamed = 0;   // named tracks seen in their marker's dark frame: names taken back
   std::uint64_t disputed = 0;  // tracks the code named as a marker a live track already is
+  std::uint64_t lost = 0;      // named tracks missed while their marker was lit: names taken back
 };
 
 template <int M>
@@ -28,7 +29,7 @@ class BlinkNames {
  public:
   static constexpr int kMaxBlobs = BlobTracker::kMaxBlobs;
   // Dark frames of its marker a track must have gone dark in before it takes the name.
-  static constexpr int kPeriods = 2;
+  static constexpr int kPeriods = 1;
 
   BlinkNames(const hal::BlinkCode& code, double max_spread_px2)
       : code_(code), tracker_(max_spread_px2) {
@@ -65,6 +66,14 @@ class BlinkNames {
     Evidence& e = evidence_[std::size_t(t)];
     if (tr.id < 0) return;
     if (e.id != tr.id) e = Evidence{tr.id, {}, {}, 0};
+    // A named track missed while its marker is lit lost its reflection (the edge of the image,
+    // an occlusion), and may take up another's when it comes back: the name goes.
+    if (tr.label >= 0 && tr.missed > 0 && tr.label != dark_) {
+      tr.label = -1;
+      e = Evidence{tr.id, {}, {}, 0};
+      ++counters_.lost;
+      return;
+    }
     if (dark_ < 0) {
       e.lit_missed += tr.missed > 0 ? 1 : 0;
       return;

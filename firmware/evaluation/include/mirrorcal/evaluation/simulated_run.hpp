@@ -29,6 +29,10 @@ struct FrameMode {
   // Every LED drawn equally bright: no brightness code, the labels come from the rig's shape
   // fitted to reflections tracked over frames (detection/shape_bootstrap.hpp).
   bool identical_leds = false;
+  // LEDs that blink their names (hal/blink_code.hpp): marker i is not drawn in frame i + 1 of
+  // each period of this many frames, and the detection names the tracks by the frames they go
+  // dark in. 0: the LEDs stay lit.
+  int blink_period = 0;
 };
 
 // The calibration configuration a scenario implies (the filter is told the true noise levels and,
