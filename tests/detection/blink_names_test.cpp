@@ -33,7 +33,9 @@ TEST(BlinkCode, EachMarkerIsDarkInOneFrameOfEachPeriodAndFrameZeroShowsAll) {
     int dark = 0;
     for (int i = 0; i < M; ++i) dark += code.lit(i, M, k) ? 0 : 1;
     EXPECT_EQ(dark, k % 8 >= 1 && k % 8 <= 3 ? 1 : 0) << "frame " << k;
-    if (dark == 1) EXPECT_FALSE(code.lit(int(k % 8) - 1, M, k));
+    if (dark == 1) {
+      EXPECT_FALSE(code.lit(int(k % 8) - 1, M, k));
+    }
   }
   const mc::hal::BlinkCode off{};
   for (std::uint32_t k = 0; k < 16; ++k) EXPECT_EQ(off.dark_marker(k, M), -1);
@@ -66,7 +68,9 @@ TEST(BlinkNames, TracksAreNamedByTheFramesTheyGoDarkInAndSteadyLightsNever) {
     names.feed(std::int64_t(k) * 33'000'000, k, b.data(), n);
     for (int j = 0; j < n; ++j) {
       const int label = names.blob_labels()[j];
-      if (label >= 0) EXPECT_EQ(label, truth[std::size_t(j)]) << "frame " << k << " blob " << j;
+      if (label >= 0) {
+        EXPECT_EQ(label, truth[std::size_t(j)]) << "frame " << k << " blob " << j;
+      }
     }
     EXPECT_EQ(names.dark_marker(), code.dark_marker(k, M));
     if (first_all_named < 0 && names.named(0) && names.named(1) && names.named(2))
