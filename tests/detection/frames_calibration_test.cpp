@@ -11,6 +11,37 @@
 
 namespace mc = mirrorcal;
 
+namespace {
+
+// A random rig (seed) calibrated from rendered frames of identical LEDs for duration_s (with the
+// blink code when blink_period > 0): how its detection went and the verdict, printed.
+struct IdenticalLedsRun {
+  mc::calibration::DetectionReport detection;
+  double nees = 0.0;
+  bool consistent = false;
+};
+IdenticalLedsRun identical_leds_run(std::uint64_t seed, double duration_s, int blink_period) {
+  mc::sim::Scenario s = mc::sim::random_scenario(seed);
+  s.duration_s = duration_s;
+  mc::evaluation::FrameMode mode;
+  mode.enabled = true;
+  mode.identical_leds = true;
+  mode.blink_period = blink_period;
+  const auto run = mc::evaluation::run_simulation<3>(s, seed, {}, mode);
+  const IdenticalLedsRun r{run.detection, run.history.back().nees,
+                           mc::calibration::consistent(run.result)};
+  const mc::calibration::DetectionReport& d = r.detection;
+  std::printf(
+      "seed %llu: %llu of %llu reflections labelled, %llu wrong (%llu before the last pass), "
+      "NEES %.1f, %s\n",
+      (unsigned long long)seed, (unsigned long long)d.markers_labelled,
+      (unsigned long long)d.markers_drawn, (unsigned long long)d.wrong_labels,
+      (unsigned long long)d.wrong_labels_before, r.nees, r.consistent ? "consistent" : "flagged");
+  return r;
+}
+
+}  // namespace
+
 // One test per pixel format, so that the two run side by side.
 class FramesCalibration : public testing::TestWithParam<mc::hal::PixelFormat> {};
 
@@ -64,26 +95,13 @@ INSTANTIATE_TEST_SUITE_P(PixelFormats, FramesCalibration,
 TEST(IdenticalLeds, RenderedFramesOfRandomRigsAreLabelledAndCalibrated) {
   int unflagged = 0;
   for (std::uint64_t seed = 1; seed <= 3; ++seed) {
-    mc::sim::Scenario s = mc::sim::random_scenario(seed);
-    s.duration_s = 20.0;
-    mc::evaluation::FrameMode mode;
-    mode.enabled = true;
-    mode.identical_leds = true;
-    const auto run = mc::evaluation::run_simulation<3>(s, seed, {}, mode);
-    const mc::calibration::DetectionReport& d = run.detection;
-    const double nees = run.history.back().nees;
-    const bool consistent = mc::calibration::consistent(run.result);
-    std::printf(
-        "seed %llu: %llu of %llu reflections labelled, %llu wrong (%llu before the last "
-        "pass), NEES %.1f, %s\n",
-        (unsigned long long)seed, (unsigned long long)d.markers_labelled,
-        (unsigned long long)d.markers_drawn, (unsigned long long)d.wrong_labels,
-        (unsigned long long)d.wrong_labels_before, nees, consistent ? "consistent" : "flagged");
+    const IdenticalLedsRun r = identical_leds_run(seed, 20.0, 0);
+    const mc::calibration::DetectionReport& d = r.detection;
     EXPECT_EQ(d.wrong_labels, 0u) << "seed " << seed;
     EXPECT_GE(d.markers_labelled, d.markers_drawn * 80 / 100) << "seed " << seed;
-    if (!consistent) continue;
+    if (!r.consistent) continue;
     ++unflagged;
-    EXPECT_LT(nees, 37.7) << "seed " << seed;  // chi-square, 15 dof, 99.9 %
+    EXPECT_LT(r.nees, 37.7) << "seed " << seed;  // chi-square, 15 dof, 99.9 %
   }
   EXPECT_GE(unflagged, 2);
 }
@@ -96,30 +114,16 @@ TEST(IdenticalLeds, RenderedFramesOfRandomRigsAreLabelledAndCalibrated) {
 TEST(IdenticalLeds, ThatBlinkTheirNamesAreLabelledFromTheStartAndCalibrated) {
   int unflagged = 0;
   for (std::uint64_t seed = 4; seed <= 6; ++seed) {
-    mc::sim::Scenario s = mc::sim::random_scenario(seed);
-    s.duration_s = 15.0;
-    mc::evaluation::FrameMode mode;
-    mode.enabled = true;
-    mode.identical_leds = true;
-    mode.blink_period = 8;
-    const auto run = mc::evaluation::run_simulation<3>(s, seed, {}, mode);
-    const mc::calibration::DetectionReport& d = run.detection;
-    const double nees = run.history.back().nees;
-    const bool consistent = mc::calibration::consistent(run.result);
-    std::printf(
-        "seed %llu: %llu of %llu reflections labelled, %llu wrong (%llu before the last pass), "
-        "NEES %.1f, %s\n",
-        (unsigned long long)seed, (unsigned long long)d.markers_labelled,
-        (unsigned long long)d.markers_drawn, (unsigned long long)d.wrong_labels,
-        (unsigned long long)d.wrong_labels_before, nees, consistent ? "consistent" : "flagged");
+    const IdenticalLedsRun r = identical_leds_run(seed, 15.0, 8);
+    const mc::calibration::DetectionReport& d = r.detection;
     // Measured: rigs 5 and 6 none wrong in any pass; rig 4, whose reflections leave the image
     // and cross often, 1 of 1,711 in the last pass (the bar is none: a name carried onto
     // a crossing reflection is caught only at its marker's next dark frame).
     EXPECT_LE(d.wrong_labels * 1000, d.markers_labelled) << "seed " << seed;
     EXPECT_GE(d.markers_labelled, d.markers_drawn * 85 / 100) << "seed " << seed;
-    if (!consistent) continue;
+    if (!r.consistent) continue;
     ++unflagged;
-    EXPECT_LT(nees, 37.7) << "seed " << seed;  // chi-square, 15 dof, 99.9 %
+    EXPECT_LT(r.nees, 37.7) << "seed " << seed;  // chi-square, 15 dof, 99.9 %
   }
   EXPECT_GE(unflagged, 2);
 }
