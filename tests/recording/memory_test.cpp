@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 #include "mirrorcal/sim_host/files.hpp"
+#include "sanitizers.hpp"
 #include "test_support.hpp"
 
 using namespace rectest;
@@ -87,7 +88,7 @@ TEST(StreamedInput, A110MBRecordingCalibratesInBoundedMemoryToTheSameBytes) {
               large.peak_rss_kib, bytes_kib, small.peak_rss_kib);
   // Under AddressSanitizer the program's shadow memory and quarantine alone take about 85 MB,
   // padded or not: there only the comparison with the unpadded run below says something.
-#if !defined(__SANITIZE_ADDRESS__)
+#if !MIRRORCAL_ASAN
   EXPECT_LT(large.peak_rss_kib, bytes_kib / 4)
       << "peak " << large.peak_rss_kib << " KiB for " << bytes_kib << " KiB of files";
 #endif
@@ -181,7 +182,7 @@ TEST(FrameStores, ARecordingThreeTimesAsLongCalibratesInNearlyTheSameMemory) {
               peak[0].peak_rss_kib, kShortS, peak[1].peak_rss_kib, kLongS);
   // Under AddressSanitizer, its quarantine keeps what the program frees for a while: memory grows
   // with the allocations made, not with what is held.
-#if !defined(__SANITIZE_ADDRESS__)
+#if !MIRRORCAL_ASAN
   EXPECT_LT(peak[1].peak_rss_kib - peak[0].peak_rss_kib, 512)
       << "peak " << peak[1].peak_rss_kib << " KiB for " << kLongS << " s, " << peak[0].peak_rss_kib
       << " KiB for " << kShortS << " s";

@@ -9,13 +9,7 @@
 #include <cstdlib>
 #include <new>
 
-#if defined(__SANITIZE_ADDRESS__)
-#define MIRRORCAL_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define MIRRORCAL_ASAN 1
-#endif
-#endif
+#include "sanitizers.hpp"
 
 namespace {
 
@@ -46,7 +40,7 @@ void* aligned(std::size_t size, std::align_val_t al) {
 }  // namespace
 
 // ---- the C allocator -------------------------------------------------------------------------
-#ifdef MIRRORCAL_ASAN
+#if MIRRORCAL_ASAN
 extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void*,
                                                                              std::size_t),
                                                          void (*free_hook)(const volatile void*));
@@ -195,7 +189,7 @@ AllocCounts AllocCounter::stop() {
 }
 
 bool alloc_counter_installed() {
-#ifdef MIRRORCAL_ASAN
+#if MIRRORCAL_ASAN
   return g_hooks_installed != 0;
 #else
   return true;
