@@ -1,11 +1,13 @@
 // Identical LEDs that blink their names (hal/blink_code.hpp): the reflections are tracked from
-// frame to frame (blob_tracker.hpp), and a track that went dark in marker i's frames of the code
-// kPeriods times, was seen in every other marker's dark frames and hardly missed elsewhere, is
-// marker i. A room light or a ghost never goes dark on the code, and a flickering spot goes dark
-// off it too, so neither is named. A named track that is seen in its
-// marker's dark frame was swapped onto another reflection and loses its name. The identifier's
-// track cue (marker_identifier.hpp) then labels each frame's blobs by their tracks' names, and no
-// blob is labelled as the marker dark in its frame. Header-only; nothing allocates.
+// frame to frame (blob_tracker.hpp), and a track that went dark in marker i's dark frame, was seen
+// in every other marker's dark frames and was missed off the code less often than on it, is marker
+// i. A room light or a ghost never goes dark on the code, and a flickering spot goes dark off it
+// too, so neither is named. A name is taken back when the code contradicts it (the track is lit in
+// its marker's dark frame: it was carried onto another reflection) and when the track is missed
+// while its marker is lit (it left the image, and may take up another reflection when it comes
+// back); the track earns a name again from the code. The identifier's track cue
+// (marker_identifier.hpp) labels each frame's blobs by their tracks' names, and no blob is labelled
+// as the marker dark in its frame. Header-only; nothing allocates.
 #pragma once
 
 #include <array>
@@ -69,9 +71,7 @@ class BlinkNames {
     // A named track missed while its marker is lit lost its reflection (the edge of the image,
     // an occlusion), and may take up another's when it comes back: the name goes.
     if (tr.label >= 0 && tr.missed > 0 && tr.label != dark_) {
-      tr.label = -1;
-      e = Evidence{tr.id, {}, {}, 0};
-      ++counters_.lost;
+      take_back(tr, e, counters_.lost);
       return;
     }
     if (dark_ < 0) {
@@ -81,11 +81,7 @@ class BlinkNames {
     const auto d = std::size_t(dark_);
     if (tr.missed == 0) {
       ++e.dark_seen[d];
-      if (tr.label == dark_) {  // lit where its marker is dark: not that marker
-        tr.label = -1;
-        e = Evidence{tr.id, {}, {}, 0};
-        ++counters_.unnamed;
-      }
+      if (tr.label == dark_) take_back(tr, e, counters_.unnamed);  // lit where its marker is dark
       return;
     }
     ++e.dark_missed[d];
@@ -104,6 +100,13 @@ class BlinkNames {
     }
     tr.label = dark_;
     ++counters_.named;
+  }
+
+  // The track's name goes, and the evidence that gave it: it starts afresh.
+  static void take_back(BlobTrack& tr, Evidence& e, std::uint64_t& counter) {
+    tr.label = -1;
+    e = Evidence{tr.id, {}, {}, 0};
+    ++counter;
   }
 
   hal::BlinkCode code_;
