@@ -6,6 +6,19 @@
 
 namespace mirrorcal::detection {
 
+namespace {
+
+// Whether any of a row's w luma bytes (Step bytes apart) is above the threshold: a reduction the
+// compiler vectorises, so that the dark rows, most of a frame, cost a few cycles per pixel.
+template <int Step>
+bool any_above(const std::uint8_t* row, int w, int threshold) {
+  std::uint8_t brightest = 0;
+  for (int x = 0; x < w; ++x) brightest = std::max(brightest, row[x * Step]);
+  return brightest > threshold;
+}
+
+}  // namespace
+
 BlobDetector::BlobDetector(const BlobConfig& config, int max_width, int max_height)
     : config_(config),
       max_width_(max_width),
@@ -25,6 +38,7 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
   for (int y = 0; y < h; ++y) {
     const std::uint8_t* row =
         f.data + static_cast<std::size_t>(y) * static_cast<std::size_t>(f.bytes_per_line);
+    if (!(step == 1 ? any_above<1>(row, w, threshold) : any_above<2>(row, w, threshold))) continue;
     for (int x = 0; x < w; ++x) {
       if (row[x * step] <= threshold || visited_[static_cast<std::size_t>(y * w + x)] != 0)
         continue;
