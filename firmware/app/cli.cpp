@@ -41,6 +41,8 @@ bool asks_for_help(int argc, char** argv, int first) {
 bool parse(int argc, char** argv, int first, const std::vector<std::string>& with_value,
            const std::vector<std::string>& flags, Options& o, std::string& error,
            std::size_t max_positional) {
+  // A command used wrongly shows its own usage only, so that the one-line error stays in sight.
+  const std::string command_usage = usage(first > 1 ? argv[first - 1] : "");
   for (int i = first; i < argc; ++i) {
     const std::string a = argv[i];
     auto in = [&](const std::vector<std::string>& v) {
@@ -50,7 +52,7 @@ bool parse(int argc, char** argv, int first, const std::vector<std::string>& wit
     };
     if (in(with_value)) {
       if (i + 1 >= argc) {
-        error = "option " + a + " needs a value\n" + usage();
+        error = "option " + a + " needs a value\n" + command_usage;
         return false;
       }
       o.values[a.substr(2)] = argv[++i];
@@ -59,7 +61,7 @@ bool parse(int argc, char** argv, int first, const std::vector<std::string>& wit
     } else if (a.rfind("-", 0) != 0 && o.positional.size() < max_positional) {
       o.positional.push_back(a);
     } else {
-      error = "unknown argument '" + a + "'\n" + usage();
+      error = "unknown argument '" + a + "'\n" + command_usage;
       return false;
     }
   }

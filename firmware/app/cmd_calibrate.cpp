@@ -135,31 +135,45 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
 int cmd_calibrate(int argc, char** argv) {
   Options o;
   std::string err;
-  if (!parse(argc, argv, 2, {"out", "from", "imu-model"},
+  if (!parse(argc, argv, 2, {"out", "from", "imu-model", "sensors", "imu-topic", "camera-topic"},
              {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise"}, o, err,
              1))
     fail(err);
-  if (o.positional.size() != 1) fail("calibrate needs a recording folder DIR\n" + usage());
+  if (o.positional.size() != 1)
+    fail("calibrate needs a recording folder DIR or a bag\n" + usage("calibrate"));
   const std::string in = o.positional[0];
+  const bool bag = sim::is_bag(in);
+  const sim::BagOptions bag_options{o.get("sensors", ""), o.get("imu-topic", ""),
+                                    o.get("camera-topic", "")};
+  if (!bag && (o.flag("sensors") || o.flag("imu-topic") || o.flag("camera-topic")))
+    fail(in + " is a recording folder: --sensors, --imu-topic and --camera-topic apply to bags");
   // The filter of the recording's number of markers (mirrorcal.yaml's features_c). Where the
   // files cannot tell, open_recording says what is wrong with them, checking them in order.
+  const std::string yaml_dir = bag ? sim::bag_sensors_dir(in, bag_options) : in;
   int markers = sim::kPaperMarkers;
   std::string unread;
-  sim::recording_marker_count(in, markers, unread);
+  sim::recording_marker_count(yaml_dir, markers, unread);
   return with_markers(markers, [&](auto m) {
     constexpr int M = decltype(m)::value;
     sim::Recording rec;
-    // The markers: features.csv, or found in the images where there is none (or when asked).
+    // The markers: features.csv, or found in the images where there is none (or when asked); a
+    // bag's are always found in its images.
     const bool from_images =
-        o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
+        bag || o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
     // Streamed from its files in each pass: memory does not grow with the recording.
-    if (!sim::open_recording(in, M, rec, err, from_images)) fail(err, 1);
-    if (from_images)
-      std::printf(
-          "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
-          in.c_str(),
-          sim::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
-                                    : " (no features.csv)");
+    if (bag) {
+      if (!open_bag(in, bag_options, M, rec, err)) fail(err, 1);
+      std::printf("mirrorcal calibrate: the markers are detected in the images of the bag %s\n",
+                  in.c_str());
+    } else {
+      if (!sim::open_recording(in, M, rec, err, from_images)) fail(err, 1);
+      if (from_images)
+        std::printf(
+            "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
+            in.c_str(),
+            sim::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
+                                      : " (no features.csv)");
+    }
     for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
     for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
     // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
@@ -188,15 +202,15 @@ int cmd_calibrate(int argc, char** argv) {
       fail(
           "--hold-skew applies when the intrinsics are estimated (--intrinsics, or "
           "estimate_intrinsics: true in " +
-          in + "/mirrorcal.yaml)");
+          yaml_dir + "/mirrorcal.yaml)");
     if (rec.priors.hold_skew && !intrinsics)
       std::fprintf(
           stderr,
           "mirrorcal: note: %s/mirrorcal.yaml: hold_skew has no effect, the intrinsics are "
           "not estimated\n",
-          in.c_str());
+          yaml_dir.c_str());
     ImuModel imu_model = kDefaultImuModel;
-    if (!calibration_imu_model(o, rec.sensors, in, imu_model, err)) fail(err);
+    if (!calibration_imu_model(o, rec.sensors, yaml_dir, imu_model, err)) fail(err);
     if (from && imu_model != ImuModel::kCalibrated && from->imu_model == imu_model &&
         from->imu_covariance.rows() > 0)
       std::printf("mirrorcal calibrate: the IMU's intrinsics (%s) start from it too\n",

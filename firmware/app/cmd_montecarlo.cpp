@@ -318,7 +318,8 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
         "room lights");
   if (c.intrinsics && c.frames.enabled)
     return refuse("--intrinsics runs on listed markers (not yet with --frames)");
-  if (!o.flag("runs")) return refuse(std::string("montecarlo needs --runs N\n") + usage());
+  if (!o.flag("runs"))
+    return refuse(std::string("montecarlo needs --runs N\n") + usage("montecarlo"));
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
   // draws each run's rig from the run's seed.
   const auto scenario_for = [&](std::uint64_t run_seed, sim::Scenario& scenario) {

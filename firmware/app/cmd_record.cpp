@@ -259,7 +259,7 @@ int cmd_record(int argc, char** argv) {
              {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"}, o,
              error))
     fail(error);
-  if (!o.flag("out")) fail("record needs --out DIR\n" + usage());
+  if (!o.flag("out")) fail("record needs --out DIR\n" + usage("record"));
   const std::string dir = o.get("out", "");
   if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
   const bool two_stage = o.flag("two-stage"), hold_skew = o.flag("hold-skew");

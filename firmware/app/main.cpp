@@ -97,7 +97,11 @@ const std::vector<Command>& commands() {
       {"calibrate",
        "  calibrate   calibrate a EuRoC recording (mav0/, imu.yaml, camchain.yaml, "
        "mirrorcal.yaml)\n"
-       "              DIR [--intrinsics [--hold-skew]] [--from RESULT [--from-same-data]]\n"
+       "              or a ROS bag (.bag, .mcap, a ROS 2 bag's folder; its images' markers found\n"
+       "              as --from-images finds them)\n"
+       "              DIR|BAG [--intrinsics [--hold-skew]] [--from RESULT [--from-same-data]]\n"
+       "              [--sensors DIR] [--imu-topic T] [--camera-topic T]  (a bag's: where its\n"
+       "              yaml files are, default beside it; its topics, default the yaml files')\n"
        "              [--out OUT] [--from-images] [--estimate-noise]  (the IMU's noise\n"
        "              densities and the pixel noise from the data; writes imu.yaml with them)\n"
        "              (the markers: mav0/cam0/features.csv; a recording without it, whose\n"

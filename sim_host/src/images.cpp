@@ -329,11 +329,10 @@ bool ImageReader::decode_png(const std::uint8_t* data, std::size_t size, const c
     std::uint8_t* out = pixels_.data() + y * std::size_t(width);
     if (channels <= 2) {  // grey, or grey and alpha
       for (std::size_t x = 0; x < std::size_t(width); ++x) out[x] = p[x * bpp];
-    } else {  // RGB(A): ITU-R BT.601 luma, as V4L2's and OpenCV's grey
+    } else {  // RGB(A): its luma
       for (std::size_t x = 0; x < std::size_t(width); ++x) {
         const std::uint8_t* c = p + x * bpp;
-        const unsigned r = c[0], g = c[sample_bytes], b = c[2 * sample_bytes];
-        out[x] = std::uint8_t((77u * r + 150u * g + 29u * b + 128u) >> 8);
+        out[x] = bt601_luma(c[0], c[sample_bytes], c[2 * sample_bytes]);
       }
     }
   }

@@ -17,7 +17,9 @@ std::string number(double v) {
 }  // namespace
 
 std::string imu_yaml_text(const SensorInfo& s) {
-  std::string imu = "# Kalibr IMU description (continuous-time noise densities)\nrostopic: /imu0\n";
+  std::string imu =
+      "# Kalibr IMU description (continuous-time noise densities)\nrostopic: " + s.imu_rostopic +
+      "\n";
   imu +=
       "accelerometer_noise_density: " + number(s.imu.accel_noise_density) + "  # m/s^2/sqrt(Hz)\n";
   imu += "accelerometer_random_walk: " + number(s.imu.accel_random_walk) + "  # m/s^3/sqrt(Hz)\n";

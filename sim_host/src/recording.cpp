@@ -13,36 +13,13 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include "mirrorcal/sim_host/bags.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "recording_checks.hpp"
 #include "recording_csv.hpp"
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
-
-namespace {
-
-// FNV-1a over the bytes of each file in turn: the same data give the same fingerprint, wherever
-// the recording lies.
-class Fingerprint {
- public:
-  void add(std::string_view bytes) {
-    for (const char c : bytes) {
-      hash_ ^= static_cast<unsigned char>(c);
-      hash_ *= 0x100000001b3ULL;
-    }
-  }
-  std::string hex() const {
-    char s[17];
-    std::snprintf(s, sizeof s, "%016llx", static_cast<unsigned long long>(hash_));
-    return s;
-  }
-
- private:
-  std::uint64_t hash_ = 0xcbf29ce484222325ULL;
-};
-
-}  // namespace
 
 namespace {
 
@@ -151,7 +128,6 @@ bool read_checked(const std::string& dir, int markers, Recording& out,
   out = Recording{};
   out.from_images = from_images;
   if (!check_not_cut(dir, out.notes, error)) return false;
-  std::string text;
   CsvFiles csv = csv_files(dir);
   if (from_images) {
     if (!has_images(dir)) {
@@ -162,6 +138,18 @@ bool read_checked(const std::string& dir, int markers, Recording& out,
     }
     csv.features_csv.clear();
   }
+  if (!read_descriptions(dir, out, error) ||
+      !gather_stats(csv, markers, out.stats, keep_imu, keep_frame, error) ||
+      !fingerprint_of(csv, out.fingerprint, error))
+    return false;
+  return check_recording(out, {csv.imu_csv, csv.frames_csv, dir + "/imu.yaml", csv.features_csv},
+                         markers, error);
+}
+
+}  // namespace
+
+bool read_descriptions(const std::string& dir, Recording& out, std::string& error) {
+  std::string text;
   const std::string imu_yaml = dir + "/imu.yaml", cam_yaml = dir + "/camchain.yaml";
   const std::string priors_yaml = dir + "/mirrorcal.yaml";
   if (!files::read_file(imu_yaml, text, error) ||
@@ -175,45 +163,40 @@ bool read_checked(const std::string& dir, int markers, Recording& out,
     return false;
   const std::string truth_yaml = dir + "/truth.yaml";
   out.has_truth = std::filesystem::exists(truth_yaml);
-  if (out.has_truth && (!files::read_file(truth_yaml, text, error) ||
-                        !parse_truth_yaml(text, truth_yaml, out.truth, error)))
-    return false;
-  if (!gather_stats(csv, markers, out.stats, keep_imu, keep_frame, error) ||
-      !fingerprint_of(csv, out.fingerprint, error))
-    return false;
-  const RecordingStats& st = out.stats;
+  return !out.has_truth || (files::read_file(truth_yaml, text, error) &&
+                            parse_truth_yaml(text, truth_yaml, out.truth, error));
+}
 
+bool check_recording(Recording& out, const RecordingFiles& named, int markers, std::string& error) {
+  const RecordingStats& st = out.stats;
   // The filter starts at the first IMU sample and ends at the last: frames outside are skipped.
   if (st.imu_samples < 2) {
-    error = csv.imu_csv + ": " + std::to_string(st.imu_samples) +
+    error = named.imu_csv + ": " + std::to_string(st.imu_samples) +
             " IMU samples; the filter needs at least 2 (it propagates between samples)";
     return false;
   }
   // An IMU-only recording (record without a camera) says so before anything about its data.
   if (st.frames_listed == 0) {
-    error = csv.frames_csv + ": no frame within the IMU data; the filter needs at least one";
+    error = named.frames_csv + ": no frame within the IMU data; the filter needs at least one";
     return false;
   }
-  const RecordingFiles named{csv.imu_csv, csv.frames_csv, imu_yaml};
   if (!check_imu_rate(out, named, error) || !check_frames_against_imu(out, named, error) ||
       !check_imu_units(out, named, error))
     return false;
   check_noise_densities(out, named, out.warnings);
   out.frames_outside_imu = st.frames_listed - st.frames;
   if (out.frames_outside_imu > 0)
-    out.notes.push_back(csv.frames_csv + ": " + std::to_string(out.frames_outside_imu) +
+    out.notes.push_back(named.frames_csv + ": " + std::to_string(out.frames_outside_imu) +
                         " frames outside the IMU data (" + std::to_string(st.imu_first_ns) + ".." +
                         std::to_string(st.imu_last_ns) + " ns) skipped");
-  for (int id = 0; id < markers && !from_images; ++id)
+  for (int id = 0; id < markers && !out.from_images; ++id)
     if (!st.marker_seen[static_cast<std::size_t>(id)]) {
-      error = csv.features_csv + ": marker " + std::to_string(id) +
+      error = named.features_csv + ": marker " + std::to_string(id) +
               " is seen in no frame within the IMU data; the filter cannot locate it";
       return false;
     }
   return true;
 }
-
-}  // namespace
 
 bool read_recording(const std::string& dir, int markers, Recording& out, std::string& error) {
   // The frames within the IMU data only; its span is known once all of it has been read.
@@ -488,6 +471,25 @@ bool has_features_csv(const std::string& dir) {
 bool has_images(const std::string& dir) {
   std::error_code ec;
   return std::filesystem::is_directory(dir + "/mav0/cam0/data", ec);
+}
+
+bool is_bag(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    return std::filesystem::exists(path + "/metadata.yaml", ec);
+  const std::string ext = std::filesystem::path(path).extension().string();
+  return ext == ".bag" || ext == ".mcap" || ext == ".db3";
+}
+
+std::string bag_sensors_dir(const std::string& path, const BagOptions& options) {
+  if (!options.sensors_dir.empty()) return options.sensors_dir;
+  std::error_code ec;
+  // A ROS 2 bag folder may hold them itself; otherwise they lie beside the bag.
+  if (std::filesystem::is_directory(path, ec) &&
+      std::filesystem::exists(path + "/camchain.yaml", ec))
+    return path;
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  return parent.empty() ? "." : parent.string();
 }
 
 // --- RecordingWriter ---------------------------------------------------------------------------

@@ -4,17 +4,47 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "mirrorcal/sim_host/recording.hpp"
 
 namespace mirrorcal::sim {
 
-// The file names the messages give.
+// The file names the messages give (a bag's: the bag and the topic).
 struct RecordingFiles {
-  std::string imu_csv, frames_csv, imu_yaml;
+  std::string imu_csv, frames_csv, imu_yaml, features_csv;
 };
+
+// FNV-1a over the bytes of each file in turn: the same data give the same fingerprint, wherever
+// the recording lies.
+class Fingerprint {
+ public:
+  void add(std::string_view bytes) {
+    for (const char c : bytes) {
+      hash_ ^= static_cast<unsigned char>(c);
+      hash_ *= 0x100000001b3ULL;
+    }
+  }
+  std::string hex() const {
+    char s[17];
+    std::snprintf(s, sizeof s, "%016llx", static_cast<unsigned long long>(hash_));
+    return s;
+  }
+
+ private:
+  std::uint64_t hash_ = 0xcbf29ce484222325ULL;
+};
+
+// A recording's descriptions in dir: imu.yaml, camchain.yaml, mirrorcal.yaml and truth.yaml if
+// there (into out's sensors, priors and truth; defaults used into its notes).
+bool read_descriptions(const std::string& dir, Recording& out, std::string& error);
+// The checks of a recording whose stats are gathered: enough data, the IMU's rate and units, the
+// frames within the IMU data, every marker seen (unless out.from_images); the notes and
+// warnings they leave go into out.
+bool check_recording(Recording& out, const RecordingFiles& named, int markers, std::string& error);
 
 // A median over a stream of any length in bounded memory: exact over up to kKept values; beyond,
 // over every 2^k-th value (k the smallest that keeps at most kKept).

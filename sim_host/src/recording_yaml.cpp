@@ -321,6 +321,7 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
          y.positive("gyroscope_noise_density", out.imu.gyro_noise_density) &&
          y.positive("gyroscope_random_walk", out.imu.gyro_random_walk) &&
          y.within("update_rate", kMinImuRateHz, kMaxImuRateHz, "Hz", out.imu_rate_hz) &&
+         (!y.has("rostopic") || y.string("rostopic", out.imu_rostopic)) &&
          parse_imu_model_keys(y, out);
 }
 
@@ -401,6 +402,12 @@ bool parse_camchain_yaml(std::string_view text, const std::string& file, SensorI
                          std::vector<std::string>& notes, std::string& error) {
   YamlMap top(file, error, &notes), cam(file, error, &notes);
   if (!top.load(text) || !cam.sub(top, "cam0")) return false;
+  // A Kalibr camchain of several cameras: mirrorcal calibrates one, and taking cam0 silently would
+  // leave the user believing the others calibrated.
+  if (top.has("cam1"))
+    return top.fail(top.node("cam1"), "cam1",
+                    "a second camera; mirrorcal calibrates one camera, cam0: give a camchain.yaml "
+                    "with cam0 alone (each camera is calibrated from its own recording)");
   std::string model;
   if (!cam.string("camera_model", model)) return false;
   if (model != "pinhole")

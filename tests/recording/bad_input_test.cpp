@@ -433,6 +433,16 @@ TEST_F(BadInput, CameraModelThatIsNotPinhole) {
   expect_error({dir() + "/camchain.yaml:", "cam0.camera_model: 'omni' is not supported"});
 }
 
+// A Kalibr camchain of two cameras is refused, not calibrated as its cam0 alone.
+TEST_F(BadInput, ACamchainOfTwoCamerasIsRefused) {
+  auto l = lines_of(dir() + "/camchain.yaml");
+  std::vector<std::string> two = l;
+  for (const auto& s : l) two.push_back(s.rfind("cam0:", 0) == 0 ? "cam1:" : s);
+  write_lines(dir() + "/camchain.yaml", two);
+  expect_error(
+      {dir() + "/camchain.yaml:", "cam1: a second camera; mirrorcal calibrates one camera"});
+}
+
 // A time offset in milliseconds where seconds are meant, or a non-positive sigma, is refused.
 TEST_F(BadInput, TimeOffsetsInTheWrongUnitAreRefused) {
   set_key(priors(), "timeshift_cam_imu", "timeshift_cam_imu: 12");

@@ -667,6 +667,24 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
 }
 
+// A command used wrongly prints the error and its own usage only (every command's would be about
+// 90 lines, and the error would scroll off the screen).
+TEST(Cli, ACommandUsedWronglyPrintsItsOwnUsageOnly) {
+  TempDir dir("cli-wrong-use");
+  for (const std::string use : {"calibrate", "montecarlo --seed 3", "record --seed 1",
+                                "calibrate x --bogus", "sim --seed"}) {
+    SCOPED_TRACE(use);
+    const Result r = run_mirrorcal(use, dir.path);
+    const std::string command = use.substr(0, use.find(' '));
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("usage: mirrorcal " + command + " [options]\n  " + command),
+              std::string::npos)
+        << r.output;
+    const std::string other = command == "sim" ? "\n  calibrate " : "\n  sim ";
+    EXPECT_EQ(r.output.find(other), std::string::npos) << r.output;
+  }
+}
+
 // --help (or -h), anywhere among a command's arguments, prints that command's usage and exits 0.
 TEST(Cli, EveryCommandPrintsItsUsageOnHelp) {
   TempDir dir("cli-help");

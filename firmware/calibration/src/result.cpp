@@ -607,9 +607,8 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                r.width, r.height);
   std::fprintf(o, "rostopic: %s\n", r.rostopic.c_str());
   if (!r.recording_fingerprint.empty())
-    std::fprintf(
-        o, "recording_fingerprint: \"%s\"  # of the CSV files calibrated (calibrate --from)\n",
-        r.recording_fingerprint.c_str());
+    std::fprintf(o, "recording_fingerprint: \"%s\"  # of the data calibrated (calibrate --from)\n",
+                 r.recording_fingerprint.c_str());
   std::fprintf(o, "passes: %d", r.passes);
   if (r.restarted_pass > 0)
     std::fprintf(o, "  # pass %d restarted from the guesses, the pixel noise inflated: locked on",

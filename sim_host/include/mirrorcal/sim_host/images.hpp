@@ -21,6 +21,11 @@ struct GrayImage {
   const std::uint8_t* pixels = nullptr;
 };
 
+// ITU-R BT.601 luma of an 8-bit colour, as V4L2's and OpenCV's grey: colour images are read as it.
+inline std::uint8_t bt601_luma(unsigned r, unsigned g, unsigned b) {
+  return std::uint8_t((77u * r + 150u * g + 29u * b + 128u) >> 8);
+}
+
 // The largest image side any reader accepts, whatever it is asked for.
 inline constexpr int kMaxImageSide = 16384;
 

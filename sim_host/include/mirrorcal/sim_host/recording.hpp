@@ -32,8 +32,10 @@ namespace mirrorcal::sim {
 // features.csv's header (the other files' are EuRoC's).
 inline constexpr const char* kFeaturesHeader = "#timestamp [ns],feature_id,u [px],v [px]";
 
-// Kalibr's topic of the first camera: what camchain.yaml names when it names none.
+// Kalibr's topics of the first camera and the IMU: what camchain.yaml and imu.yaml name when they
+// name none.
 inline constexpr const char* kDefaultCameraTopic = "/cam0/image_raw";
+inline constexpr const char* kDefaultImuTopic = "/imu0";
 
 // camchain.yaml's distortion_model: radtan (with zero coefficients) for no lens, which every
 // reader takes.
@@ -56,6 +58,7 @@ constexpr double kMinImuRateHz = 1.0, kMaxImuRateHz = 10000.0;
 struct SensorInfo : CameraInfo {
   ImuNoise imu{};
   double imu_rate_hz = 200.0;
+  std::string imu_rostopic = kDefaultImuTopic;  // where a bag's IMU messages are
   // mirrorcal's own imu.yaml keys (docs/recordings.md): the IMU model the calibration estimates
   // (imu_model; none: the program's default) and the datasheet's tolerances, 1-sigma (defaults
   // that cover common MEMS parts where not given).
@@ -208,7 +211,8 @@ struct Recording {
   std::uint64_t frames_outside_imu = 0;  // skipped: before the first or after the last IMU sample
   std::vector<std::string> notes;        // defaults used, frames skipped: tell the user
   std::vector<std::string> warnings;     // the data disagree with a description (noise densities)
-  std::string fingerprint;               // of the CSV files' bytes: results name their recording
+  std::string fingerprint;  // of the CSV files (a bag: of its samples and stamps): results name
+                            // their recording
   // The markers come from the images in cam0/data/ (open_recording's from_images), not from
   // features.csv; the streams' frames then carry no markers.
   bool from_images = false;
