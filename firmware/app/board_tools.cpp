@@ -37,12 +37,4 @@ AllanPlotter allan_plotter() {
   return nullptr;
 }
 
-bool open_bag(const std::string& path, const sim::BagOptions&, int, sim::Recording&,
-              std::string& error) {
-  error = path +
-          ": a ROS bag; the board's build of mirrorcal reads recording folders only (record "
-          "writes them). Calibrate the bag with the host's build (docs/usage.md)";
-  return false;
-}
-
 }  // namespace mirrorcal::app

@@ -9,6 +9,7 @@
 #include "mirrorcal/calibration/recording_run.hpp"
 #include "mirrorcal/calibration/report.hpp"
 #include "mirrorcal/calibration/statistics.hpp"
+#include "mirrorcal/sim_host/bags.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 
 namespace mirrorcal::app {
@@ -16,6 +17,20 @@ namespace mirrorcal::app {
 using namespace calibration;
 
 namespace {
+
+// A bag as a recording, in a build that reads bags (MIRRORCAL_BAGS: the host's).
+bool open_bag(const std::string& path, const sim::BagOptions& options, int markers,
+              sim::Recording& out, std::string& error) {
+#ifdef MIRRORCAL_BAGS
+  return sim::open_bag_recording(path, options, markers, out, error);
+#else
+  (void)options, (void)markers, (void)out;
+  error = path +
+          ": a ROS bag; this build of mirrorcal (a board's) reads recording folders only, which "
+          "record writes. Calibrate the bag with the host's build (docs/usage.md)";
+  return false;
+#endif
+}
 
 template <int M, int NK, int NI = 0>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,

@@ -19,9 +19,4 @@ AllanPlotter allan_plotter() {
   return draw_allan_plot;
 }
 
-bool open_bag(const std::string& path, const sim::BagOptions& options, int markers,
-              sim::Recording& out, std::string& error) {
-  return sim::open_bag_recording(path, options, markers, out, error);
-}
-
 }  // namespace mirrorcal::app
