@@ -8,6 +8,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <vector>
 
@@ -481,6 +482,64 @@ TEST(DetectingMarkerSource, FramesTheDeviceFlaggedCorruptAreSkippedAndCounted) {
   EXPECT_EQ(source.poll(f), mc::hal::SourceStatus::kNotReady);
   EXPECT_EQ(source.counters().frames, 2u);
   EXPECT_EQ(source.counters().corrupt_skipped, 1u);
+}
+
+// The passes of a calibration over one recording's images: a pass that stops early keeps nothing
+// for the others; the first pass that meets the end keeps every frame's blobs; a pass after it
+// replays them without reading an image (its frame source fails if polled), and labels exactly as
+// a pass that reads and detects every image.
+TEST(DetectingMarkerSource, APassReplaysTheBlobsTheFirstCompletePassKept) {
+  struct MemoryReplay final : mc::detection::BlobReplay {
+    std::vector<mc::detection::DetectedFrame> frames;
+    std::size_t complete_frames = 0;
+    std::size_t complete() const override { return complete_frames; }
+    void read(std::size_t k, mc::detection::DetectedFrame& f) const override { f = frames.at(k); }
+    void keep(std::size_t k, const mc::detection::DetectedFrame& f) override {
+      if (frames.size() <= k) frames.resize(k + 1);
+      frames[k] = f;
+    }
+    void ended(std::size_t n) override { complete_frames = n; }
+  };
+  struct NoImages final : mc::hal::FrameSource {
+    mc::hal::SourceStatus poll(mc::hal::FrameView&) override {
+      ADD_FAILURE() << "a replayed pass read an image";
+      return mc::hal::SourceStatus::kError;
+    }
+  };
+  mc::sim::Scenario s = mc::sim::paper_scenario();
+  s.duration_s = 3.0;
+  mc::detection::DetectionConfig<M> config;
+  config.identify = identifier_config();
+  const auto pass = [&](mc::hal::FrameSource& frames, MemoryReplay* replay, std::size_t most) {
+    mc::detection::DetectingMarkerSource<M> source(frames, config, s.truth.width, s.truth.height);
+    source.replay_with(replay);
+    std::vector<mc::MarkerFrame<M>> out;
+    mc::MarkerFrame<M> f;
+    while (out.size() < most && source.poll(f) == mc::hal::SourceStatus::kOk) out.push_back(f);
+    return out;
+  };
+  const auto same = [](const std::vector<mc::MarkerFrame<M>>& a,
+                       const std::vector<mc::MarkerFrame<M>>& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t k = 0; k < a.size(); ++k)
+      for (int i = 0; i < M; ++i)
+        if (a[k].t_ns != b[k].t_ns || a[k].seen[i] != b[k].seen[i] ||
+            (a[k].seen[i] && a[k].uv[i] != b[k].uv[i]))
+          return false;
+    return true;
+  };
+  MemoryReplay replay;
+  mc::sim::RenderedFrameSource stretch(s, mc::sim::RenderConfig{}, 21);
+  EXPECT_EQ(pass(stretch, &replay, 20).size(), 20u);
+  EXPECT_EQ(replay.complete(), 0u);  // a stretch of the data keeps nothing for a replay
+  mc::sim::RenderedFrameSource all(s, mc::sim::RenderConfig{}, 21);
+  const auto detected = pass(all, &replay, SIZE_MAX);
+  ASSERT_GT(detected.size(), 100u);
+  EXPECT_EQ(replay.complete(), detected.size());
+  NoImages none;
+  EXPECT_TRUE(same(pass(none, &replay, SIZE_MAX), detected));
+  mc::sim::RenderedFrameSource again(s, mc::sim::RenderConfig{}, 21);
+  EXPECT_TRUE(same(pass(again, nullptr, SIZE_MAX), detected));
 }
 
 TEST(MarkerIdentifier, WithoutAPredictionTheBrightestBlobsAreTheCandidates) {

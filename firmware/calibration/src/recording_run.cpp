@@ -2,6 +2,8 @@
 
 #include <memory>
 
+#include "mirrorcal/calibration/image_markers.hpp"
+
 namespace mirrorcal::calibration {
 
 CalibrationConfig recording_config(const sim::Recording& r) {
@@ -22,7 +24,10 @@ LoopData recording_loop_data(const sim::Recording& r) {
   d.imu_period_ns = imu_period_ns(r.sensors.imu_rate_hz);
   d.width = r.sensors.width;
   d.height = r.sensors.height;
-  if (r.from_images) d.image_detection = std::make_shared<DetectionReport>();
+  if (r.from_images) {
+    d.image_detection = std::make_shared<DetectionReport>();
+    d.image_blobs = std::make_shared<ImageBlobs>();
+  }
   d.leds = r.priors.leds;
   return d;
 }

@@ -7,6 +7,7 @@
 
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
+#include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -29,11 +30,34 @@ detection::DetectionConfig<M> marker_detection_config(const sim::MarkerLeds& led
 // when polled and by the filter's prediction too when the loop relabels it. On destruction
 // it leaves how detection went in report, if it met at least as many frames as the one before
 // (so report ends with the last pass over all the data, not a shorter stretch of it).
+// The blobs of a recording's images, detected once for all the passes of its calibration (each
+// pass would read and detect every image again): fixed-size records in a temporary file (a frame
+// takes 1.6 KB of disk, not memory), and the time the pass that detected them took.
+class ImageBlobs final : public detection::BlobReplay {
+ public:
+  std::size_t complete() const override { return complete_; }
+  void read(std::size_t k, detection::DetectedFrame& frame) const override {
+    frames_.read(k, &frame);
+  }
+  void keep(std::size_t k, const detection::DetectedFrame& frame) override {
+    frames_.write(k, &frame);
+  }
+  void ended(std::size_t frames) override { complete_ = frames; }
+  // Reading and detecting over the pass that kept the frames (s), which the report gives.
+  double read_seconds = 0.0, detect_seconds = 0.0;
+
+ private:
+  files::RecordFile frames_{sizeof(detection::DetectedFrame), "the images' blobs"};
+  std::size_t complete_ = 0;
+};
+
 template <int M>
 class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
+  // blobs: where the passes keep and replay the detected frames (nullptr: every pass detects).
   ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
-               DetectionReport* report, const sim::MarkerLeds& leds = {});
+               DetectionReport* report, const sim::MarkerLeds& leds = {},
+               ImageBlobs* blobs = nullptr);
   ~ImageMarkers() override;
   hal::SourceStatus poll(MarkerFrame<M>& frame) override;
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override;
@@ -44,6 +68,8 @@ class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabe
   std::unique_ptr<hal::FrameSource> frames_;
   detection::DetectingMarkerSource<M> detect_;
   DetectionReport* report_;
+  ImageBlobs* blobs_;
+  bool replayed_;  // the frames came from blobs_, not from the images
   std::uint64_t frames_seen_ = 0, labelled_ = 0;
   double read_seconds_ = 0.0;
 };

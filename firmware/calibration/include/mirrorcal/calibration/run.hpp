@@ -20,6 +20,8 @@
 
 namespace mirrorcal::calibration {
 
+class ImageBlobs;  // image_markers.hpp
+
 // How detection did against the rendered truth (--frames only).
 struct DetectionReport {
   std::uint64_t frames = 0;
@@ -87,6 +89,7 @@ struct LoopData {
   // board's detection, labelled with the filter's prediction, in every pass; it gets how that went
   // in the last pass over all the data.
   std::shared_ptr<DetectionReport> image_detection;
+  std::shared_ptr<ImageBlobs> image_blobs;  // with image_detection: the images detected once
   sim::MarkerLeds leds;  // the markers' LEDs, as the detection in images needs them
 
   std::size_t imu_samples() const { return streams ? stats.imu_samples : imu.size(); }

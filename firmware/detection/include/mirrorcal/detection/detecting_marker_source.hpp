@@ -5,8 +5,10 @@
 // simulation (rendered frames). Nothing allocates per frame.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstddef>
 
 #include "mirrorcal/detection/blink_names.hpp"
 #include "mirrorcal/detection/blob_detector.hpp"
@@ -42,6 +44,31 @@ struct DetectionCounters {
   double detect_seconds = 0.0;        // wall time spent in detection and identification
 };
 
+// A frame's blobs as detection found them, for a later pass over the same frames to take instead
+// of reading and detecting the image again (BlobReplay).
+struct DetectedFrame {
+  static constexpr int kMaxBlobs = 32;
+  std::int64_t t_ns = 0;
+  std::uint32_t sequence = 0;
+  int count = 0;
+  std::array<Blob, kMaxBlobs> blobs{};
+};
+
+// The detected frames of passes over one recording (the host's calibration makes several): the
+// first pass that reaches the end of the stream keeps every frame's blobs, and the passes after
+// it replay them, so that each image is read and detected once.
+class BlobReplay {
+ public:
+  virtual ~BlobReplay() = default;
+  // The frames a pass kept up to the end of the stream (0: none has yet).
+  virtual std::size_t complete() const = 0;
+  virtual void read(std::size_t k, DetectedFrame& frame) const = 0;
+  // Frame k of the stream as this pass detected it (every pass counts from the first frame).
+  virtual void keep(std::size_t k, const DetectedFrame& frame) = 0;
+  // This pass met the end of the stream after `frames` frames, all kept.
+  virtual void ended(std::size_t frames) = 0;
+};
+
 template <int M>
 class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
@@ -57,17 +84,19 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
     bootstrap_.name_ahead(config.names_ahead);
   }
 
+  // Replays the frames replay kept, once a pass has kept them all, and keeps them until then.
+  void replay_with(BlobReplay* replay) { replay_ = replay; }
+
   hal::SourceStatus poll(MarkerFrame<M>& frame) override {
     hal::FrameView view;
-    for (;;) {
-      const hal::SourceStatus st = frames_.poll(view);
-      if (st != hal::SourceStatus::kOk) return st;
-      if ((view.flags & hal::kFrameCorrupt) == 0) break;
-      ++counters_.corrupt_skipped;
-    }
-    last_view_ = view;
+    const bool replaying = replay_ != nullptr && replay_->complete() > 0;
+    const hal::SourceStatus st = replaying ? replay(view) : next_frame(view);
+    if (st != hal::SourceStatus::kOk) return st;
     const auto t0 = std::chrono::steady_clock::now();
-    blob_count_ = detector_.detect(view, blobs_.data(), static_cast<int>(blobs_.size()));
+    if (!replaying) {
+      blob_count_ = detector_.detect(view, blobs_.data(), static_cast<int>(blobs_.size()));
+      keep(view);
+    }
     if (bootstrap_shape_) bootstrap_.feed(view.t_ns, blobs_.data(), blob_count_);
     if (blink_on_) blink_.feed(view.t_ns, view.sequence, blobs_.data(), blob_count_);
     committed_ += last_;  // the previous frame's labelling is final now
@@ -119,6 +148,38 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   }
 
  private:
+  // The next frame the device has not flagged as damaged.
+  hal::SourceStatus next_frame(hal::FrameView& view) {
+    for (;;) {
+      const hal::SourceStatus st = frames_.poll(view);
+      if (st == hal::SourceStatus::kEndOfStream && replay_ != nullptr) replay_->ended(frame_index_);
+      if (st != hal::SourceStatus::kOk) return st;
+      if ((view.flags & hal::kFrameCorrupt) == 0) break;
+      ++counters_.corrupt_skipped;
+    }
+    last_view_ = view;
+    return hal::SourceStatus::kOk;
+  }
+  void keep(const hal::FrameView& view) {
+    if (replay_ != nullptr) {
+      kept_.t_ns = view.t_ns;
+      kept_.sequence = view.sequence;
+      kept_.count = blob_count_;
+      std::copy(blobs_.begin(), blobs_.begin() + blob_count_, kept_.blobs.begin());
+      replay_->keep(frame_index_, kept_);
+    }
+    ++frame_index_;
+  }
+  hal::SourceStatus replay(hal::FrameView& view) {
+    if (frame_index_ == replay_->complete()) return hal::SourceStatus::kEndOfStream;
+    replay_->read(frame_index_++, kept_);
+    view = hal::FrameView{};
+    view.t_ns = kept_.t_ns;
+    view.sequence = kept_.sequence;
+    blob_count_ = kept_.count;
+    std::copy(kept_.blobs.begin(), kept_.blobs.begin() + blob_count_, blobs_.begin());
+    return hal::SourceStatus::kOk;
+  }
   const int* track_labels() const {
     if (blink_on_) return blink_.blob_labels();
     return bootstrap_shape_ ? bootstrap_.blob_labels() : nullptr;
@@ -139,7 +200,12 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   bool blink_on_;
   BlinkNames<M> blink_;
   std::array<Blob, MarkerIdentifier<M>::kMaxBlobs> blobs_{};
+  static_assert(DetectedFrame::kMaxBlobs == MarkerIdentifier<M>::kMaxBlobs,
+                "a replayed frame holds the blobs the identifier takes");
   int blob_count_ = 0;
+  BlobReplay* replay_ = nullptr;
+  std::size_t frame_index_ = 0;  // of this pass, from the stream's first frame
+  DetectedFrame kept_{};
   hal::FrameView last_view_{};
   IdentifierCounters committed_{}, last_{};
   DetectionCounters counters_{};
