@@ -214,6 +214,42 @@ class Decompressor {
   ZSTD_DCtx* zstd_ = nullptr;
 };
 
+// A topic's messages read chunk by chunk: the records of the chunk in hand, then on through the
+// file to the next chunk.
+class ChunkStream : public MessageStream {
+ public:
+  hal::SourceStatus next(Message& m) final {
+    if (!error_.empty()) return hal::SourceStatus::kError;
+    for (;;) {
+      while (at_ < inner_.size()) {
+        const hal::SourceStatus s = chunk_record(m);
+        if (s != hal::SourceStatus::kEndOfStream) return s;  // a message of ours, or an error
+      }
+      const hal::SourceStatus s = advance(m);
+      if (s != hal::SourceStatus::kNotReady) return s;
+    }
+  }
+
+ protected:
+  ChunkStream(const std::string& path, std::string topic) : topic_(std::move(topic)) {
+    std::string error;
+    if (!file_.open(path, error)) fail(error);
+  }
+  // The record at at_ of the chunk in hand (inner_), at_ moved past it: kOk with a message of
+  // ours, kEndOfStream if it is none, kError.
+  virtual hal::SourceStatus chunk_record(Message& m) = 0;
+  // On beyond the chunk in hand: kNotReady once the next chunk is in inner_ (or a record outside
+  // chunks was skipped), kOk with a message of ours outside chunks, kEndOfStream, kError.
+  virtual hal::SourceStatus advance(Message& m) = 0;
+
+  std::string topic_;
+  File file_;
+  Decompressor decompress_;
+  std::vector<std::uint8_t> compressed_, inner_;
+  std::size_t at_ = 0;
+  std::uint64_t chunk_offset_ = 0;  // the chunk in hand's, for messages
+};
+
 // --- ROS 1 bags ------------------------------------------------------------------------------
 
 constexpr std::string_view kRos1Magic = "#ROSBAG V2.0\n";
@@ -314,33 +350,25 @@ class Ros1Bag final : public Bag {
   std::vector<Chunk> chunks_;                                 // in file order
 };
 
-class Ros1Stream final : public MessageStream {
+class Ros1Stream final : public ChunkStream {
  public:
   Ros1Stream(const std::string& path, const Topic& topic, std::set<std::uint32_t> connections,
              const std::vector<Ros1Bag::Chunk>& chunks)
-      : topic_(topic.name), connections_(std::move(connections)) {
+      : ChunkStream(path, topic.name), connections_(std::move(connections)) {
     for (const Ros1Bag::Chunk& c : chunks)
       for (std::uint32_t conn : c.connections)
         if (connections_.count(conn) != 0) {
           chunks_.push_back(c.offset);
           break;
         }
-    std::string error;
-    if (!file_.open(path, error)) fail(error);
-  }
-  hal::SourceStatus next(Message& m) override {
-    if (!error_.empty()) return hal::SourceStatus::kError;
-    for (;;) {
-      while (at_ < inner_.size()) {
-        const hal::SourceStatus s = inner_record(m);
-        if (s != hal::SourceStatus::kEndOfStream) return s;  // a message of ours, or an error
-      }
-      if (next_chunk_ == chunks_.size()) return hal::SourceStatus::kEndOfStream;
-      if (!load_chunk(chunks_[next_chunk_++])) return hal::SourceStatus::kError;
-    }
   }
 
  private:
+  hal::SourceStatus advance(Message&) override {
+    if (next_chunk_ == chunks_.size()) return hal::SourceStatus::kEndOfStream;
+    return load_chunk(chunks_[next_chunk_++]) ? hal::SourceStatus::kNotReady
+                                              : hal::SourceStatus::kError;
+  }
   bool load_chunk(std::uint64_t offset) {
     std::string error;
     Ros1Record r;
@@ -364,7 +392,7 @@ class Ros1Stream final : public MessageStream {
     return true;
   }
   // The chunk's next record: kOk if it is a message of ours, kEndOfStream if not (or none left).
-  hal::SourceStatus inner_record(Message& m) {
+  hal::SourceStatus chunk_record(Message& m) override {
     Bytes b(inner_.data() + at_, inner_.size() - at_);
     const std::string_view header = b.string32();
     const std::string_view data = b.string32();
@@ -399,15 +427,9 @@ class Ros1Stream final : public MessageStream {
     return false;
   }
 
-  std::string topic_;
   std::set<std::uint32_t> connections_;
   std::vector<std::uint64_t> chunks_;  // the chunks holding messages of ours
   std::size_t next_chunk_ = 0;
-  File file_;
-  Decompressor decompress_;
-  std::vector<std::uint8_t> compressed_, inner_;
-  std::size_t at_ = 0;
-  std::uint64_t chunk_offset_ = 0;
 };
 
 bool Ros1Bag::open(std::string& error) {
@@ -548,29 +570,23 @@ struct McapDefinitions {
   }
 };
 
-class McapStream final : public MessageStream {
+class McapStream final : public ChunkStream {
  public:
   McapStream(const std::string& path, const Topic& topic, std::uint64_t data_end)
-      : topic_(topic.name), data_end_(data_end) {
-    std::string error;
-    if (!file_.open(path, error)) fail(error);
-  }
-  hal::SourceStatus next(Message& m) override {
-    if (!error_.empty()) return hal::SourceStatus::kError;
-    for (;;) {
-      while (at_ < inner_.size()) {
-        const hal::SourceStatus s = record_in(inner_, at_, chunk_offset_, m);
-        if (s != hal::SourceStatus::kEndOfStream) return s;
-      }
-      if (done_) return hal::SourceStatus::kEndOfStream;
-      const hal::SourceStatus s = top_record(m);
-      if (s != hal::SourceStatus::kEndOfStream) return s;
-    }
-  }
+      : ChunkStream(path, topic.name), data_end_(data_end) {}
   // The schemas and channels met so far.
   const McapDefinitions& definitions() const { return definitions_; }
 
  private:
+  hal::SourceStatus chunk_record(Message& m) override {
+    return record_in(inner_, at_, chunk_offset_, m);
+  }
+  hal::SourceStatus advance(Message& m) override {
+    if (done_) return hal::SourceStatus::kEndOfStream;
+    const hal::SourceStatus s = top_record(m);
+    if (s != hal::SourceStatus::kEndOfStream) return s;
+    return done_ ? hal::SourceStatus::kEndOfStream : hal::SourceStatus::kNotReady;
+  }
   // The next record of the data section: a message of ours (kOk), a chunk loaded, or another
   // record skipped (both kEndOfStream, with more to come unless done_).
   hal::SourceStatus top_record(Message& m) {
@@ -671,15 +687,10 @@ class McapStream final : public MessageStream {
     return hal::SourceStatus::kOk;
   }
 
-  std::string topic_;
   std::uint64_t data_end_;
-  File file_;
-  Decompressor decompress_;
   McapDefinitions definitions_;
-  std::vector<std::uint8_t> record_, compressed_, inner_;
+  std::vector<std::uint8_t> record_;  // a record outside chunks
   std::uint64_t offset_ = sizeof kMcapMagic;
-  std::size_t at_ = 0;
-  std::uint64_t chunk_offset_ = 0;
   bool done_ = false;
 };
 
