@@ -13,7 +13,7 @@
 namespace mirrorcal::app {
 
 std::string usage() {
-  std::string u = "usage: mirrorcal <command> [options]\n";
+  std::string u = "usage: mirrorcal <command> [options]   (mirrorcal --version: which build)\n";
   for (const auto& c : commands()) u += c.usage;
   return u;
 }

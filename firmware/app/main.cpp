@@ -6,6 +6,7 @@
 #include "build_tools.hpp"
 #include "cli.hpp"
 #include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/sim_host/version.hpp"
 
 namespace mirrorcal::app {
 
@@ -161,6 +162,10 @@ const std::vector<Command>& commands() {
 int main(int argc, char** argv) {
   namespace app = mirrorcal::app;
   const std::string first = argc < 2 ? "" : argv[1];
+  if (first == "--version") {
+    std::printf("%s\n", mirrorcal::sim::written_by().c_str());
+    return 0;
+  }
   if (argc < 2 || first == "--help" || first == "-h") {
     std::fputs(app::usage().c_str(), argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;

@@ -2,6 +2,7 @@
 // noise a calibration estimated. Apart from recording_yaml.cpp so that the calibration, which has
 // no YAML reader, writes it too.
 #include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/sim_host/version.hpp"
 #include "text_io.hpp"
 
 namespace mirrorcal::sim {
@@ -17,9 +18,8 @@ std::string number(double v) {
 }  // namespace
 
 std::string imu_yaml_text(const SensorInfo& s) {
-  std::string imu =
-      "# Kalibr IMU description (continuous-time noise densities)\nrostopic: " + s.imu_rostopic +
-      "\n";
+  std::string imu = "# Kalibr IMU description (continuous-time noise densities)\n# written by " +
+                    written_by() + "\nrostopic: " + s.imu_rostopic + "\n";
   imu +=
       "accelerometer_noise_density: " + number(s.imu.accel_noise_density) + "  # m/s^2/sqrt(Hz)\n";
   imu += "accelerometer_random_walk: " + number(s.imu.accel_random_walk) + "  # m/s^3/sqrt(Hz)\n";

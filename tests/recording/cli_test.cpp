@@ -667,6 +667,21 @@ TEST(Cli, RecordNeedsAnOutputFolder) {
   EXPECT_NE(r.output.find("--out"), std::string::npos) << r.output;
 }
 
+// `mirrorcal --version` names the build, and every YAML file and report it writes names it too.
+TEST(Cli, TheVersionIsPrintedAndInEveryFileHeader) {
+  TempDir dir("cli-version");
+  const Result v = run_mirrorcal("--version", dir.path);
+  ASSERT_EQ(v.code, 0) << v.output;
+  const std::string build = v.output.substr(0, v.output.find('\n'));
+  EXPECT_EQ(build.rfind("mirrorcal " MIRRORCAL_VERSION " (commit ", 0), 0u) << build;
+  const Result r =
+      run_mirrorcal("sim --seed 2 --duration 10 --no-plots --out " + dir.path, dir.path);
+  ASSERT_TRUE(r.code == 0 || r.code == 3) << r.output;  // 3: the run flagged itself
+  for (const char* file : {"camchain-imucam.yaml", "mirrorcal-result.yaml", "report.txt"})
+    EXPECT_NE(slurp(dir.path + "/" + file).find("written by " + build + "\n"), std::string::npos)
+        << file;
+}
+
 // A command used wrongly prints the error and its own usage only (every command's would be about
 // 90 lines, and the error would scroll off the screen).
 TEST(Cli, ACommandUsedWronglyPrintsItsOwnUsageOnly) {

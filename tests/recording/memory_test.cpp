@@ -165,7 +165,8 @@ TEST(FrameStores, TheCalibrationIsTheSameThroughTheFileAsInMemory) {
 // stores, each frame took about 13 KB (history rows, the tracking pass's motion rows, the smoothed
 // trajectory, and copies of the first two): 32 MB here. The bound, 0.5 MB, is 200 bytes a frame.
 // Without gnuplot (no program on PATH): its memory, which wait4 counts as well, grows with the
-// points it plots and is not calibrate's.
+// points it plots and is not calibrate's. The same calibration's peak varies by up to 600 KiB
+// from run to run (where the libraries and the heap land): each is the least of three runs.
 TEST(FrameStores, ARecordingThreeTimesAsLongCalibratesInNearlyTheSameMemory) {
   constexpr double kShortS = 20.0, kLongS = 3 * kShortS;
   TempDir tmp("three-times");
@@ -174,9 +175,12 @@ TEST(FrameStores, ARecordingThreeTimesAsLongCalibratesInNearlyTheSameMemory) {
     const std::string rec = tmp.path + "/rec" + std::to_string(i);
     const auto s = short_scenario(i == 0 ? kShortS : kLongS);
     write_recording(rec, s, mc::sim::simulate(s, 5), 5);
-    peak[i] = run_measured({"calibrate", rec, "--out", rec + "-out"}, rec + ".log",
-                           {"PATH=/nonexistent"});
-    ASSERT_EQ(peak[i].status, 0) << slurp(rec + ".log");
+    for (int run = 0; run < 3; ++run) {
+      const Measured m = run_measured({"calibrate", rec, "--out", rec + "-out"}, rec + ".log",
+                                      {"PATH=/nonexistent"});
+      ASSERT_EQ(m.status, 0) << slurp(rec + ".log");
+      if (run == 0 || m.peak_rss_kib < peak[i].peak_rss_kib) peak[i] = m;
+    }
   }
   std::printf("calibrate's peak memory: %ld KiB for %.0f s, %ld KiB for %.0f s\n",
               peak[0].peak_rss_kib, kShortS, peak[1].peak_rss_kib, kLongS);

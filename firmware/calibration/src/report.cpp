@@ -10,6 +10,7 @@
 
 #include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/estimator/so3.hpp"
+#include "mirrorcal/sim_host/version.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -567,7 +568,8 @@ void add_excitation(std::string& t, const ReportData& d) {
 }  // namespace
 
 std::string report_text(const ReportData& d) {
-  std::string t = "mirrorcal calibration report: " + d.title + "\n\n";
+  std::string t =
+      "mirrorcal calibration report: " + d.title + "\nwritten by " + sim::written_by() + "\n\n";
   add_verdict(t, d);
   add_noise(t, d);
   add_calibration(t, d);

@@ -9,6 +9,7 @@
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/sim_host/version.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -65,7 +66,7 @@ void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* inden
 // First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
 // refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
 void write_yaml_header(std::FILE* o, const char* what) {
-  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n", what);
+  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n# written by %s\n", what, sim::written_by().c_str());
 }
 
 namespace {
@@ -569,7 +570,9 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
   if (o == nullptr) return false;
   std::fprintf(o,
                "# mirrorcal result: SI units (m, rad, px); sigma is 1-sigma, rotations as the\n"
-               "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n");
+               "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n"
+               "# written by %s\n",
+               sim::written_by().c_str());
   std::fprintf(o, "T_cam_imu:\n");
   write_matrix_rows(o, t_cam_imu(r), "  ");
   std::fprintf(o, "p_b_c: [%.17g, %.17g, %.17g]\n", r.p_b_c.x(), r.p_b_c.y(), r.p_b_c.z());
@@ -725,6 +728,7 @@ void write_ros_matrix(std::FILE* o, const char* key, int rows, int cols, const d
 void write_ros_camera_info(std::FILE* o, const CalibrationResult& r) {
   const Pinhole<double>& k = r.intrinsics;
   std::fprintf(o, "# mirrorcal calibration: ROS camera_info (camera_calibration_parsers)\n");
+  std::fprintf(o, "# written by %s\n", sim::written_by().c_str());
   std::fprintf(o, "image_width: %d\nimage_height: %d\ncamera_name: cam0\n", r.width, r.height);
   const double kk[9] = {k.fu, k.skew, k.cu, 0.0, k.fv, k.cv, 0.0, 0.0, 1.0};
   write_ros_matrix(o, "camera_matrix", 3, 3, kk);
