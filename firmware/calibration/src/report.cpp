@@ -568,8 +568,9 @@ void add_excitation(std::string& t, const ReportData& d) {
 }  // namespace
 
 std::string report_text(const ReportData& d) {
+  // The verdict stays the third line (after the title and a blank): what a reader looks for first.
   std::string t =
-      "mirrorcal calibration report: " + d.title + "\nwritten by " + sim::written_by() + "\n\n";
+      "mirrorcal calibration report: " + d.title + "; written by " + sim::written_by() + "\n\n";
   add_verdict(t, d);
   add_noise(t, d);
   add_calibration(t, d);
