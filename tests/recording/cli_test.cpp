@@ -821,9 +821,9 @@ TEST(Cli, AnOutputFolderNamedLikeACommandIsOnlyAFolder) {
       run_mirrorcal({"sim", "--seed", "2", "--duration", "20", "--out", out}, dir.path, dir.path);
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output.find("no plots"), std::string::npos) << r.output;
-  for (const char* f :
-       {"camchain-imucam.yaml", "mirrorcal-result.yaml", "estimates.csv", "error_p.png",
-        "error_rot.png", "error_markers.png", "error_timeshift.png", "nees.png"})
+  for (const char* f : {"camchain-imucam.yaml", "mirrorcal-result.yaml", "estimates.csv",
+                        "error_p.png", "error_rot.png", "error_markers.png", "error_timeshift.png",
+                        "error_markers_from_prior.png", "nees.png"})
     EXPECT_GT(fs::file_size(out + "/" + f), 0u) << f;
   // The scratch folder holds the output folder and the log, nothing a command made.
   std::vector<std::string> names;

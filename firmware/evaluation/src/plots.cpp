@@ -99,21 +99,36 @@ std::vector<std::string> write_error_plot_script(const std::string& dir, const s
   g << "set terminal pngcairo size 1500,900 font 'DejaVu Sans,10' noenhanced\nset grid\n"
     << "set key off\nset xlabel 'time [s]'\n";
   const std::string line = runs > 1 ? "lc rgb '#a0336699' lw 0.6" : "lc rgb '#336699' lw 1.2";
-  for (const PlotGroup& grp : plot_groups(params)) {
-    const std::size_t n = grp.params.size(), cols = 3, rows = (n + cols - 1) / cols;
-    g << "set output '" << grp.file << "'\n"
-      << "set multiplot layout " << rows << "," << cols << " title "
-      << gnuplot_quoted(title + ": " + grp.label + " error and +-3 sigma") << "\n";
-    for (std::size_t j : grp.params) {
-      const std::size_t c = j + 2;  // 1-based column in both files
-      g << "set title " << gnuplot_quoted(params[j].name) << "\nset ylabel "
-        << gnuplot_quoted(params[j].unit) << "\nplot 'errors.dat' using 1:" << c << " with lines "
-        << line << ", 'band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
-        << ", '' using 1:(-$" << c << ") with lines lc rgb '#cc2222' lw 1.5\n";
+  // Each group twice: scaled to the converged estimate (+-4 times its smallest 3-sigma band, the
+  // early errors running off the plot), and whole from the prior's sigmas, in which the converged
+  // part is a flat line (<group>_from_prior.png).
+  for (const bool from_prior : {false, true})
+    for (const PlotGroup& grp : plot_groups(params)) {
+      const std::size_t n = grp.params.size(), cols = 3, rows = (n + cols - 1) / cols;
+      const std::string file =
+          from_prior ? grp.file.substr(0, grp.file.size() - 4) + "_from_prior.png" : grp.file;
+      g << "set output '" << file << "'\n"
+        << "set multiplot layout " << rows << "," << cols << " title "
+        << gnuplot_quoted(title + ": " + grp.label + " error and +-3 sigma" +
+                          (from_prior ? ", from the prior" : ", converged"))
+        << "\n";
+      for (std::size_t j : grp.params) {
+        const std::size_t c = j + 2;  // 1-based column in both files
+        if (from_prior)
+          g << "set autoscale y\n";
+        else
+          g << "stats 'band.dat' using " << c << " nooutput\n"
+            << "if (STATS_min > 0) { set yrange [-4 * STATS_min : 4 * STATS_min] } "
+               "else { set autoscale y }\n";
+        g << "set title " << gnuplot_quoted(params[j].name) << "\nset ylabel "
+          << gnuplot_quoted(params[j].unit) << "\nplot 'errors.dat' using 1:" << c << " with lines "
+          << line << ", 'band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
+          << ", '' using 1:(-$" << c << ") with lines lc rgb '#cc2222' lw 1.5\n";
+      }
+      g << "unset multiplot\n";
+      written.push_back(dir + "/" + file);
     }
-    g << "unset multiplot\n";
-    written.push_back(dir + "/" + grp.file);
-  }
+  g << "set autoscale y\n";
   const std::size_t nc = params.size() + 2;
   g << "set output 'nees.png'\nset terminal pngcairo size 900,500 noenhanced\n"
     << "set title 'NEES of the " << params.size() << " calibration states, mean over " << runs
