@@ -337,15 +337,10 @@ class BagImageSource final : public hal::FrameSource {
     image_ = pixels_.data();
     return true;
   }
-  // One image skipped: counted, and its message kept if it is among the first (each once).
+  // One image skipped: counted, and its message kept if it is among the first.
   void unreadable(const std::string& message) {
     ++unreadable_;
-    char text[512];
-    std::snprintf(text, sizeof text, "%.511s", message.c_str());
-    for (int k = 0; k < log_.kept; ++k)
-      if (std::strcmp(log_.messages[std::size_t(k)].data(), text) == 0) return;
-    if (log_.kept == ImageLog::kKept) return;
-    std::memcpy(log_.messages[std::size_t(log_.kept++)].data(), text, sizeof text);
+    log_.keep(message.c_str());
   }
 
   CameraMessages messages_;

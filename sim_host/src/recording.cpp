@@ -367,10 +367,7 @@ class FileImageSource final : public hal::FrameSource {
       std::snprintf(text, sizeof text, "%.380s: %.120s", message, what);
     else
       std::snprintf(text, sizeof text, "%.511s", message);
-    for (int k = 0; k < log_.kept; ++k)
-      if (std::strcmp(log_.messages[std::size_t(k)].data(), text) == 0) return;
-    if (log_.kept == ImageLog::kKept) return;
-    std::memcpy(log_.messages[std::size_t(log_.kept++)].data(), text, sizeof text);
+    log_.keep(text);
   }
   void fail(const std::string& error) {
     error_ = !error.empty() ? error : reader_.error();
@@ -431,6 +428,14 @@ class FileStreams final : public RecordingStreams {
 };
 
 }  // namespace
+
+void ImageLog::keep(const char* text) {
+  std::array<char, 512> m{};
+  std::snprintf(m.data(), m.size(), "%s", text);
+  for (int k = 0; k < kept; ++k)
+    if (messages[std::size_t(k)] == m) return;
+  if (kept < kKept) messages[std::size_t(kept++)] = m;
+}
 
 bool recording_marker_count(const std::string& dir, int& markers, std::string& error) {
   const std::string cam_yaml = dir + "/camchain.yaml", priors_yaml = dir + "/mirrorcal.yaml";

@@ -145,6 +145,8 @@ struct ImageLog {
   static constexpr int kKept = 5;
   int kept = 0;
   std::array<std::array<char, 512>, kKept> messages{};  // the first ones', naming their files
+  // Keeps text (cut to 511 characters) among messages if it is among the first, each once.
+  void keep(const char* text);
 };
 
 // A recording's streams, opened afresh for each pass of a calibration (open_recording reads them
