@@ -10,15 +10,16 @@ set_target_properties(mirrorcal_loop PROPERTIES EXPORT_NAME loop)
 set_target_properties(mirrorcal_detection PROPERTIES EXPORT_NAME detection)
 
 install(TARGETS mirrorcal_estimator mirrorcal_hal mirrorcal_loop mirrorcal_detection
-        EXPORT mirrorcalTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+        EXPORT mirrorcalTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT development
         INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/estimator/include/ ${PROJECT_SOURCE_DIR}/hal/include/
                   ${PROJECT_SOURCE_DIR}/firmware/loop/include/
                   ${PROJECT_SOURCE_DIR}/firmware/detection/include/
-        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} COMPONENT development)
 install(FILES ${MIRRORCAL_GENERATED_INCLUDE}/mirrorcal/estimator/marker_counts.hpp
-        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/mirrorcal/estimator)
-install(EXPORT mirrorcalTargets NAMESPACE mirrorcal:: DESTINATION ${MIRRORCAL_CMAKE_DIR})
+        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/mirrorcal/estimator COMPONENT development)
+install(EXPORT mirrorcalTargets NAMESPACE mirrorcal:: DESTINATION ${MIRRORCAL_CMAKE_DIR}
+        COMPONENT development)
 
 configure_package_config_file(${CMAKE_CURRENT_LIST_DIR}/mirrorcalConfig.cmake.in
                               ${PROJECT_BINARY_DIR}/mirrorcalConfig.cmake
@@ -29,4 +30,5 @@ configure_file(${CMAKE_CURRENT_LIST_DIR}/mirrorcal.pc.in ${PROJECT_BINARY_DIR}/m
 install(FILES ${PROJECT_BINARY_DIR}/mirrorcalConfig.cmake
               ${PROJECT_BINARY_DIR}/mirrorcalConfigVersion.cmake
         DESTINATION ${MIRRORCAL_CMAKE_DIR})
-install(FILES ${PROJECT_BINARY_DIR}/mirrorcal.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)
+install(FILES ${PROJECT_BINARY_DIR}/mirrorcal.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig
+        COMPONENT development)
