@@ -448,6 +448,67 @@ TEST(ReportFiles, ThePapersMotionLeavesNoStateWeaklyObserved) {
   }
 }
 
+// The biases and gravity of report.txt are mirrorcal-result.yaml's, with sigmas the filter could
+// have (positive, below their prior's); report.txt's per-axis residual line is residuals.csv's.
+TEST(ReportFiles, BiasesGravityAndResidualAxesAreTheResultFilesAndResiduals) {
+  TempDir dir("report-imu");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 3 --no-plots --out " + d + "/out", d), 0)
+      << slurp(d + "/command.log");
+  const std::string report = slurp(d + "/out/report.txt");
+  const YAML::Node imu = YAML::LoadFile(d + "/out/mirrorcal-result.yaml")["imu"];
+  // "accelerometer [m/s^2]: x B +- S, y ...", "gyro [deg/s]: ..." to 5 decimals.
+  double a[6] = {}, g[6] = {}, gravity[3] = {};
+  ASSERT_EQ(std::sscanf(line_starting(report, "accelerometer [m/s^2]:").c_str(),
+                        "accelerometer [m/s^2]: x %lf +- %lf, y %lf +- %lf, z %lf +- %lf", &a[0],
+                        &a[1], &a[2], &a[3], &a[4], &a[5]),
+            6);
+  ASSERT_EQ(std::sscanf(line_starting(report, "gyro [deg/s]:").c_str(),
+                        "gyro [deg/s]: x %lf +- %lf, y %lf +- %lf, z %lf +- %lf", &g[0], &g[1],
+                        &g[2], &g[3], &g[4], &g[5]),
+            6);
+  ASSERT_EQ(std::sscanf(line_starting(report, "gravity in the mirror's frame").c_str(),
+                        "gravity in the mirror's frame [m/s^2]: %lf %lf %lf", &gravity[0],
+                        &gravity[1], &gravity[2]),
+            3);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(a[2 * i], imu["accel_bias"][i].as<double>(), 6e-6);
+    EXPECT_NEAR(a[2 * i + 1], imu["accel_bias_sigma"][i].as<double>(), 6e-6);
+    EXPECT_NEAR(g[2 * i], imu["gyro_bias"][i].as<double>() * 180.0 / M_PI, 6e-6);
+    EXPECT_NEAR(g[2 * i + 1], imu["gyro_bias_sigma"][i].as<double>() * 180.0 / M_PI, 6e-6);
+    EXPECT_NEAR(gravity[i], imu["gravity_n"][i].as<double>(), 6e-5);
+    // Below the priors' 0.03 m/s^2 and 0.002 rad/s (prior.hpp): a minute of motion sees them.
+    EXPECT_GT(a[2 * i + 1], 0.0);
+    EXPECT_LT(a[2 * i + 1], 0.03);
+    EXPECT_GT(g[2 * i + 1], 0.0);
+    EXPECT_LT(g[2 * i + 1], 0.002 * 180.0 / M_PI);
+  }
+  EXPECT_NEAR(imu["gravity_n"][1].as<double>(), -9.81, 1e-9);  // the paper's wall mirror, y up
+  // "per axis [px]: u mean M std S max |u| X, v mean ..." against residuals.csv's settled rows.
+  double u[3] = {}, v[3] = {};
+  ASSERT_EQ(std::sscanf(line_starting(report, "per axis [px]:").c_str(),
+                        "per axis [px]: u mean %lf std %lf max |u| %lf, v mean %lf std %lf max "
+                        "|v| %lf",
+                        &u[0], &u[1], &u[2], &v[0], &v[1], &v[2]),
+            6);
+  std::vector<double> du, dv, abs_u, abs_v;
+  for (const CsvResidual& r : read_residuals_csv(d + "/out/residuals.csv"))
+    if (r.settled) {
+      du.push_back(r.du);
+      dv.push_back(r.dv);
+      abs_u.push_back(std::abs(r.du));
+      abs_v.push_back(std::abs(r.dv));
+    }
+  ASSERT_FALSE(du.empty());
+  const Row su = stats_of(du), sv = stats_of(dv);
+  EXPECT_NEAR(u[0], su.mean, 6e-5);
+  EXPECT_NEAR(u[1], su.std, 6e-5);
+  EXPECT_NEAR(u[2], stats_of(abs_u).max, 6e-4);
+  EXPECT_NEAR(v[0], sv.mean, 6e-5);
+  EXPECT_NEAR(v[1], sv.std, 6e-5);
+  EXPECT_NEAR(v[2], stats_of(abs_v).max, 6e-4);
+}
+
 // Without gnuplot the page says the plots are unavailable and why; the text is the same.
 TEST(ReportFiles, WithoutGnuplotThePageSaysSoAndTheTextIsWhole) {
   TempDir dir("report-no-gnuplot");

@@ -97,6 +97,17 @@ void write_imu_result_yaml(std::FILE* o, const ImuResult& r) {
                "y in its x-y plane)\n"
                "  model: %s\n",
                to_string(r.model));
+  const auto vector = [&](const char* key, const Eigen::Vector3d& v, const char* comment) {
+    std::fprintf(o, "  %s: [%.9g, %.9g, %.9g]%s\n", key, v(0), v(1), v(2), comment);
+  };
+  std::fprintf(o, "  # the biases at the end of the data (they walk), each with its 1-sigma\n");
+  vector("accel_bias", r.accel_bias, "  # m/s^2");
+  vector("accel_bias_sigma", r.accel_bias_sigma, "");
+  vector("gyro_bias", r.gyro_bias, "  # rad/s");
+  vector("gyro_bias_sigma", r.gyro_bias_sigma, "");
+  vector("gravity_n", r.gravity_n,
+         "  # m/s^2 in the mirror's frame (z along its normal): given (mirrorcal.yaml), not "
+         "estimated");
   if (!r.estimated()) {
     std::fprintf(o, "  # an ideal IMU assumed: bias and white noise only\n");
     const IdealImuCheck& c = r.ideal_check;

@@ -70,10 +70,6 @@ ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& 
       double(
           run.history[std::min<std::size_t>(run.gate_after_frames, run.history.size() - 1)].t_ns) *
       1e-9;
-  for (int i = 0; i < 3; ++i) {
-    d.accel_bias_sigma(i) = std::sqrt(run.covariance(State::kBa + i, State::kBa + i));
-    d.gyro_bias_sigma(i) = std::sqrt(run.covariance(State::kBg + i, State::kBg + i));
-  }
   static_assert(L <= kMaxReportStates, "a report row holds every calibration state");
   const std::vector<ParamInfo>& params = run.result.params;
   const State last = run.history.back().state;
@@ -110,7 +106,6 @@ ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& 
 #define MIRRORCAL_REPORT_DATA_(M, NK, NI) \
   template ReportData report_data<M, NK, NI>(const CalibrationRun<M, NK, NI>&, const std::string&);
 MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_REPORT_DATA_)
-#undef MIRRORCAL_REPORT_DATA_
 #undef MIRRORCAL_REPORT_DATA_
 
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title) {
@@ -242,6 +237,23 @@ Sample residual_lengths(const ReportData& d, int m, bool all_frames = false) {
         const double length = std::hypot(r.du, r.dv);
         if (std::isfinite(length)) f(length);  // the statistics' samples are numbers
       }
+  };
+}
+
+// The largest |value| of a sample (0 when it is empty).
+double largest_magnitude(const Sample& sample) {
+  double m = 0.0;
+  sample([&m](double v) { m = std::max(m, std::abs(v)); });
+  return m;
+}
+
+// Each settled residual's u (axis 0) or v (axis 1) coordinate, px.
+Sample residual_axis(const ReportData& d, int axis) {
+  return [&d, axis](const std::function<void(double)>& f) {
+    for (const ResidualSample r : d.residuals) {
+      const double x = axis == 0 ? r.du : r.dv;
+      if (r.settled && std::isfinite(x)) f(x);
+    }
   };
 }
 
@@ -438,8 +450,14 @@ void add_residuals(std::string& t, const ReportData& d) {
   const double rms = settled == 0 ? 0.0 : std::sqrt(squares / (2.0 * double(settled)));
   t += format(
       "RMS per coordinate: %.4f px = %.4f sigma (about 1 when the pixel sigma is right: a 2-D "
-      "normal residual's length has median 1.18 sigma; '+settling' adds the first frames)\n\n",
+      "normal residual's length has median 1.18 sigma; '+settling' adds the first frames)\n",
       rms, rms / d.pixel_sigma);
+  const Sample u_values = residual_axis(d, 0), v_values = residual_axis(d, 1);
+  const SampleStats u = sample_stats(u_values), v = sample_stats(v_values);
+  t += format(
+      "per axis [px]: u mean %+.4f std %.4f max |u| %.3f, v mean %+.4f std %.4f max |v| %.3f (a "
+      "mean off zero by more than a few std/sqrt(n) is a bias the model does not hold)\n\n",
+      u.mean, u.std, largest_magnitude(u_values), v.mean, v.std, largest_magnitude(v_values));
 }
 
 void add_nis(std::string& t, const ReportData& d) {
@@ -466,16 +484,19 @@ void add_nis(std::string& t, const ReportData& d) {
 }
 
 void add_biases(std::string& t, const ReportData& d) {
+  const ImuResult& imu = d.result.imu;
   if (d.rows.empty()) return;
-  const ReportRow last = d.rows.back();
-  const Eigen::Vector3d& a = last.accel_bias;
-  const Eigen::Vector3d g = last.gyro_bias * kDeg;
-  const Eigen::Vector3d sg = d.gyro_bias_sigma * kDeg;
+  const Eigen::Vector3d& a = imu.accel_bias;
+  const Eigen::Vector3d& sa = imu.accel_bias_sigma;
+  const Eigen::Vector3d g = imu.gyro_bias * kDeg;
+  const Eigen::Vector3d sg = imu.gyro_bias_sigma * kDeg;
   t += "IMU BIASES (final estimate +- 1-sigma)\n";
   t += format("accelerometer [m/s^2]: x %.5f +- %.5f, y %.5f +- %.5f, z %.5f +- %.5f\n", a(0),
-              d.accel_bias_sigma(0), a(1), d.accel_bias_sigma(1), a(2), d.accel_bias_sigma(2));
-  t += format("gyro [deg/s]:          x %.5f +- %.5f, y %.5f +- %.5f, z %.5f +- %.5f\n\n", g(0),
+              sa(0), a(1), sa(1), a(2), sa(2));
+  t += format("gyro [deg/s]:          x %.5f +- %.5f, y %.5f +- %.5f, z %.5f +- %.5f\n", g(0),
               sg(0), g(1), sg(1), g(2), sg(2));
+  t += format("gravity in the mirror's frame [m/s^2]: %.4f %.4f %.4f (given, not estimated)\n\n",
+              imu.gravity_n(0), imu.gravity_n(1), imu.gravity_n(2));
 }
 
 // How well the data fixed the markers' size against the mirror's distance (scale_unresolved()
@@ -636,7 +657,10 @@ std::string report_html(const ReportData& d, const std::string& text, const Repo
       "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\"/>\n<title>" +
       html_escaped("mirrorcal report: " + d.title) +
       "</title>\n<style>\nbody { font-family: sans-serif; margin: 1em auto; max-width: 1250px; "
-      "padding: 0 1em; }\npre { background: #f4f4f4; padding: 1em; overflow-x: auto; }\n"
+      "padding: 0 1em; }\n"
+      // Long lines (the warnings, the advice) wrap: a side-scrolling block hid them at 1200 px.
+      "pre { background: #f4f4f4; padding: 1em; white-space: pre-wrap; overflow-wrap: anywhere; "
+      "}\n"
       ".ok { color: #176b2c; }\n.bad { color: #b3261e; }\nimg { max-width: 100%; }\n"
       "figure { margin: 1.5em 0; }\n</style>\n</head>\n<body>\n<h1>" +
       html_escaped("mirrorcal calibration report: " + d.title) + "</h1>\n<p class=\"" +

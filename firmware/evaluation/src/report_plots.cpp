@@ -129,6 +129,20 @@ void write_residual_plots(std::ostream& g, const ReportData& d, std::vector<Figu
   g << "\nunset logscale y\n";
   figures.push_back({"residual_time.png", "Residuals over time"});
 
+  g << "set output 'residual_axes.png'\nset multiplot layout 2,1 title 'Reprojection residuals "
+       "per axis over time, once the estimate settled, with +-3 pixel sigmas'\n";
+  for (int axis = 0; axis < 2; ++axis) {
+    g << "set title '" << (axis == 0 ? "u" : "v") << "'\nset ylabel 'px'\nset yrange ["
+      << -5.0 * sigma << ":" << 5.0 * sigma << "]\nplot ";
+    for (int m = 0; m < count; ++m)
+      g << "'residuals.dat' index " << m << " using 1:" << 2 + axis
+        << " with points pt 7 ps 0.2 title 'f" << m + 1 << "', ";
+    g << 3.0 * sigma << " lc rgb '#cc2222' dt 2 title '+-3 sigma', " << -3.0 * sigma
+      << " lc rgb '#cc2222' dt 2 notitle\n";
+  }
+  g << "unset multiplot\nset autoscale y\n";
+  figures.push_back({"residual_axes.png", "Reprojection residuals per axis over time"});
+
   g << "set output 'nis.png'\nset title 'Normalised innovation squared per dof over windows of "
     << kNisWindowFrames << " frames, with its 95 % chi-square band'\nset ylabel 'NIS / dof'\n"
     << "plot 'nis.dat' using 1:2 with linespoints pt 7 ps 0.5 lc rgb '#336699' title 'NIS / dof', "

@@ -50,6 +50,12 @@ struct ImuResult {
   double prior_offset_sigmas = 0.0;
   std::string prior_offset_name;
   IdealImuCheck ideal_check;  // made for the calibrated model only
+  // The biases at the end of the data (they walk: imu.yaml's random walks), m/s^2 and rad/s, with
+  // their 1-sigma; and gravity in the mirror's frame, which the calibration is given
+  // (mirrorcal.yaml's gravity_n: the mirror on a wall or the floor), not estimates.
+  Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero(), accel_bias_sigma = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero(), gyro_bias_sigma = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gravity_n = Eigen::Vector3d::Zero();
 
   bool estimated() const { return model != ImuModel::kCalibrated; }
 };

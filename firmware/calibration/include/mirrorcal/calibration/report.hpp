@@ -72,9 +72,7 @@ struct ReportData {
   double final_nees = 0.0;  // against the truth, if any
   RecordStore<ResidualSample> residuals{"the report's residuals"};
   RecordStore<ReportRow> rows{"the report's series"};
-  double settled_from_s = 0.0;  // the first frame after those the estimate needed to settle
-  Eigen::Vector3d accel_bias_sigma = Eigen::Vector3d::Zero(),
-                  gyro_bias_sigma = Eigen::Vector3d::Zero();  // final
+  double settled_from_s = 0.0;    // the first frame after those the estimate needed to settle
   firmware::LoopCounters loop{};  // what the last pass met on its streams: IMU gaps, restarts
   // What the checks of the input found doubtful but not wrong (calibrate: a noise density unlike
   // the data's, ...), said beside the verdict: the self-check cannot see them.

@@ -254,6 +254,13 @@ CalibrationResult make_result(const Filter& f, int width, int height) {
   r.filter_failures = f.counters().failures;
   r.imu.model = State::kImuModel;
   r.imu.noise = f.config().imu;
+  r.imu.accel_bias = x.b_a.template cast<double>();
+  r.imu.gyro_bias = x.b_g.template cast<double>();
+  for (int i = 0; i < 3; ++i) {
+    r.imu.accel_bias_sigma(i) = std::sqrt(double(f.covariance()(State::kBa + i, State::kBa + i)));
+    r.imu.gyro_bias_sigma(i) = std::sqrt(double(f.covariance()(State::kBg + i, State::kBg + i)));
+  }
+  r.imu.gravity_n = f.config().gravity_n;
   if constexpr (State::kImuIntrinsics > 0) {
     r.imu.intrinsics = x.imu.template cast<double>();
     constexpr int K = State::kImu, NI = State::kImuIntrinsics;
