@@ -120,7 +120,11 @@ const std::vector<Command>& commands() {
        cmd_calibrate},
       {"run",
        "  run         calibrate on the board's devices\n"
-       "              --imu spi:/dev/spidevB.C | i2c:/dev/i2c-N[:ADDR] | can:IFACE\n"
+       "              --imu spi:/dev/spidevB.C  (TDK ICM-42688-P)\n"
+       "                  | i2c:/dev/i2c-N[:ADDR]  (InvenSense MPU-6050 family; default 0x68)\n"
+       "                  | can:IFACE  (Bosch MM7.10, 500 kbit/s)\n"
+       "              (another part: log it with its own tool as a EuRoC folder or a ROS bag and\n"
+       "              calibrate that; docs/board.md, \"Another IMU part\")\n"
        "              --sensors DIR (imu.yaml, camchain.yaml, mirrorcal.yaml: its features_c\n"
        "              say how many markers) [--drdy CHIP:LINE]\n"
        "              [--camera /dev/videoN] [--trigger CHIP:LINE [--trigger-every N]]\n"
