@@ -17,13 +17,7 @@ foreach(f lib/cmake/mirrorcal/mirrorcalConfig.cmake lib/pkgconfig/mirrorcal.pc
   endif()
 endforeach()
 
-function(run what)
-  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  if(NOT rc EQUAL 0)
-    message(FATAL_ERROR "${what} failed (${rc}):\n${out}\n${err}")
-  endif()
-  message(STATUS "${what}: ${out}")
-endfunction()
+include(${CMAKE_CURRENT_LIST_DIR}/run_step.cmake)
 
 # find_package(mirrorcal), from the installed prefix only.
 run("configure the outside project" ${CMAKE_COMMAND} -S ${SOURCE_DIR}/outside -B ${WORK}/outside

@@ -484,8 +484,8 @@ void add_nis(std::string& t, const ReportData& d) {
 }
 
 void add_biases(std::string& t, const ReportData& d) {
-  const ImuResult& imu = d.result.imu;
   if (d.rows.empty()) return;
+  const ImuResult& imu = d.result.imu;
   const Eigen::Vector3d& a = imu.accel_bias;
   const Eigen::Vector3d& sa = imu.accel_bias_sigma;
   const Eigen::Vector3d g = imu.gyro_bias * kDeg;
