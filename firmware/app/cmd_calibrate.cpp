@@ -138,7 +138,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv%s%s%s\n",
+      "report.html, residuals.csv, imu_residuals.csv%s%s%s\n",
       out.c_str(), run.features_found ? ", features.csv (the markers found in the images)" : "",
       NI > 0 ? ", kalibr_imu_chain.yaml (the IMU's intrinsics, as OpenVINS reads them)" : "",
       run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");

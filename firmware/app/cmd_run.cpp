@@ -243,7 +243,7 @@ bool write_run_result(const std::string& dir, const CalibrationResult& result,
     return false;
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, report.txt, report.html, "
-      "residuals.csv\n",
+      "residuals.csv, imu_residuals.csv\n",
       dir.c_str());
   return true;
 }

@@ -105,7 +105,7 @@ bool report_run(const Run& run, const SimReport& r, int& status, std::string& er
   if (!write_run_outputs_and_report(r.dir, run, r.title, r.two_stage, figures, err)) return false;
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
-      "report.html, residuals.csv%s\n",
+      "report.html, residuals.csv, imu_residuals.csv%s\n",
       r.dir.c_str(),
       run.result.noise.estimated ? ", imu.yaml (the noise densities estimated)" : "");
   status = calibration_exit_status(run.result);

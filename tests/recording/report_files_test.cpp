@@ -7,6 +7,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -16,6 +17,7 @@
 
 #include <unistd.h>
 
+#include "mirrorcal/estimator/mirror_model.hpp"
 #include "mirrorcal/evaluation/process.hpp"
 #include "test_support.hpp"
 
@@ -32,11 +34,11 @@ int run_mirrorcal(const std::string& args, const std::string& scratch) {
   return mc::evaluation::run_program(argv, "", scratch + "/command.log").status;
 }
 
-// The line of text that starts with prefix ("" if none).
-std::string line_starting(const std::string& text, const std::string& prefix) {
+// The line of text that starts with prefix ("" if none), or the line after it.
+std::string line_starting(const std::string& text, const std::string& prefix, bool next = false) {
   std::istringstream lines(text);
   for (std::string line; std::getline(lines, line);)
-    if (line.rfind(prefix, 0) == 0) return line;
+    if (line.rfind(prefix, 0) == 0) return next && std::getline(lines, line) ? line : line;
   return "";
 }
 
@@ -507,6 +509,80 @@ TEST(ReportFiles, BiasesGravityAndResidualAxesAreTheResultFilesAndResiduals) {
   EXPECT_NEAR(v[0], sv.mean, 6e-5);
   EXPECT_NEAR(v[1], sv.std, 6e-5);
   EXPECT_NEAR(v[2], stats_of(abs_v).max, 6e-4);
+}
+
+// The IMU residuals' statistics in report.txt are those of imu_residuals.csv, computed here: the
+// intervals, and per sensor and axis the mean and RMS, in SI and in the white noise's sigmas over
+// each interval (the paper scenario's IMU is imu.yaml's default, the ADIS16448's); report.html
+// plots them.
+TEST(ReportFiles, ImuResidualStatisticsAreThoseOfTheImuResidualsFile) {
+  TempDir dir("report-imu-residuals");
+  const std::string& d = dir.path;
+  ASSERT_EQ(run_mirrorcal("sim --seed 4 --out " + d + "/out", d), 0) << slurp(d + "/command.log");
+  const std::string report = slurp(d + "/out/report.txt");
+  std::vector<std::array<double, 7>> rows;  // interval, gyro xyz, accel xyz
+  std::istringstream csv(slurp(d + "/out/imu_residuals.csv"));
+  std::string line;
+  std::getline(csv, line);
+  EXPECT_EQ(line.rfind("#time [s],interval [s],gyro x [rad/s]", 0), 0u) << line;
+  while (std::getline(csv, line)) {
+    std::array<double, 7> r{};
+    double t = 0;
+    ASSERT_EQ(std::sscanf(line.c_str(), "%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &t, &r[0], &r[1], &r[2],
+                          &r[3], &r[4], &r[5], &r[6]),
+              8)
+        << line;
+    rows.push_back(r);
+  }
+  // A minute at 60 Hz: an interval between each two frames the filter propagated across.
+  ASSERT_GT(rows.size(), 3000u);
+  std::size_t intervals = 0;
+  double median_ms = 0;
+  ASSERT_EQ(std::sscanf(line_starting(report, "IMU RESIDUALS", true).c_str(),
+                        "%zu intervals, median %lf ms", &intervals, &median_ms),
+            2);
+  EXPECT_EQ(intervals, rows.size());
+  std::vector<double> dt;
+  for (const auto& r : rows) dt.push_back(r[0]);
+  EXPECT_NEAR(median_ms, 1e3 * stats_of(dt).median, 0.06);
+  const mc::ImuNoise noise{};
+  for (int sensor = 0; sensor < 2; ++sensor) {
+    const std::string name =
+        sensor == 0 ? "gyro residual [rad/s]:" : "accelerometer residual [m/s^2]:";
+    const double density = sensor == 0 ? noise.gyro_noise_density : noise.accel_noise_density;
+    double mean[3], rms[3], mean_sigmas[3], rms_sigmas[3];
+    ASSERT_EQ(std::sscanf(line_starting(report, name, true).c_str(),
+                          "  per axis x y z: mean %lf %lf %lf, RMS %lf %lf %lf; in white-noise "
+                          "sigmas: mean %lf %lf %lf, RMS %lf %lf %lf",
+                          &mean[0], &mean[1], &mean[2], &rms[0], &rms[1], &rms[2], &mean_sigmas[0],
+                          &mean_sigmas[1], &mean_sigmas[2], &rms_sigmas[0], &rms_sigmas[1],
+                          &rms_sigmas[2]),
+              12)
+        << name;
+    for (int axis = 0; axis < 3; ++axis) {
+      double sum = 0, squares = 0, sum_sigmas = 0, squares_sigmas = 0;
+      for (const auto& r : rows) {
+        const double v = r[std::size_t(1 + 3 * sensor + axis)];
+        const double in_sigmas = v * std::sqrt(r[0]) / density;
+        sum += v;
+        squares += v * v;
+        sum_sigmas += in_sigmas;
+        squares_sigmas += in_sigmas * in_sigmas;
+      }
+      const double n = double(rows.size());
+      const std::string what = name + " axis " + std::to_string(axis);
+      // Three significant digits (%.3g), or three decimals (%.3f).
+      EXPECT_NEAR(mean[axis], sum / n, 6e-3 * std::abs(sum / n)) << what;
+      EXPECT_NEAR(rms[axis], std::sqrt(squares / n), 6e-3 * std::sqrt(squares / n)) << what;
+      EXPECT_NEAR(mean_sigmas[axis], sum_sigmas / n, 6e-4) << what;
+      EXPECT_NEAR(rms_sigmas[axis], std::sqrt(squares_sigmas / n), 6e-4) << what;
+      // The model's IMU: within its white noise (the smoothing takes some of it out).
+      EXPECT_GT(rms_sigmas[axis], 0.0) << what;
+      EXPECT_LT(rms_sigmas[axis], 1.0) << what;
+    }
+  }
+  EXPECT_NE(slurp(d + "/out/report.html").find("IMU residuals per axis over time"),
+            std::string::npos);
 }
 
 // Without gnuplot the page says the plots are unavailable and why; the text is the same.

@@ -64,6 +64,7 @@ ReportData report_data(const CalibrationRun<M, NK, NI>& run, const std::string& 
   d.prior_sigma = run.prior_sigma;
   d.has_truth = run.has_truth;
   d.loop = run.loop_counters;
+  d.imu_residuals = run.imu_residuals;
   if (run.history.empty()) return d;
   d.final_nees = run.history.back().nees;
   d.settled_from_s =
@@ -199,6 +200,18 @@ SampleStats sample_stats(const std::vector<double>& values) {
   return sample_stats([&values](const std::function<void(double)>& f) {
     for (double v : values) f(v);
   });
+}
+
+void for_each_imu_residual(const ReportData& d, int sensor, int axis,
+                           const std::function<void(const ImuResidual&, double, double)>& f) {
+  if (!d.imu_residuals) return;
+  const ImuNoise& noise = d.result.imu.noise;
+  const double density = sensor == 0 ? noise.gyro_noise_density : noise.accel_noise_density;
+  for (const ImuResidual r : *d.imu_residuals) {
+    if (!(r.dt_s > 0.0)) continue;  // across a restart
+    const double value = sensor == 0 ? r.gyro(axis) : r.accel(axis);
+    f(r, value, value * std::sqrt(r.dt_s) / density);
+  }
 }
 
 void for_each_nis_window(const ReportData& d, const std::function<void(const NisWindow&)>& f) {
@@ -483,6 +496,68 @@ void add_nis(std::string& t, const ReportData& d) {
       chi2_quantile(0.975, double(dof)) / double(dof), kNisWindowFrames, outside, windows);
 }
 
+// One sensor's line of the IMU residuals (for_each_imu_residual's sensor): the statistics of the
+// residual's length, and each axis's mean and RMS, in the sensor's units and in white-noise sigmas.
+void add_imu_residual_line(std::string& t, const ReportData& d, int sensor) {
+  std::array<double, 3> mean{}, rms{}, mean_sigmas{}, rms_sigmas{};
+  std::size_t n = 0;
+  for (int axis = 0; axis < 3; ++axis)
+    for_each_imu_residual(d, sensor, axis, [&](const ImuResidual&, double value, double sigmas) {
+      n += axis == 0 ? 1 : 0;
+      mean[std::size_t(axis)] += value;
+      rms[std::size_t(axis)] += value * value;
+      mean_sigmas[std::size_t(axis)] += sigmas;
+      rms_sigmas[std::size_t(axis)] += sigmas * sigmas;
+    });
+  const double count = std::max<double>(double(n), 1.0);
+  for (std::size_t axis = 0; axis < 3; ++axis) {
+    mean[axis] /= count;
+    rms[axis] = std::sqrt(rms[axis] / count);
+    mean_sigmas[axis] /= count;
+    rms_sigmas[axis] = std::sqrt(rms_sigmas[axis] / count);
+  }
+  const SampleStats length = sample_stats([&](const std::function<void(double)>& f) {
+    if (!d.imu_residuals) return;
+    for (const ImuResidual r : *d.imu_residuals)
+      if (r.dt_s > 0.0) f(sensor == 0 ? r.gyro.norm() : r.accel.norm());
+  });
+  t += format("%s |r| mean %.3g, median %.3g, std %.3g, max %.3g\n",
+              sensor == 0 ? "gyro residual [rad/s]:         " : "accelerometer residual [m/s^2]:",
+              length.mean, length.median, length.std, length.max);
+  t += format(
+      "  per axis x y z: mean %+.3g %+.3g %+.3g, RMS %.3g %.3g %.3g; in white-noise sigmas: mean "
+      "%+.3f %+.3f %+.3f, RMS %.3f %.3f %.3f\n",
+      mean[0], mean[1], mean[2], rms[0], rms[1], rms[2], mean_sigmas[0], mean_sigmas[1],
+      mean_sigmas[2], rms_sigmas[0], rms_sigmas[1], rms_sigmas[2]);
+}
+
+void add_imu_residuals(std::string& t, const ReportData& d) {
+  std::vector<double> intervals;
+  if (d.imu_residuals)
+    for (const ImuResidual r : *d.imu_residuals)
+      if (r.dt_s > 0.0) intervals.push_back(r.dt_s);
+  t +=
+      "IMU RESIDUALS (the body rate and specific force the refinement's smoothed motion has beyond "
+      "the IMU's samples, over each frame interval; imu_residuals.csv lists them)\n";
+  if (intervals.empty()) {
+    t += "none: the refinement took no step, so the motion was not smoothed\n\n";
+    return;
+  }
+  const ImuNoise& noise = d.result.imu.noise;
+  const double dt = sample_stats(intervals).median;
+  t += format(
+      "%zu intervals, median %.1f ms; the white noise's 1-sigma over it: gyro %.3g rad/s, "
+      "accelerometer %.3g m/s^2 (imu.yaml's densities / sqrt(interval))\n",
+      intervals.size(), 1e3 * dt, noise.gyro_noise_density / std::sqrt(dt),
+      noise.accel_noise_density / std::sqrt(dt));
+  add_imu_residual_line(t, d, 0);
+  add_imu_residual_line(t, d, 1);
+  t += "(in white-noise sigmas the RMS is about 1 or less when imu.yaml's densities hold: the "
+       "smoothing takes some of the noise out; well above 1, the IMU is noisier than imu.yaml "
+       "says, or has scale factors or axes the IMU model lacks, which show as residuals that "
+       "follow the motion in imu_residuals.png; a mean off zero is a bias the estimate missed)\n\n";
+}
+
 void add_biases(std::string& t, const ReportData& d) {
   if (d.rows.empty()) return;
   const ImuResult& imu = d.result.imu;
@@ -602,6 +677,7 @@ std::string report_text(const ReportData& d) {
   }
   add_residuals(t, d);
   add_nis(t, d);
+  add_imu_residuals(t, d);
   add_biases(t, d);
   add_excitation(t, d);
   return t;
@@ -693,6 +769,21 @@ bool write_residuals_csv(files::OutputSet& out, const std::string& path, const R
   return true;
 }
 
+bool write_imu_residuals_csv(files::OutputSet& out, const std::string& path, const ReportData& d,
+                             std::string& error) {
+  std::FILE* o = out.add(path, error);
+  if (o == nullptr) return false;
+  std::fprintf(o,
+               "#time [s],interval [s],gyro x [rad/s],gyro y [rad/s],gyro z [rad/s],accel x "
+               "[m/s^2],accel y [m/s^2],accel z [m/s^2]\n");
+  if (!d.imu_residuals) return true;
+  for (const ImuResidual r : *d.imu_residuals)
+    if (r.dt_s > 0.0)
+      std::fprintf(o, "%.9f,%.9f,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", double(r.t_ns) * 1e-9,
+                   r.dt_s, r.gyro(0), r.gyro(1), r.gyro(2), r.accel(0), r.accel(1), r.accel(2));
+  return true;
+}
+
 bool write_text(files::OutputSet& out, const std::string& path, const std::string& text,
                 std::string& error) {
   std::FILE* o = out.add(path, error);
@@ -707,6 +798,7 @@ bool write_report(files::OutputSet& out, const std::string& dir, const ReportDat
                   const ReportPlots& plots, std::string& error) {
   const std::string text = report_text(d);
   return write_residuals_csv(out, dir + "/residuals.csv", d, error) &&
+         write_imu_residuals_csv(out, dir + "/imu_residuals.csv", d, error) &&
          write_text(out, dir + "/report.txt", text, error) &&
          write_text(out, dir + "/report.html", report_html(d, text, plots), error);
 }

@@ -171,12 +171,34 @@ CalibrationRun<M, NK, NI> run_pass(const CalibrationConfig& config,
   return run;
 }
 
+// The IMU's residual over an interval (ImuResidual) from the smoothed motion's residual w there
+// (the motion block's error state), the interval's transition f and the smoothed state at its end;
+// none (dt_s 0) across a restart (f's position-velocity block zero).
+template <class State, class Motion, class Transition>
+ImuResidual imu_residual(const Motion& w, const Transition& f, const State& end,
+                         std::int64_t t_ns) {
+  ImuResidual r;
+  r.t_ns = t_ns;
+  const double dt_s = f(State::kP, State::kV);
+  if (!(dt_s > 0.0) || !w.allFinite()) return r;
+  r.dt_s = dt_s;
+  // The rotation is perturbed on the right (in the body frame at the end), the velocity in n.
+  r.gyro = w.template segment<3>(State::kTheta) / dt_s;
+  r.accel = end.q_n_b.conjugate() * Eigen::Vector3d(w.template segment<3>(State::kV)) / dt_s;
+  return r;
+}
+
 // The tracking pass's motion smoothed over the whole pass (Rauch-Tung-Striebel backwards over
 // its frames, the calibration held at the pass's final estimate, as the pass held it): each
 // frame's linearisation point then rests on every frame, not on those before it, and holds its
-// own frame's noise no more than any other's.
+// own frame's noise no more than any other's. With it, the IMU's residual over each interval
+// between updates (ImuResidual): to first order in the smoother's corrections c (smoothed minus
+// filtered), the smoothed motion at k + 1 less the IMU's integration from the smoothed motion at k
+// is d_{k+1} - F c_k, d_{k+1} the smoothed motion less the filter's prediction at k + 1 and F the
+// transition between them, whose position-velocity block is the interval's length times I.
 template <int M, int NK, int NI>
-void smoothed_trajectory(const CalibrationRun<M, NK, NI>& track, Trajectory<M, NK, NI>& out) {
+void smoothed_trajectory(const CalibrationRun<M, NK, NI>& track, Trajectory<M, NK, NI>& out,
+                         RecordStore<ImuResidual>& residuals) {
   using State = typename CalibrationRun<M, NK, NI>::State;
   constexpr int D = CalibrationRun<M, NK, NI>::Filter::kMotionDim;
   using MotionMatrix = Eigen::Matrix<double, D, D>;
@@ -213,25 +235,31 @@ void smoothed_trajectory(const CalibrationRun<M, NK, NI>& track, Trajectory<M, N
     w->row = track.history[k];
     w->row_motion = motion[k];
     State smoothed = w->row.state;
+    ImuResidual residual;  // over the interval from this row to the next: none (dt_s 0) yet
     // A row that followed no update (the final one) says nothing new about the one before it.
     if (w->next.step.update != w->row_motion.step.update) {
       const Eigen::Matrix<double, D, 1> d =
           next_smoothed.template boxminus_block<0, D>(w->next_row.predicted);
+      Eigen::Matrix<double, D, 1> step;
       if constexpr (NI > 0) {
         // Only C d is needed: P_k F^T (P_{k+1|k}^-1 d), one solve where the gain takes D of them
         // (at NI = 12 the smoother had been a sixth of a calibration's cost). The ideal IMU keeps
         // the gain's form below, to the last digit of its published figures.
         const Eigen::Matrix<double, D, 1> y = w->next.step.predicted_covariance.ldlt().solve(d);
-        const Eigen::Matrix<double, D, 1> step =
-            w->row_motion.covariance * (w->next.step.transition.transpose() * y);
-        if (step.allFinite()) smoothed.template boxplus_block<0, D>(step);
+        step = w->row_motion.covariance * (w->next.step.transition.transpose() * y);
       } else {
         // C = P_k F^T P_{k+1|k}^-1, so C^T = P_{k+1|k}^-1 F P_k (both covariances symmetric).
         w->f_p = w->next.step.transition * w->row_motion.covariance;
         w->gain_t = w->next.step.predicted_covariance.ldlt().solve(w->f_p);
-        if (w->gain_t.allFinite()) smoothed.template boxplus_block<0, D>(w->gain_t.transpose() * d);
+        step = w->gain_t.transpose() * d;
+      }
+      if (step.allFinite()) {
+        smoothed.template boxplus_block<0, D>(step);
+        residual = imu_residual<State>(d - w->next.step.transition * step, w->next.step.transition,
+                                       next_smoothed, w->next_row.t_ns);
       }
     }
+    residuals.set(k, residual);
     out.set(k, held(smoothed), w->row.t_ns);
     next_smoothed = smoothed;
     w->next_row = w->row;
@@ -565,6 +593,7 @@ template <int M, int NK, int NI>
 template <int M, int NK, int NI>
 struct Linearisation {
   std::unique_ptr<Trajectory<M, NK, NI>> trajectory;
+  std::shared_ptr<RecordStore<ImuResidual>> imu_residuals;  // along the trajectory
   typename CalibrationRun<M, NK, NI>::State start;
 };
 
@@ -662,7 +691,8 @@ std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
   // update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05; smoothed 3 and 0.96 (along
   // the true motion, a diagnostic: 3 and 0.97).
   at.trajectory = std::make_unique<Trajectory<M, NK, NI>>();
-  smoothed_trajectory<M, NK, NI>(*track, *at.trajectory);
+  at.imu_residuals = std::make_shared<RecordStore<ImuResidual>>("the IMU's residuals");
+  smoothed_trajectory<M, NK, NI>(*track, *at.trajectory, *at.imu_residuals);
   // From the prior's guesses of the calibration (the data count once), and the IMU start the
   // trajectory has.
   at.start = x0;
@@ -730,6 +760,7 @@ template <int M, int NK, int NI>
     refined->result.passes = free_passes;
     refined->result.restarted_pass = run.result.restarted_pass;
     refined->veto = veto;
+    refined->imu_residuals = at.imu_residuals;
     run = std::move(*refined);
     imu_start_from<M, NK, NI>(config, run, p0, data, start);
     return true;

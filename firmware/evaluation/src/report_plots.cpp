@@ -1,8 +1,11 @@
 #include "mirrorcal/evaluation/report_plots.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
+#include <iomanip>
+#include <sstream>
 
 #include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/evaluation/plots.hpp"
@@ -75,6 +78,19 @@ void write_plot_data(const std::string& dir, const ReportData& d) {
       s << "NaN";
     s << '\n';
   }
+  // imu_residuals.dat: t, the gyro's residual xyz and the accelerometer's, each sensor's white
+  // noise 1-sigma over the interval.
+  std::ofstream imu(dir + "/imu_residuals.dat");
+  const ImuNoise& noise = d.result.imu.noise;
+  if (d.imu_residuals)
+    for (const ImuResidual r : *d.imu_residuals) {
+      if (!(r.dt_s > 0.0)) continue;
+      imu << double(r.t_ns) * 1e-9;
+      for (int i = 0; i < 3; ++i) imu << ' ' << r.gyro(i);
+      for (int i = 0; i < 3; ++i) imu << ' ' << r.accel(i);
+      imu << ' ' << noise.gyro_noise_density / std::sqrt(r.dt_s) << ' '
+          << noise.accel_noise_density / std::sqrt(r.dt_s) << '\n';
+    }
   std::ofstream n(dir + "/nis.dat");
   for_each_nis_window(d, [&n](const NisWindow& w) {
     n << w.t_s << ' ' << w.nis / w.dof << ' ' << chi2_quantile(0.025, w.dof) / w.dof << ' '
@@ -213,12 +229,56 @@ void write_motion_plots(std::ostream& g, const ReportData& d, std::vector<Figure
   figures.push_back({"excitation.png", "Motion and markers seen"});
 }
 
+// The IMU's residuals per axis over time, scaled to themselves, with +-3 of the white noise's
+// sigmas over each interval when those lie inside (Kalibr's accelerometer and gyroscope error
+// plots); the title gives that bound when it lies outside, as it does where the frames pin the
+// motion less than the IMU's noise would.
+void write_imu_residual_plot(std::ostream& g, const ReportData& d, std::vector<Figure>& figures) {
+  if (!d.imu_residuals) return;
+  std::array<double, 2> largest{}, bound{};  // per sensor: the largest |residual|, 3 sigmas
+  for (int part = 0; part < 2; ++part)
+    for (int axis = 0; axis < 3; ++axis)
+      for_each_imu_residual(d, part, axis, [&](const ImuResidual&, double value, double sigmas) {
+        largest[std::size_t(part)] = std::max(largest[std::size_t(part)], std::abs(value));
+        if (sigmas != 0.0)
+          bound[std::size_t(part)] = std::max(bound[std::size_t(part)], 3.0 * value / sigmas);
+      });
+  if (!(largest[0] > 0.0)) return;
+  g << "set output 'imu_residuals.png'\nset key on\nset multiplot layout 2,1 title 'IMU residuals "
+       "along the smoothed motion per axis'\n";
+  const char* axes[3] = {"x", "y", "z"};
+  for (int part = 0; part < 2; ++part) {
+    const double range = 1.15 * std::max(largest[std::size_t(part)], 1e-12);
+    const bool bound_shown = bound[std::size_t(part)] <= range;
+    const char* unit = part == 0 ? "rad/s" : "m/s^2";
+    std::ostringstream bound_text;
+    bound_text << std::setprecision(3) << bound[std::size_t(part)] << ' ' << unit;
+    g << "set title "
+      << gnuplot_quoted(std::string(part == 0 ? "gyroscope" : "accelerometer") +
+                        (bound_shown ? ", with +-3 sigmas of the white noise"
+                                     : ": +-3 sigmas of the white noise, " + bound_text.str() +
+                                           ", lie beyond the scale"))
+      << "\nset ylabel '" << unit << "'\nset yrange [" << -range << ":" << range << "]\nplot ";
+    for (int i = 0; i < 3; ++i)
+      g << (i > 0 ? ", " : "") << "'imu_residuals.dat' using 1:" << 2 + 3 * part + i
+        << " with points pt 7 ps 0.2 title '" << axes[i] << "'";
+    if (bound_shown)
+      g << ", '' using 1:(3 * $" << 8 + part << ") with lines dt 2 lc rgb '#cc2222' title "
+        << "'+-3 sigma', '' using 1:(-3 * $" << 8 + part
+        << ") with lines dt 2 lc rgb '#cc2222' notitle";
+    g << "\n";
+  }
+  g << "unset multiplot\nset autoscale y\n";
+  figures.push_back({"imu_residuals.png", "IMU residuals per axis over time"});
+}
+
 // The gnuplot script, and the figures it draws.
 std::vector<Figure> write_plot_script(std::ostream& g, const ReportData& d) {
   std::vector<Figure> figures;
   // Titles hold names such as p_b_c: no subscripts.
   g << "set terminal pngcairo size 1200,700 font 'DejaVu Sans,10' noenhanced\nset grid\n";
   write_residual_plots(g, d, figures);
+  write_imu_residual_plot(g, d, figures);
   write_estimate_plots(g, d, figures);
   write_motion_plots(g, d, figures);
   return figures;

@@ -1,12 +1,14 @@
 // The report a user judges a calibration by, without ground truth. report.txt opens with the
 // verdict (the calibration, its sigmas, and whether the self-check of result.hpp trusts it), then
 // the reprojection residuals, the normalised innovation squared against its chi-square band, the
-// IMU biases and the excitation the data had; report.html holds the same text and its plots
-// (base64 PNG: one self-contained file); residuals.csv the residuals the statistics are of.
+// IMU's residuals and biases and the excitation the data had; report.html holds the same text and
+// its plots (base64 PNG: one self-contained file); residuals.csv and imu_residuals.csv the
+// residuals the statistics are of.
 #pragma once
 
 #include <array>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -71,6 +73,8 @@ struct ReportData {
   bool has_truth = false;
   double final_nees = 0.0;  // against the truth, if any
   RecordStore<ResidualSample> residuals{"the report's residuals"};
+  // The IMU's residuals along the refinement's smoothed motion (CalibrationRun's); none without it.
+  std::shared_ptr<const RecordStore<ImuResidual>> imu_residuals;
   RecordStore<ReportRow> rows{"the report's series"};
   double settled_from_s = 0.0;    // the first frame after those the estimate needed to settle
   firmware::LoopCounters loop{};  // what the last pass met on its streams: IMU gaps, restarts
@@ -101,6 +105,12 @@ struct SampleStats {
 SampleStats sample_stats(const Sample& sample);
 SampleStats sample_stats(const std::vector<double>& values);
 
+// The IMU's residuals (ImuResidual) as the report states them: each axis's value, and the same in
+// the white noise's 1-sigma over its interval (noise_density / sqrt(dt)), for the gyro (sensor 0)
+// or the accelerometer (1); f(residual, value, in_sigmas) for each axis of each interval there is.
+void for_each_imu_residual(const ReportData& d, int sensor, int axis,
+                           const std::function<void(const ImuResidual&, double, double)>& f);
+
 // The normalised innovation squared summed over windows of kNisWindowFrames frames with markers
 // used (the last window may be shorter), handed to f in time order.
 struct NisWindow {
@@ -127,7 +137,7 @@ struct ReportPlots {
 
 // report.txt's text.
 std::string report_text(const ReportData& d);
-// report.txt, report.html and residuals.csv in dir, added to out (written when it commits). The
+// report.txt, report.html, residuals.csv and imu_residuals.csv in dir, added to out (written when it commits). The
 // plots are drawn in a temporary folder; without gnuplot the page says so and the text is whole.
 bool write_report(files::OutputSet& out, const std::string& dir, const ReportData& d,
                   const ReportPlots& plots, std::string& error);

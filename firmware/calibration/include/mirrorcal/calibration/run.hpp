@@ -43,6 +43,21 @@ inline CalibrationResult::DetectionCounts detection_counts(const DetectionReport
   return {d.frames, d.markers_labelled, d.dropped_in_doubt, d.unlabelled_blobs};
 }
 
+// The IMU's residual over one frame interval of the refinement's smoothed motion (run.cpp,
+// smoothed_trajectory): the rotation and velocity the smoothed motion moved by beyond what the
+// IMU's samples integrate to from its estimate at the interval's start (the smoothed process
+// noise), as the body rate and specific force that would explain them over the interval, in the
+// body frame at its end. Under the model each axis scatters with the white noise's 1-sigma over the
+// interval, noise_density / sqrt(dt_s), less what the smoothing took out; a scale factor or axis
+// the model lacks shows as structure that follows the motion (Kalibr's accelerometer and gyroscope
+// errors, over the frame interval rather than one sample).
+struct ImuResidual {
+  std::int64_t t_ns = 0;  // the interval's end: the frame's stamp
+  double dt_s = 0.0;
+  Eigen::Vector3d gyro = Eigen::Vector3d::Zero();   // rad/s
+  Eigen::Vector3d accel = Eigen::Vector3d::Zero();  // m/s^2
+};
+
 // One calibration of M markers: its final estimate and result, the estimate after every frame
 // (history), and what the loop, the filter and detection met on the way. NK camera parameters
 // and NI of the IMU's are estimated (MirrorState).
@@ -73,6 +88,9 @@ struct CalibrationRun {
   // The markers the refinement found to be outliers at its converged solution, which its passes
   // and the ideal-IMU check drop (run.cpp, find_outliers).
   OutlierVeto<M> veto;
+  // The IMU's residuals along the last refinement step's smoothed motion, one per frame interval
+  // the filter propagated across (none across a restart); none without a refinement step.
+  std::shared_ptr<const RecordStore<ImuResidual>> imu_residuals;
 };
 
 // What the loop consumes, filled before it starts (the loop itself never allocates): the streams
