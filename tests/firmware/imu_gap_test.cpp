@@ -2,7 +2,8 @@
 // uncertainty of the signal it did not give, and the calibration stays consistent; silent for
 // longer (400 ms, 5 s), the motion states restart and the calibration goes on as consistent.
 // Full calibrations (run_loop) of the paper scenario and of random-family rigs, the gap at 30 s;
-// and twenty more random rigs, each either within 4 sigma in every state or flagged.
+// and twenty-one more random rigs, with gaps of 200 ms, 400 ms or 2 s, each either within 4 sigma
+// in every state or flagged.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -54,18 +55,21 @@ void expect_gap_survived(std::int64_t gap_ms, std::uint64_t restarts) {
   EXPECT_LT(nees_sum / n, chi2_quantile(0.975, dof) / n);
 }
 
-// Random-family rigs 7-26 (slow and fast sweeps, wall and floor mirrors, 20-60 Hz cameras) with
-// the gap at 30 s: every run lies within 4 sigma of the truth in every calibration state or says
+// Random-family rigs 7-27 (slow and fast sweeps, wall and floor mirrors, 20-60 Hz cameras), each
+// with a gap at 30 s of 200 ms (propagated across), 400 ms or 2 s (a restart of the motion states)
+// in turn: every run lies within 4 sigma of the truth in every calibration state or says
 // consistent: false, as the campaigns judge a run (montecarlo's unflagged beyond 4 sigma). With
 // the Gauss-Newton refinement off (Passes{2, 4, false}: the free passes alone, as before it came
-// in) three of the twenty end beyond 4 sigma unflagged after 400 ms (rig 11: 18 sigma, NEES 1719,
-// where it was 7.6 sigma without the gap; rigs 22 and 25: 5.0 and 10.8).
-void expect_each_run_right_or_flagged(std::int64_t gap_ms, std::uint64_t restarts) {
-  for (std::uint64_t seed = 7; seed <= 26; ++seed) {
+// in) rig 11 ended 18 sigma off unflagged after 400 ms (NEES 1719, where it was 7.6 sigma without
+// the gap), and rigs 22 and 25 5.0 and 10.8 sigma.
+void expect_each_run_right_or_flagged() {
+  constexpr std::int64_t kGapsMs[] = {200, 400, 2000};
+  for (std::uint64_t seed = 7; seed <= 27; ++seed) {
+    const std::int64_t gap_ms = kGapsMs[(seed - 7) % 3];
     const Run run = calibrate_with_gap(mc::sim::random_scenario(seed), seed, gap_ms);
-    SCOPED_TRACE("random seed " + std::to_string(seed));
+    SCOPED_TRACE("random seed " + std::to_string(seed) + ", gap " + std::to_string(gap_ms) + " ms");
     EXPECT_EQ(run.loop_counters.imu_gaps, 1u);
-    EXPECT_EQ(run.loop_counters.imu_restarts, restarts);
+    EXPECT_EQ(run.loop_counters.imu_restarts, gap_ms > 300 ? 1u : 0u);
     EXPECT_TRUE(mc::gaptest::worst_sigmas(run) <= 4.0 || !mc::calibration::consistent(run.result))
         << mc::gaptest::worst_sigmas(run) << " sigmas, NEES " << run.history.back().nees;
   }
@@ -90,14 +94,6 @@ TEST(ImuGap, Of5SRestartsTheMotionStatesAndTheCalibrationStaysConsistent) {
   expect_gap_survived(5000, 1);
 }
 
-TEST(ImuGap, Of200MsOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
-  expect_each_run_right_or_flagged(200, 0);
-}
-
-TEST(ImuGap, Of400MsOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
-  expect_each_run_right_or_flagged(400, 1);
-}
-
-TEST(ImuGap, Of2SOnTwentyRandomRigsLeavesEachRunRightOrFlagged) {
-  expect_each_run_right_or_flagged(2000, 1);
+TEST(ImuGap, OnTwentyOneRandomRigsLeavesEachRunRightOrFlagged) {
+  expect_each_run_right_or_flagged();
 }
