@@ -1,15 +1,18 @@
 // mirrorcal record: a EuRoC recording, either of the simulated rig's streams and priors (which
-// `mirrorcal calibrate` replays bit-identically to `mirrorcal sim` with the same seed), or, with
-// --imu, of the board's devices (the IMU's samples and the markers detected in the camera's
-// frames, labelled by their brightness) through the same writer.
+// `mirrorcal calibrate` replays bit-identically to `mirrorcal sim` with the same seed; with --bag
+// as a ROS 2 bag of its IMU messages and images), or, with --imu, of the board's devices (the
+// IMU's samples and the markers detected in the camera's frames, labelled by their brightness)
+// through the same writer.
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <vector>
 
 #include "cli.hpp"
 #include "devices.hpp"
 #include "mirrorcal/calibration/run.hpp"
+#include "mirrorcal/sim_host/bags.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/frame_renderer.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
@@ -171,23 +174,18 @@ int record_devices(const Options& o, const std::string& dir) {
   return 0;
 }
 
-// The simulated rig's streams of one run (data and prior from seed) and its priors, as `sim` with
-// that seed hands them to the loop, and its truth, into dir.
-// dir lies within folder's temporary folder; failures name the folder the user asked for.
-// With images, each frame's image is drawn too (the renderer of sim --frames, GREY): a spot for
-// each marker of features.csv at the very pixel listed there (its pixel noise included), so the
-// images hold the same data as features.csv and a calibration from either sees the same.
-// With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
-// guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
-// true ones. False, with the error, when a file cannot be written.
-template <int M>
-bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
-                               bool hold_skew, bool lens, RecordingFolder& folder,
-                               const std::string& sub, std::string& err, bool images = false) {
-  const std::string dir = folder.path() + sub;
-  const sim::SimData data = sim::simulate(s, seed);
-  const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
+// Draws frame j's markers into pixels as the renderer of sim --frames does.
+void render_frame(sim::FrameRenderer& renderer, const sim::RenderConfig& render,
+                  const sim::ObservedFrame& f, std::uint64_t j, std::uint8_t* pixels) {
+  for (const sim::ObservedMarker& m : f.markers)
+    renderer.add_spot(m.u, m.v, render.brightness[std::size_t(m.id) % render.brightness.size()]);
+  renderer.finish(j, pixels);
+}
 
+// The simulated streams into dir as a EuRoC recording (mav0/: the IMU's samples, the frames'
+// markers in features.csv, with images their PNGs too).
+bool write_simulated_streams(const sim::Scenario& s, std::uint64_t seed, const sim::SimData& data,
+                             const std::string& dir, bool images, std::string& err) {
   sim::RecordingWriter writer;
   if (!writer.open(dir, err)) return false;
   for (const ImuSample& smp : data.imu)
@@ -199,15 +197,63 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   const sim::GrayImage image{renderer.width(), renderer.height(), pixels.data()};
   std::uint64_t j = 0;
   for (const sim::ObservedFrame& f : data.frames) {
-    if (images) {
-      for (const sim::ObservedMarker& m : f.markers)
-        renderer.add_spot(m.u, m.v,
-                          render.brightness[std::size_t(m.id) % render.brightness.size()]);
-      renderer.finish(j++, pixels.data());
-    }
+    if (images) render_frame(renderer, render, f, j++, pixels.data());
     if (!writer.add_frame(f, images ? &image : nullptr)) break;
   }
-  if (!writer.close(err)) return false;
+  return writer.close(err);
+}
+
+// The same as a ROS 2 bag folder (sim::BagWriter): the IMU's samples and the frames' images (the
+// very images of --images, raw mono8) in the order of their stamps, as a recorder receives them,
+// on the topics the yaml files name; the bag's file is named after name (the user's folder).
+bool write_simulated_bag(const sim::Scenario& s, std::uint64_t seed, const sim::SimData& data,
+                         const sim::SensorInfo& sensors, const std::string& dir,
+                         const std::string& name, std::string& err) {
+#ifdef MIRRORCAL_BAGS
+  sim::BagWriter writer;
+  if (!writer.open(dir, name, sensors.imu_rostopic, sensors.rostopic, err)) return false;
+  const sim::RenderConfig render;
+  sim::FrameRenderer renderer(s, render, sim::derive_seed(seed, 200));
+  std::vector<std::uint8_t> pixels(std::size_t(renderer.width()) * std::size_t(renderer.height()));
+  const sim::GrayImage image{renderer.width(), renderer.height(), pixels.data()};
+  std::size_t i = 0;
+  std::uint64_t j = 0;
+  bool ok = true;
+  for (const sim::ObservedFrame& f : data.frames) {
+    for (; ok && i < data.imu.size() && data.imu[i].t_ns <= f.t_ns; ++i)
+      ok = writer.add_imu(data.imu[i]);
+    render_frame(renderer, render, f, j++, pixels.data());
+    ok = ok && writer.add_image(f.t_ns, image);
+  }
+  for (; ok && i < data.imu.size(); ++i) ok = writer.add_imu(data.imu[i]);
+  return writer.close(err);
+#else
+  (void)s, (void)seed, (void)data, (void)sensors, (void)dir, (void)name;
+  err =
+      "--bag: this build of mirrorcal (a board's) writes recording folders only; record the bag "
+      "with the host's build";
+  return false;
+#endif
+}
+
+// The simulated rig's streams of one run (data and prior from seed) and its priors, as `sim` with
+// that seed hands them to the loop, and its truth, into dir.
+// dir lies within folder's temporary folder; failures name the folder the user asked for.
+// With images, each frame's image is drawn too (the renderer of sim --frames, GREY): a spot for
+// each marker of features.csv at the very pixel listed there (its pixel noise included), so the
+// images hold the same data as features.csv and a calibration from either sees the same.
+// With lens (estimate_distortion, with intrinsics and skew held), camchain.yaml holds the prior's
+// guess of the lens's coefficients, as `sim --estimate-distortion` starts from, and truth.yaml the
+// true ones. With bag, the streams are a ROS 2 bag (write_simulated_bag). False, with the error,
+// when a file cannot be written.
+template <int M>
+bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
+                               bool hold_skew, bool lens, RecordingFolder& folder,
+                               const std::string& sub, std::string& err, bool images = false,
+                               bool bag = false) {
+  const std::string dir = folder.path() + sub;
+  const sim::SimData data = sim::simulate(s, seed);
+  const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
 
   sim::SensorInfo sensors;
   sensors.imu = s.told_imu.value_or(s.imu);  // what imu.yaml says (the mems family's told noise)
@@ -233,15 +279,23 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   truth.intrinsics = s.truth.intrinsics;
   truth.t_d = s.truth.t_d;
   truth.has_distortion = lens;
-  if (!sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
+  const std::string target = folder.as_target(dir);
+  const std::string name = std::filesystem::path(target).lexically_normal().filename().string();
+  if (!(bag ? write_simulated_bag(s, seed, data, sensors, dir, name, err)
+            : write_simulated_streams(s, seed, data, dir, images, err)) ||
+      !sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
     return false;
+  const std::string streams =
+      bag ? "metadata.yaml, " + name + "_0.mcap (a ROS 2 bag: " + sensors.imu_rostopic + ", " +
+                sensors.rostopic + " mono8),"
+          : std::string("mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv,") +
+                (images ? " mav0/cam0/data/*.png," : "");
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
-      "  mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv,%s imu.yaml, "
-      "camchain.yaml, mirrorcal.yaml, truth.yaml\n",
+      "  %s imu.yaml, camchain.yaml, mirrorcal.yaml, truth.yaml\n",
       s.name.c_str(), static_cast<unsigned long long>(seed), data.imu.size(), data.frames.size(),
-      s.duration_s, folder.as_target(dir).c_str(), images ? " mav0/cam0/data/*.png," : "");
+      s.duration_s, target.c_str(), streams.c_str());
   return true;
 }
 
@@ -255,13 +309,19 @@ int cmd_record(int argc, char** argv) {
     if (std::string(key) != "out") with_value.emplace_back(key);
   Options o;
   std::string error;
-  if (!parse(argc, argv, 2, with_value,
-             {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion"}, o,
-             error))
+  if (!parse(
+          argc, argv, 2, with_value,
+          {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion", "bag"},
+          o, error))
     fail(error);
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage("record"));
   const std::string dir = o.get("out", "");
-  if (o.flag("imu") || o.flag("config")) return record_devices(o, dir);
+  if (o.flag("imu") || o.flag("config")) {
+    if (o.flag("bag")) fail("--bag records the simulated rig; the board's devices record a folder");
+    return record_devices(o, dir);
+  }
+  const bool bag = o.flag("bag");
+  if (bag && o.flag("images")) fail("--bag holds the images already; drop --images");
   const bool two_stage = o.flag("two-stage"), hold_skew = o.flag("hold-skew");
   if (hold_skew && !o.flag("intrinsics") && !two_stage)
     fail("--hold-skew applies with --intrinsics or --two-stage");
@@ -286,7 +346,7 @@ int cmd_record(int argc, char** argv) {
     const bool images = o.flag("images");
     if (!two_stage) {
       if (!write_simulated_recording<M>(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
-                                        error, images))
+                                        error, images, bag))
         folder.fail_with(error);
       folder.commit();
       return 0;
@@ -295,9 +355,9 @@ int cmd_record(int argc, char** argv) {
     // together.
     const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
     if (!write_simulated_recording<M>(s, seed, false, false, false, folder, "/stage1", error,
-                                      images) ||
+                                      images, bag) ||
         !write_simulated_recording<M>(s, sim::derive_seed(seed, sim::kStage2SeedStream), true,
-                                      hold_skew, lens, folder, "/stage2", error, images))
+                                      hold_skew, lens, folder, "/stage2", error, images, bag))
       folder.fail_with(error);
     folder.commit();
     std::printf(

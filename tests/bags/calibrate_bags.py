@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 """`mirrorcal calibrate` on bags written by the formats' own writers (write_bags.py, checked by
-read_back.py): every bag of a recording calibrates to the bytes of its folder's calibration from
+read_back.py), and on the ROS 2 bag `mirrorcal record --bag` writes (checked by read_back.py's
+readers too): every bag of a recording calibrates to the bytes of its folder's calibration from
 the same images, and a bag that is cut off, damaged, missing its topic or its sensor files is
 refused with a message naming the file, the topic and the place.
 
@@ -13,6 +14,12 @@ import subprocess
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+import mcap_reader  # noqa: E402
+import read_back  # noqa: E402
+import recording as recording_io  # noqa: E402
+
 SENSOR_FILES = ('imu.yaml', 'camchain.yaml', 'mirrorcal.yaml', 'truth.yaml')
 # The folder's result names the fingerprint of its CSV files, a bag's that of its messages.
 DIFFERS_BY_SOURCE = ('recording_fingerprint:',)
@@ -88,6 +95,24 @@ def main(mirrorcal, work):
                                  os.path.join(work, 'out-' + name))
     calibrates_as_folder(mirrorcal, os.path.join(bags, 'ros1.bag'), reference,
                          os.path.join(work, 'out-sensors'), '--sensors', rec)
+
+    # record --bag: the same recording as a ROS 2 bag of mirrorcal's own writing, read back by
+    # read_back's MCAP reader (records, CRCs, indexes, summary, rosbag2's metadata) message for
+    # message against the folder's images, and calibrated as a folder and as its single file.
+    recbag = os.path.join(work, 'recbag')
+    code, output = run(mirrorcal, 'record', '--seed', '4', '--bag', '--duration', '4', '--out',
+                       recbag)
+    check(code == 0, 'record --bag exits 0' + ('' if code == 0 else ':\n' + output))
+    try:
+        expected = read_back.Expected(recording_io.load(rec), png_images=False)
+        held = read_back.check_bag_folder(recbag, expected, 'mcap', '.mcap', read_back.check_mcap,
+                                          'zstd')
+        check(True, 'record --bag is a ROS 2 bag of the recording: ' + held)
+    except (read_back.Mismatch, mcap_reader.McapError, OSError) as e:
+        check(False, f'record --bag is a ROS 2 bag of the recording: {e}')
+    calibrates_as_folder(mirrorcal, recbag, reference, os.path.join(work, 'out-recbag'))
+    calibrates_as_folder(mirrorcal, os.path.join(recbag, 'recbag_0.mcap'), reference,
+                         os.path.join(work, 'out-recbag-file'))
 
     # Bad input: each refused with the file, the topic or the place named.
     bad = os.path.join(work, 'bad')

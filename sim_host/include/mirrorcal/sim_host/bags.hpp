@@ -5,8 +5,11 @@
 // camchain.yaml and mirrorcal.yaml, lie beside the bag or in a folder named for them.
 #pragma once
 
+#include <cstdint>
+#include <memory>
 #include <string>
 
+#include "mirrorcal/sim_host/images.hpp"
 #include "mirrorcal/sim_host/recording.hpp"
 
 namespace mirrorcal::sim {
@@ -32,5 +35,33 @@ std::string bag_sensors_dir(const std::string& path, const BagOptions& options);
 // that is not there, the topics that are.
 bool open_bag_recording(const std::string& path, const BagOptions& options, int markers,
                         Recording& out, std::string& error);
+
+// A recording's streams written as a ROS 2 bag folder, which `ros2 bag` and Foxglove read, and
+// calibrate as any bag: FOLDER/metadata.yaml (rosbag2's) and FOLDER/NAME_0.mcap (NAME the bag's,
+// rosbag2's name for its folder's first file), the IMU's samples as sensor_msgs/msg/Imu and the
+// camera's frames as sensor_msgs/msg/Image (mono8), CDR, in zstd chunks of a few MB with their
+// message indexes, and a summary indexing them (mcap.dev/spec). Memory holds one chunk. The files
+// are renamed into place by close(); until then, and if anything failed, the folder holds neither.
+// (Host builds only, as open_bag_recording.)
+class BagWriter {
+ public:
+  BagWriter();
+  ~BagWriter();
+  BagWriter(const BagWriter&) = delete;
+  BagWriter& operator=(const BagWriter&) = delete;
+
+  // Creates folder if need be; false with a message naming the file if it cannot be written.
+  bool open(const std::string& folder, const std::string& name, const std::string& imu_topic,
+            const std::string& camera_topic, std::string& error);
+  // Messages in the order they come (a recorder's): each stamped in its header and logged at its
+  // stamp. False once anything failed; close() says what.
+  bool add_imu(const ImuSample& sample);
+  bool add_image(std::int64_t t_ns, const GrayImage& image);
+  bool close(std::string& error);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace mirrorcal::sim
