@@ -531,18 +531,6 @@ std::unique_ptr<MessageStream> Ros1Bag::messages(const Topic& topic) const {
 
 // --- MCAP -----------------------------------------------------------------------------------
 
-constexpr std::uint8_t kMcapMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
-enum McapOp : std::uint8_t {
-  kMcapHeader = 0x01,
-  kMcapFooter = 0x02,
-  kMcapSchema = 0x03,
-  kMcapChannel = 0x04,
-  kMcapMessage = 0x05,
-  kMcapChunk = 0x06,
-  kMcapStatistics = 0x0b,
-  kMcapDataEnd = 0x0f
-};
-
 struct McapChannel {
   std::string topic, encoding;
   std::uint16_t schema = 0;

@@ -17,6 +17,25 @@
 
 namespace mirrorcal::sim::bag {
 
+// MCAP's magic, at both ends of a file, and its records' opcodes (mcap.dev/spec), for the reader
+// here and the writer (bag_writer.cpp).
+constexpr std::uint8_t kMcapMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
+enum McapOp : std::uint8_t {
+  kMcapHeader = 0x01,
+  kMcapFooter = 0x02,
+  kMcapSchema = 0x03,
+  kMcapChannel = 0x04,
+  kMcapMessage = 0x05,
+  kMcapChunk = 0x06,
+  kMcapMessageIndex = 0x07,
+  kMcapChunkIndex = 0x08,
+  kMcapStatistics = 0x0b,
+  kMcapMetadata = 0x0c,
+  kMcapMetadataIndex = 0x0d,
+  kMcapSummaryOffset = 0x0e,
+  kMcapDataEnd = 0x0f
+};
+
 // How a topic's messages are serialised: ROS 1's (packed, little-endian) or ROS 2's CDR.
 enum class Encoding { kRos1, kCdr, kOther };
 

@@ -17,30 +17,17 @@
 #include <utility>
 #include <vector>
 
+#include "bag_containers.hpp"
 #include "mirrorcal/sim_host/bags.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 #include "mirrorcal/sim_host/version.hpp"
 
 namespace mirrorcal::sim {
 
+using namespace bag;  // MCAP's magic and opcodes (bag_containers.hpp)
+
 namespace {
 
-constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
-enum Op : std::uint8_t {
-  kHeader = 0x01,
-  kFooter = 0x02,
-  kSchema = 0x03,
-  kChannel = 0x04,
-  kMessage = 0x05,
-  kChunk = 0x06,
-  kMessageIndex = 0x07,
-  kChunkIndex = 0x08,
-  kStatistics = 0x0b,
-  kMetadata = 0x0c,
-  kMetadataIndex = 0x0d,
-  kSummaryOffset = 0x0e,
-  kDataEnd = 0x0f
-};
 // A chunk is closed once its records pass this many bytes: what a reader holds at a time.
 constexpr std::size_t kChunkBytes = 4u << 20;
 constexpr int kZstdLevel = 3;
@@ -73,7 +60,7 @@ class Bytes {
     append(m.data.data(), m.data.size());
   }
   // A record: its opcode, its content's length, its content.
-  void record(Op op, const Bytes& content) {
+  void record(McapOp op, const Bytes& content) {
     put(std::uint8_t(op));
     put(std::uint64_t(content.data.size()));
     append(content.data.data(), content.data.size());
@@ -212,7 +199,7 @@ struct BagWriter::Impl {
     m.put(t);                          // log time
     m.put(t);                          // publish time
     m.append(cdr.data(), cdr.size());
-    chunk.record(kMessage, m);
+    chunk.record(kMcapMessage, m);
     ++c.messages;
     ++messages;
     return chunk.data.size() < kChunkBytes || close_chunk();
@@ -238,7 +225,7 @@ struct BagWriter::Impl {
     c.put(std::uint64_t(n));
     c.append(compressed.data(), n);
     Bytes record;
-    record.record(kChunk, c);
+    record.record(kMcapChunk, c);
     if (!write(record.data, &data_crc)) return false;
     const std::uint64_t chunk_length = offset - start;
     Bytes offsets;  // the Chunk Index's map: channel -> its Message Index's offset
@@ -254,7 +241,7 @@ struct BagWriter::Impl {
       offsets.put(id);
       offsets.put(offset);
       Bytes r;
-      r.record(kMessageIndex, mi);
+      r.record(kMcapMessageIndex, mi);
       if (!write(r.data, &data_crc)) return false;
     }
     Bytes ci;
@@ -268,7 +255,7 @@ struct BagWriter::Impl {
     ci.string("zstd");
     ci.put(std::uint64_t(n));
     ci.put(std::uint64_t(chunk.data.size()));
-    chunk_indexes.record(kChunkIndex, ci);
+    chunk_indexes.record(kMcapChunkIndex, ci);
     ++chunks;
     chunk.data.clear();
     index.clear();
@@ -280,24 +267,24 @@ struct BagWriter::Impl {
     Bytes metadata, content;
     content.string("rosbag2");
     content.string_map({{"serialized_metadata", bag_metadata()}});
-    metadata.record(kMetadata, content);
+    metadata.record(kMcapMetadata, content);
     const std::uint64_t metadata_at = offset;
     if (!write(metadata.data, &data_crc)) return false;
     Bytes metadata_index, mi;
     mi.put(metadata_at);
     mi.put(std::uint64_t(metadata.data.size()));
     mi.string("rosbag2");
-    metadata_index.record(kMetadataIndex, mi);
+    metadata_index.record(kMcapMetadataIndex, mi);
     Bytes end, end_content;
     end_content.put(data_crc);
-    end.record(kDataEnd, end_content);
+    end.record(kMcapDataEnd, end_content);
     if (!write(end.data, nullptr)) return false;
     const std::uint64_t summary_start = offset;
     std::uint32_t summary_crc = 0;
     Bytes schemas, channels, statistics;
     for (const ChannelInfo* c : {&imu, &camera}) {
-      schemas.record(kSchema, schema(*c));
-      channels.record(kChannel, channel(*c));
+      schemas.record(kMcapSchema, schema(*c));
+      channels.record(kMcapChannel, channel(*c));
     }
     Bytes st, counts;
     st.put(messages);
@@ -314,31 +301,31 @@ struct BagWriter::Impl {
     }
     st.put(std::uint32_t(counts.data.size()));
     st.append(counts.data.data(), counts.data.size());
-    statistics.record(kStatistics, st);
+    statistics.record(kMcapStatistics, st);
     Bytes offsets;
-    for (const auto& [op, group] : {std::pair<Op, const Bytes*>{kSchema, &schemas},
-                                    {kChannel, &channels},
-                                    {kStatistics, &statistics},
-                                    {kChunkIndex, &chunk_indexes},
-                                    {kMetadataIndex, &metadata_index}}) {
+    for (const auto& [op, group] : {std::pair<McapOp, const Bytes*>{kMcapSchema, &schemas},
+                                    {kMcapChannel, &channels},
+                                    {kMcapStatistics, &statistics},
+                                    {kMcapChunkIndex, &chunk_indexes},
+                                    {kMcapMetadataIndex, &metadata_index}}) {
       if (group->data.empty()) continue;
       Bytes so;
       so.put(std::uint8_t(op));
       so.put(offset);
       so.put(std::uint64_t(group->data.size()));
-      offsets.record(kSummaryOffset, so);
+      offsets.record(kMcapSummaryOffset, so);
       if (!write(group->data, &summary_crc)) return false;
     }
     const std::uint64_t summary_offset_start = offset;
     if (!write(offsets.data, &summary_crc)) return false;
     Bytes footer;
-    footer.put(std::uint8_t(kFooter));
+    footer.put(std::uint8_t(kMcapFooter));
     footer.put(std::uint64_t(20));
     footer.put(summary_start);
     footer.put(summary_offset_start);
     summary_crc = std::uint32_t(crc32(summary_crc, footer.data.data(), uInt(footer.data.size())));
     footer.put(summary_crc);
-    footer.append(kMagic, sizeof kMagic);
+    footer.append(kMcapMagic, sizeof kMcapMagic);
     return write(footer.data, nullptr);
   }
   // rosbag2's BagMetadata (version 8) of the bag, as yaml-cpp writes it, indented by indent.
@@ -384,13 +371,13 @@ bool BagWriter::open(const std::string& folder, const std::string& name,
   w.file = w.out.add(w.path, error);
   if (w.file == nullptr) return false;
   Bytes head, header;
-  head.append(kMagic, sizeof kMagic);
+  head.append(kMcapMagic, sizeof kMcapMagic);
   header.string("ros2");
   header.string(written_by());
-  head.record(kHeader, header);
+  head.record(kMcapHeader, header);
   for (const ChannelInfo* c : {&w.imu, &w.camera}) {
-    head.record(kSchema, w.schema(*c));
-    head.record(kChannel, w.channel(*c));
+    head.record(kMcapSchema, w.schema(*c));
+    head.record(kMcapChannel, w.channel(*c));
   }
   if (!w.write(head.data, &w.data_crc)) {
     error = w.error;

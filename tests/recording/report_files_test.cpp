@@ -518,7 +518,8 @@ TEST(ReportFiles, BiasesGravityAndResidualAxesAreTheResultFilesAndResiduals) {
 TEST(ReportFiles, ImuResidualStatisticsAreThoseOfTheImuResidualsFile) {
   TempDir dir("report-imu-residuals");
   const std::string& d = dir.path;
-  ASSERT_EQ(run_mirrorcal("sim --seed 4 --out " + d + "/out", d), 0) << slurp(d + "/command.log");
+  ASSERT_EQ(run_mirrorcal("sim --seed 4 --duration 20 --out " + d + "/out", d), 0)
+      << slurp(d + "/command.log");
   const std::string report = slurp(d + "/out/report.txt");
   std::vector<std::array<double, 7>> rows;  // interval, gyro xyz, accel xyz
   std::istringstream csv(slurp(d + "/out/imu_residuals.csv"));
@@ -534,8 +535,8 @@ TEST(ReportFiles, ImuResidualStatisticsAreThoseOfTheImuResidualsFile) {
         << line;
     rows.push_back(r);
   }
-  // A minute at 60 Hz: an interval between each two frames the filter propagated across.
-  ASSERT_GT(rows.size(), 3000u);
+  // 20 s at 60 Hz: an interval between each two frames the filter propagated across.
+  ASSERT_GT(rows.size(), 1000u);
   std::size_t intervals = 0;
   double median_ms = 0;
   ASSERT_EQ(std::sscanf(line_starting(report, "IMU RESIDUALS", true).c_str(),
