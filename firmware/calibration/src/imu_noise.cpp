@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdarg>
 #include <cstdio>
 #include <limits>
 
 #include "mirrorcal/sim_host/recording.hpp"
+#include "text_format.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -36,16 +36,6 @@ constexpr double kDriftWindowS = 10.0;
 // one); up to kMaxIrregular of them (and of the time) are let through with a note.
 constexpr double kStepTolerance = 0.5;
 constexpr double kMaxIrregular = 0.01;
-
-std::string format(const char* f, ...) __attribute__((format(printf, 1, 2)));
-std::string format(const char* f, ...) {
-  char s[512];
-  va_list args;
-  va_start(args, f);
-  std::vsnprintf(s, sizeof s, f, args);
-  va_end(args);
-  return s;
-}
 
 // A duration in the unit a person would say it in.
 std::string duration(double s) {

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -11,25 +10,13 @@
 #include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/estimator/so3.hpp"
 #include "mirrorcal/sim_host/version.hpp"
+#include "text_format.hpp"
 
 namespace mirrorcal::calibration {
 
 namespace {
 
 constexpr double kDeg = 180.0 / M_PI;
-
-std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-std::string format(const char* fmt, ...) {
-  va_list args, again;
-  va_start(args, fmt);
-  va_copy(again, args);
-  const int n = std::vsnprintf(nullptr, 0, fmt, args);
-  va_end(args);
-  std::string text(n > 0 ? std::size_t(n) : 0, '\0');
-  std::vsnprintf(text.data(), text.size() + 1, fmt, again);
-  va_end(again);
-  return text;
-}
 
 // A Euclidean calibration state's value (j in calibration_params() order; the rotation's are 0).
 template <class State>
