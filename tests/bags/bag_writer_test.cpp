@@ -49,11 +49,7 @@ TEST(BagWriter, WritesWhatTheReaderReadsBack) {
     for (; i < data.imu.size(); ++i) ASSERT_TRUE(bag.add_imu(data.imu[i]));
     ASSERT_TRUE(bag.close(err)) << err;
   }
-  const auto prior = mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, 7);
-  ASSERT_TRUE(mc::sim::write_sensor_yaml(dir, sensors, err) &&
-              mc::sim::write_priors_yaml(
-                  dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))
-      << err;
+  write_sensor_files(dir, s, sensors, data, 7);
 
   mc::sim::Recording rec;
   ASSERT_TRUE(mc::sim::open_bag_recording(dir, {}, mc::sim::kPaperMarkers, rec, err)) << err;

@@ -224,11 +224,7 @@ void write_still_bag(const std::string& dir, double seconds) {
     }
   }
   ASSERT_TRUE(bag.close(err)) << err;
-  const auto prior = mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, 5);
-  ASSERT_TRUE(mc::sim::write_sensor_yaml(dir, sensors, err) &&
-              mc::sim::write_priors_yaml(
-                  dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))
-      << err;
+  write_sensor_files(dir, s, sensors, data, 5);
 }
 
 // A bag is streamed, one chunk at a time: calibrate takes the same memory on a bag of ten minutes

@@ -70,6 +70,19 @@ inline mc::sim::SensorInfo sensors_of(const mc::sim::Scenario& s) {
   return i;
 }
 
+// imu.yaml and camchain.yaml of sensors, and mirrorcal.yaml of the prior of data and seed, into
+// dir.
+inline void write_sensor_files(const std::string& dir, const mc::sim::Scenario& s,
+                               const mc::sim::SensorInfo& sensors, const mc::sim::SimData& data,
+                               std::uint64_t seed) {
+  std::string err;
+  const auto prior = mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, seed);
+  if (!mc::sim::write_sensor_yaml(dir, sensors, err) ||
+      !mc::sim::write_priors_yaml(
+          dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))
+    throw std::runtime_error(err);
+}
+
 // Writes a complete recording of data with the prior of seed into dir.
 inline void write_recording(const std::string& dir, const mc::sim::Scenario& s,
                             const mc::sim::SimData& data, std::uint64_t seed) {
@@ -79,11 +92,7 @@ inline void write_recording(const std::string& dir, const mc::sim::Scenario& s,
   for (const auto& smp : data.imu) w.add_imu(smp);
   for (const auto& f : data.frames) w.add_frame(f);
   if (!w.close(err)) throw std::runtime_error(err);
-  const auto prior = mc::sim::simulation_prior<mc::sim::kPaperMarkers>(s, data, seed);
-  if (!mc::sim::write_sensor_yaml(dir, sensors_of(s), err) ||
-      !mc::sim::write_priors_yaml(
-          dir, mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, false), err))
-    throw std::runtime_error(err);
+  write_sensor_files(dir, s, sensors_of(s), data, seed);
 }
 
 #ifdef MIRRORCAL_BIN
