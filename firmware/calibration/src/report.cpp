@@ -190,14 +190,14 @@ SampleStats sample_stats(const std::vector<double>& values) {
 }
 
 void for_each_imu_residual(const ReportData& d, int sensor, int axis,
-                           const std::function<void(const ImuResidual&, double, double)>& f) {
+                           const std::function<void(double, double)>& f) {
   if (!d.imu_residuals) return;
   const ImuNoise& noise = d.result.imu.noise;
   const double density = sensor == 0 ? noise.gyro_noise_density : noise.accel_noise_density;
   for (const ImuResidual r : *d.imu_residuals) {
     if (!(r.dt_s > 0.0)) continue;  // across a restart
     const double value = sensor == 0 ? r.gyro(axis) : r.accel(axis);
-    f(r, value, value * std::sqrt(r.dt_s) / density);
+    f(value, value * std::sqrt(r.dt_s) / density);
   }
 }
 
@@ -489,7 +489,7 @@ void add_imu_residual_line(std::string& t, const ReportData& d, int sensor) {
   std::array<double, 3> mean{}, rms{}, mean_sigmas{}, rms_sigmas{};
   std::size_t n = 0;
   for (int axis = 0; axis < 3; ++axis)
-    for_each_imu_residual(d, sensor, axis, [&](const ImuResidual&, double value, double sigmas) {
+    for_each_imu_residual(d, sensor, axis, [&](double value, double sigmas) {
       n += axis == 0 ? 1 : 0;
       mean[std::size_t(axis)] += value;
       rms[std::size_t(axis)] += value * value;
@@ -527,7 +527,8 @@ void add_imu_residuals(std::string& t, const ReportData& d) {
       "IMU RESIDUALS (the body rate and specific force the refinement's smoothed motion has beyond "
       "the IMU's samples, over each frame interval; imu_residuals.csv lists them)\n";
   if (intervals.empty()) {
-    t += "none: the refinement took no step, so the motion was not smoothed\n\n";
+    t += "none: no refinement step smoothed the motion (none was taken, or this calibration makes "
+         "none)\n\n";
     return;
   }
   const ImuNoise& noise = d.result.imu.noise;

@@ -238,7 +238,7 @@ void write_imu_residual_plot(std::ostream& g, const ReportData& d, std::vector<F
   std::array<double, 2> largest{}, bound{};  // per sensor: the largest |residual|, 3 sigmas
   for (int part = 0; part < 2; ++part)
     for (int axis = 0; axis < 3; ++axis)
-      for_each_imu_residual(d, part, axis, [&](const ImuResidual&, double value, double sigmas) {
+      for_each_imu_residual(d, part, axis, [&](double value, double sigmas) {
         largest[std::size_t(part)] = std::max(largest[std::size_t(part)], std::abs(value));
         if (sigmas != 0.0)
           bound[std::size_t(part)] = std::max(bound[std::size_t(part)], 3.0 * value / sigmas);

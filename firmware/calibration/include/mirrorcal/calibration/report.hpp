@@ -107,9 +107,9 @@ SampleStats sample_stats(const std::vector<double>& values);
 
 // The IMU's residuals (ImuResidual) as the report states them: each axis's value, and the same in
 // the white noise's 1-sigma over its interval (noise_density / sqrt(dt)), for the gyro (sensor 0)
-// or the accelerometer (1); f(residual, value, in_sigmas) for each axis of each interval there is.
+// or the accelerometer (1); f(value, in_sigmas) for the axis of each interval there is.
 void for_each_imu_residual(const ReportData& d, int sensor, int axis,
-                           const std::function<void(const ImuResidual&, double, double)>& f);
+                           const std::function<void(double, double)>& f);
 
 // The normalised innovation squared summed over windows of kNisWindowFrames frames with markers
 // used (the last window may be shorter), handed to f in time order.
@@ -137,8 +137,9 @@ struct ReportPlots {
 
 // report.txt's text.
 std::string report_text(const ReportData& d);
-// report.txt, report.html, residuals.csv and imu_residuals.csv in dir, added to out (written when it commits). The
-// plots are drawn in a temporary folder; without gnuplot the page says so and the text is whole.
+// report.txt, report.html, residuals.csv and imu_residuals.csv in dir, added to out (written when
+// it commits). The plots are drawn in a temporary folder; without gnuplot the page says so and the
+// text is whole.
 bool write_report(files::OutputSet& out, const std::string& dir, const ReportData& d,
                   const ReportPlots& plots, std::string& error);
 // For a run without data (`run` without frames): the verdict and the calibration only.
