@@ -696,7 +696,7 @@ int cmd_montecarlo(int argc, char** argv) {
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
               "outliers", "label-swaps", "rig", "imu-model", "blink"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion",
-              "estimate-noise", "identical-leds"},
+              "estimate-noise", "identical-leds", "room"},
              o, error) ||
       !campaign_options(o, c, error))
     fail(error);

@@ -145,9 +145,9 @@ int cmd_sim(int argc, char** argv) {
                                          "distortion",  "line-delay",  "filter-line-delay",
                                          "markers",     "duration",    "outliers",
                                          "label-swaps", "blink"},
-                           flags = {"no-plots",       "frames",        "intrinsics",
-                                    "hold-skew",      "one-stage",     "estimate-distortion",
-                                    "estimate-noise", "identical-leds"};
+                           flags = {"no-plots",       "frames",         "intrinsics",
+                                    "hold-skew",      "one-stage",      "estimate-distortion",
+                                    "estimate-noise", "identical-leds", "room"};
   with_value.insert(with_value.end(), kLoopValueOptions.begin(), kLoopValueOptions.end());
   flags.insert(flags.end(), kLoopFlagOptions.begin(), kLoopFlagOptions.end());
   Options o;

@@ -43,6 +43,11 @@ bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) 
     error = "--identical-leds applies to --frames only";
     return false;
   }
+  frames.room = o.flag("room");
+  if (frames.room && !frames.enabled) {
+    error = "--room applies to --frames only";
+    return false;
+  }
   if (o.flag("blink")) {
     const std::string text = o.get("blink", "");
     char* end = nullptr;

@@ -10,7 +10,7 @@ namespace mirrorcal::app {
 
 using evaluation::FrameMode;
 
-// --frames, --format grey|yuyv, --spot-noise PX, --pixel-sigma PX, --identical-leds and
+// --frames, --format grey|yuyv, --spot-noise PX, --pixel-sigma PX, --identical-leds, --room and
 // --blink PERIOD of sim and montecarlo; an error for a format that is not one, a noise that is
 // negative, a sigma that is not positive, a period that is not 2..hal::BlinkCode::kMaxPeriod
 // frames, or any of them without --frames.

@@ -13,6 +13,9 @@ namespace {
 constexpr std::size_t kNoiseTable = std::size_t{1} << 18;
 constexpr std::uint64_t kNoiseStream = 0x4652414d45ull;  // "FRAME": seeds apart from simulate()'s
 constexpr std::uint64_t kSpotStream = 0x53504f54ull << 32;  // "SPOT", xor the frame's time
+constexpr std::uint64_t kRoomStream = 0x524f4f4dull;        // "ROOM"
+// Motion blur: a spot drawn as this many spots spread evenly over the exposure.
+constexpr int kExposureSteps = 5;
 
 }  // namespace
 
@@ -61,10 +64,49 @@ FrameRenderer::FrameRenderer(const Scenario& scenario, const RenderConfig& confi
   std::normal_distribution<float> n01;
   noise_.resize(kNoiseTable);
   for (float& v : noise_) v = n01(rng);
+  if (config_.room.enabled) place_room_lights();
 }
 
-FrameRenderer::Window FrameRenderer::spot_window(double u, double v) const {
-  const int r = static_cast<int>(std::ceil(4.0 * config_.psf_sigma_px)) + 1;
+// Each light is put on a ray from the camera's mean position within 4-16 deg of its mean optical
+// axis, as the mirror image of a point 0.5-2 m further into the room than the camera: the camera
+// then sees it in the mirror now and then as the rig turns, as it would a lamp behind its user.
+void FrameRenderer::place_room_lights() {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero(), axis = Eigen::Vector3d::Zero();
+  constexpr int kSamples = 64;
+  for (int k = 0; k < kSamples; ++k) {
+    const Kinematics kin = kinematics(scenario_.motion, scenario_.duration_s * k / (kSamples - 1));
+    const Eigen::Matrix3d r_n_b = kin.q_n_b.toRotationMatrix();
+    centre += (kin.p + r_n_b * scenario_.truth.p_b_c) / kSamples;
+    axis += r_n_b * scenario_.truth.q_b_c.toRotationMatrix().col(2);
+  }
+  axis.normalize();
+  if (axis.z() > -0.2) axis = -Eigen::Vector3d::UnitZ();  // a camera that hardly faces the mirror
+  std::mt19937_64 rng(derive_seed(seed_, kRoomStream));
+  std::uniform_real_distribution<double> u01;
+  const RoomConfig& room = config_.room;
+  for (int i = 0; i < 2; ++i) {
+    const double off_axis = (4.0 + 12.0 * u01(rng)) * M_PI / 180.0, azimuth = 2.0 * M_PI * u01(rng);
+    const Eigen::Vector3d across = axis.unitOrthogonal();
+    const Eigen::Vector3d ray =
+        Eigen::AngleAxisd(off_axis, Eigen::AngleAxisd(azimuth, axis) * across) * axis;
+    const double depth = centre.z() + 0.5 + 1.5 * u01(rng);  // the light's height above the mirror
+    const Eigen::Vector3d image = centre + ((centre.z() + depth) / -ray.z()) * ray;
+    Light light;
+    light.what.point_n = Eigen::Vector3d(image.x(), image.y(), depth);
+    light.peak = i == 0 ? room.lamp_peak : room.point_light_peak;
+    light.psf_sigma_px = i == 0 ? room.lamp_psf_sigma_px : config_.psf_sigma_px;
+    room_lights_.push_back(light);
+  }
+}
+
+std::vector<Eigen::Vector3d> FrameRenderer::room_lights() const {
+  std::vector<Eigen::Vector3d> points;
+  for (const Light& light : room_lights_) points.push_back(light.what.point_n);
+  return points;
+}
+
+FrameRenderer::Window FrameRenderer::spot_window(double u, double v, double psf_sigma_px) const {
+  const int r = static_cast<int>(std::ceil(4.0 * psf_sigma_px)) + 1;
   Window w;
   w.x0 = std::max(0, static_cast<int>(std::floor(u)) - r);
   w.x1 = std::min(width_ - 1, static_cast<int>(std::ceil(u)) + r);
@@ -74,9 +116,13 @@ FrameRenderer::Window FrameRenderer::spot_window(double u, double v) const {
 }
 
 void FrameRenderer::add_spot(double u, double v, double peak) {
-  const double s = config_.psf_sigma_px;
+  add_spot(u, v, peak, config_.psf_sigma_px);
+}
+
+void FrameRenderer::add_spot(double u, double v, double peak, double psf_sigma_px) {
+  const double s = psf_sigma_px;
   const double flux = peak * 2.0 * M_PI * s * s;
-  const auto [x0, x1, y0, y1] = spot_window(u, v);
+  const auto [x0, x1, y0, y1] = spot_window(u, v, s);
   if (x0 > x1 || y0 > y1) return;
   // The Gaussian integrated over pixel [x - 0.5, x + 0.5] x [y - 0.5, y + 0.5]: separable.
   const double k = 1.0 / (s * std::sqrt(2.0));
@@ -139,6 +185,29 @@ void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::ui
   finish(frame_index, image);
 }
 
+bool FrameRenderer::draw_light(std::int64_t t_ns, const Light& light, const Eigen::Vector2d& offset,
+                               Eigen::Vector2d& uv) {
+  if (!reflection_pixel(scenario_, t_ns, light.what, uv)) return false;
+  uv += offset;
+  const double exposure = config_.room.enabled ? config_.room.exposure_s : 0.0;
+  const int steps = exposure > 0.0 ? kExposureSteps : 1;
+  Window drawn = spot_window(uv.x(), uv.y(), light.psf_sigma_px);
+  for (int k = 0; k < steps; ++k) {
+    Eigen::Vector2d at = uv;
+    if (steps > 1) {
+      const double dt = exposure * (static_cast<double>(k) / (steps - 1) - 0.5);
+      if (!reflection_pixel(scenario_, t_ns + std::llround(dt * 1e9), light.what, at)) continue;
+      at += offset;
+    }
+    add_spot(at.x(), at.y(), light.peak / steps, light.psf_sigma_px);
+    const Window w = spot_window(at.x(), at.y(), light.psf_sigma_px);
+    drawn = {std::min(drawn.x0, w.x0), std::max(drawn.x1, w.x1), std::min(drawn.y0, w.y0),
+             std::max(drawn.y1, w.y1)};
+  }
+  drawn_.push_back(drawn);
+  return true;
+}
+
 void FrameRenderer::draw_scene_spots(std::int64_t t_ns, std::uint32_t lit, RenderedTruth& truth) {
   drawn_.clear();
   const auto m = scenario_.truth.markers.size();
@@ -149,15 +218,28 @@ void FrameRenderer::draw_scene_spots(std::int64_t t_ns, std::uint32_t lit, Rende
   // same frame gets the same ones whenever drawn.
   std::mt19937_64 rng(derive_seed(seed_, kSpotStream ^ static_cast<std::uint64_t>(t_ns)));
   std::normal_distribution<double> n01;
+  const RoomConfig& room = config_.room;
   for (std::size_t i = 0; i < m; ++i) {
     const double du = n01(rng), dv = n01(rng);
+    if ((lit >> i & 1u) == 0) continue;
+    const Eigen::Vector2d offset = config_.spot_noise_px * Eigen::Vector2d(du, dv);
+    Light led{Reflected{static_cast<int>(i)}, config_.brightness[i % config_.brightness.size()],
+              config_.psf_sigma_px};
+    if (room.enabled) led.peak *= room.exposure_gain;
     Eigen::Vector2d uv;
-    if ((lit >> i & 1u) == 0 || !true_pixel(scenario_, t_ns, static_cast<int>(i), uv)) continue;
-    uv += config_.spot_noise_px * Eigen::Vector2d(du, dv);
+    if (!draw_light(t_ns, led, offset, uv)) continue;
     truth.visible[i] = true;
     truth.uv[i] = uv;
-    add_spot(uv.x(), uv.y(), config_.brightness[i % config_.brightness.size()]);
-    drawn_.push_back(spot_window(uv.x(), uv.y()));
+    if (!room.enabled) continue;
+    Light ghost = led;
+    ghost.what.plane_z = room.ghost_offset_m;
+    ghost.peak *= room.ghost_ratio;
+    Eigen::Vector2d unused;
+    draw_light(t_ns, ghost, offset, unused);
+  }
+  for (const Light& light : room_lights_) {
+    Eigen::Vector2d unused;
+    draw_light(t_ns, light, Eigen::Vector2d::Zero(), unused);
   }
 }
 

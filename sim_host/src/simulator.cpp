@@ -16,33 +16,38 @@ std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream) {
 
 namespace {
 
-// The true pixel of marker i with the IMU at (p_n_b, q_n_b), wherever it falls; false if the
-// mirror shows nothing there.
-bool project_marker(const Scenario& s, const Eigen::Vector3d& p_n_b,
-                    const Eigen::Quaterniond& q_n_b, int marker, Eigen::Vector2d& uv) {
+// The true pixel of a reflection with the IMU at (p_n_b, q_n_b), wherever it falls; false if the
+// plane shows nothing there. The plane z = h is the mirror z = 0 of n shifted by h.
+bool project_reflection(const Scenario& s, const Eigen::Vector3d& p_n_b,
+                        const Eigen::Quaterniond& q_n_b, const Reflected& what,
+                        Eigen::Vector2d& uv) {
   const Rig& rig = s.truth;
   const Eigen::Matrix3d r_n_b = q_n_b.toRotationMatrix();
   const Eigen::Matrix3d r_n_c = r_n_b * rig.q_b_c.toRotationMatrix();
-  const Eigen::Vector3d p_n_c = p_n_b + r_n_b * rig.p_b_c;
-  const Eigen::Vector3d& pi = rig.markers[static_cast<std::size_t>(marker)];
-  // The marker itself must be on the reflective side, else the mirror shows nothing.
+  Eigen::Vector3d p_n_c = p_n_b + r_n_b * rig.p_b_c;
+  const Eigen::Vector3d pi = what.marker >= 0
+                                 ? rig.markers[static_cast<std::size_t>(what.marker)]
+                                 : Eigen::Vector3d(r_n_c.transpose() * (what.point_n - p_n_c));
+  p_n_c.z() -= what.plane_z;
+  // The point itself must be on the reflective side, else the plane shows nothing.
   if ((r_n_c * pi + p_n_c).z() <= 0.0 || p_n_c.z() <= 0.0) return false;
   return project<double>(rig.intrinsics, mirror_image<double>(r_n_c, p_n_c, pi), uv);
 }
 
 }  // namespace
 
-bool true_pixel(const Scenario& s, std::int64_t exposure_ns, int marker, Eigen::Vector2d& uv) {
+bool reflection_pixel(const Scenario& s, std::int64_t exposure_ns, const Reflected& what,
+                      Eigen::Vector2d& uv) {
   const double t0 = static_cast<double>(exposure_ns) * 1e-9;
   const double line_delay = s.truth.intrinsics.line_delay_s;
   Kinematics kin = kinematics(s.motion, t0);
-  if (!project_marker(s, kin.p, kin.q_n_b, marker, uv)) return false;
-  // A rolling shutter reads the row the marker lands on line_delay * row later: the row where the
-  // rig's motion by then puts it, a fixed point that three steps find to far below a
+  if (!project_reflection(s, kin.p, kin.q_n_b, what, uv)) return false;
+  // A rolling shutter reads the row the reflection lands on line_delay * row later: the row where
+  // the rig's motion by then puts it, a fixed point that three steps find to far below a
   // micropixel (the row moves a fraction line_delay * |dv/dt| < 0.1 of its error per step).
   for (int step = 0; step < 3 && line_delay != 0.0; ++step) {
     kin = kinematics(s.motion, t0 + line_delay * uv.y());
-    if (!project_marker(s, kin.p, kin.q_n_b, marker, uv)) return false;
+    if (!project_reflection(s, kin.p, kin.q_n_b, what, uv)) return false;
   }
   return uv.x() >= 0.0 && uv.x() < s.truth.width && uv.y() >= 0.0 && uv.y() < s.truth.height;
 }

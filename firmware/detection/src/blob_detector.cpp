@@ -54,6 +54,8 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
       Blob b;
       b.area = r.area;
       b.peak = r.peak;
+      b.width = r.width;
+      b.wide = r.width > config_.max_width_px2;
       if (!measure(f, r.x0, r.y0, r.x1, r.y1, b)) {
         ++counters_.too_small;
         continue;
@@ -87,13 +89,23 @@ BlobDetector::Region BlobDetector::fill(const hal::FrameView& f, int x, int y) {
   };
   int top = 0, area = 0, peak = 0;
   int x0 = x, x1 = x, y0 = y, y1 = y;
+  // Moments about the seed, weighted by each pixel's excess over the threshold.
+  double ws = 0.0, su = 0.0, sv = 0.0, suu = 0.0, svv = 0.0, suv = 0.0;
   stack_[static_cast<std::size_t>(top++)] = y * w + x;
   visited_[static_cast<std::size_t>(y * w + x)] = 1;
   while (top > 0) {
     const int p = stack_[static_cast<std::size_t>(--top)];
     const int px = p % w, py = p / w;
     ++area;
-    peak = std::max(peak, luma(px, py));
+    const int value = luma(px, py);
+    peak = std::max(peak, value);
+    const double wgt = value - threshold, du = px - x, dv = py - y;
+    ws += wgt;
+    su += wgt * du;
+    sv += wgt * dv;
+    suu += wgt * du * du;
+    svv += wgt * dv * dv;
+    suv += wgt * du * dv;
     x0 = std::min(x0, px);
     x1 = std::max(x1, px);
     y0 = std::min(y0, py);
@@ -108,7 +120,11 @@ BlobDetector::Region BlobDetector::fill(const hal::FrameView& f, int x, int y) {
       stack_[static_cast<std::size_t>(top++)] = static_cast<std::int32_t>(q);
     }
   }
-  return {area, peak, x0, y0, x1, y1};
+  const double mu = su / ws, mv = sv / ws;
+  const double cuu = suu / ws - mu * mu, cvv = svv / ws - mv * mv, cuv = suv / ws - mu * mv;
+  const double width =
+      0.5 * (cuu + cvv) - std::sqrt(std::max(0.0, 0.25 * (cuu - cvv) * (cuu - cvv) + cuv * cuv));
+  return {area, peak, x0, y0, x1, y1, width};
 }
 
 // Centroid, flux and spread over the blob's box grown by the margin: the background is the mean

@@ -10,6 +10,15 @@ namespace mirrorcal::evaluation {
 
 using namespace calibration;
 
+namespace {
+
+// A labelled blob further than this from every spot drawn is something else (a room light, a
+// ghost) that merely lies nearest to one marker's: its label is wrong whichever. A right label's
+// centroid is within a tenth of a pixel of its spot (docs/campaign/README.md, frames).
+constexpr double kSameSpotPx = 3.0;
+
+}  // namespace
+
 DetectionReport combine(const std::vector<DetectionReport>& runs) {
   DetectionReport all;
   double sum_sq = 0.0, ms = 0.0;
@@ -131,7 +140,7 @@ void RenderedMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction,
         nearest = k;
       }
     }
-    if (nearest != naming_[ii]) {
+    if (nearest != naming_[ii] || best > kSameSpotPx) {
       ++report_.wrong_labels;
       continue;
     }

@@ -72,6 +72,7 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   render.spot_noise_px = frames.spot_noise_px >= 0.0 ? frames.spot_noise_px : s.pixel_sigma;
   if (frames.identical_leds) render.brightness = {render.brightness[1]};
   render.blink.period = frames.blink_period;
+  render.room.enabled = frames.room;
   const detection::RigGeometry<M> geometry =
       detection::prior_geometry(prior, config.intrinsics, config.pixel_sigma);
   const std::uint64_t render_seed = sim::derive_seed(seed, 200);

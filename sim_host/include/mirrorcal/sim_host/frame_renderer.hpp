@@ -12,8 +12,30 @@
 #include "mirrorcal/hal/blink_code.hpp"
 #include "mirrorcal/hal/frames.hpp"
 #include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
 
 namespace mirrorcal::sim {
+
+// A real room (mirrorcal sim --frames --room): what a detector meets besides the LEDs' clean
+// spots. Every part is drawn from the scene's geometry, so it moves in the image as it would.
+struct RoomConfig {
+  bool enabled = false;
+  // Two lights of the room seen in the mirror, fixed in the room behind the rig, where the camera
+  // looks: a lamp (a wide spot that saturates) and a small light as bright and sharp as an LED (a
+  // standby light, a distant bulb). Placed from the renderer's seed about the camera's mean view.
+  double lamp_peak = 400.0, lamp_psf_sigma_px = 3.0;
+  double point_light_peak = 200.0;
+  // A glass mirror's front surface: a faint second image of each LED, this far in front of the
+  // silvered plane (the glass's thickness over its index) and this bright against the LED's.
+  double ghost_offset_m = 0.004, ghost_ratio = 0.05;
+  // An exposure a little too long: every LED drawn this many times brighter than its brightness
+  // says, so that the brightest one's spot clips at full scale (the brightness code holds for
+  // the light, not for the clipped pixels).
+  double exposure_gain = 1.6;
+  // The exposure: each spot is smeared along its motion over it (motion blur), centred on the
+  // frame's time.
+  double exposure_s = 0.004;
+};
 
 struct RenderConfig {
   hal::PixelFormat format = hal::PixelFormat::kGrey;
@@ -30,6 +52,7 @@ struct RenderConfig {
   // LEDs that blink their names: marker i is not drawn in the frames the code darkens it in (the
   // frame index is the code's sequence number).
   hal::BlinkCode blink{};
+  RoomConfig room{};
 };
 
 // What was drawn in one frame: the pixel each marker's spot was drawn at, if it is in the image
@@ -48,6 +71,8 @@ class FrameRenderer {
   int height() const { return height_; }
   int bytes_per_line() const { return width_ * hal::bytes_per_pixel(config_.format); }
   const RenderConfig& config() const { return config_; }
+  // The room's lights (RoomConfig), as points of the room: the lamp, then the small light.
+  std::vector<Eigen::Vector3d> room_lights() const;
 
   // Renders the scene at true time t_ns into image (rows of bytes_per_line() bytes); truth gets
   // the spots drawn. frame_index selects the noise, so a frame is the same whenever drawn.
@@ -72,11 +97,23 @@ class FrameRenderer {
   struct Window {
     int x0 = 0, x1 = -1, y0 = 0, y1 = -1;  // inclusive; empty when x0 > x1
   };
-  // The pixels a spot at (u, v) reaches (its PSF to 4 sigma), clipped to the image.
-  Window spot_window(double u, double v) const;
+  // A reflection the scene draws, and how: its spot's peak and PSF.
+  struct Light {
+    Reflected what;
+    double peak = 0.0, psf_sigma_px = 0.0;
+  };
+  // The pixels a spot at (u, v) of the given PSF reaches (to 4 sigma), clipped to the image.
+  Window spot_window(double u, double v, double psf_sigma_px) const;
+  void add_spot(double u, double v, double peak, double psf_sigma_px);
+  // Draws a light as the camera saw it over the exposure about t_ns (motion blur), its spots
+  // displaced by offset; false, and nothing drawn, if it is not in the image at t_ns. uv: where.
+  bool draw_light(std::int64_t t_ns, const Light& light, const Eigen::Vector2d& offset,
+                  Eigen::Vector2d& uv);
   // Adds the spots of the scene at t_ns of the markers lit (bit i: marker i) to the canvas, says
   // where they are in truth, and keeps their windows in drawn_.
   void draw_scene_spots(std::int64_t t_ns, std::uint32_t lit, RenderedTruth& truth);
+  // The room's lights, placed about the camera's mean view of the run (RoomConfig).
+  void place_room_lights();
 
   const Scenario& scenario_;
   RenderConfig config_;
@@ -86,6 +123,7 @@ class FrameRenderer {
   std::vector<float> canvas_;      // spots of the frame being drawn, DN
   std::vector<float> noise_;       // a table of standard normal draws, cycled through per frame
   std::vector<Window> drawn_;      // the windows of the spots drawn last
+  std::vector<Light> room_lights_;
 };
 
 // The rendered frames of a scenario as a hal::FrameSource: frame j at the camera's j-th time

@@ -36,9 +36,25 @@ struct SimData {
 // (outlier_share, label_swap_share). Deterministic in seed.
 SimData simulate(const Scenario& s, std::uint64_t seed);
 
-// The true pixel of marker i in the frame whose row 0 was exposed at IMU time exposure_ns (a
-// rolling shutter reads the marker's row later); false if not visible in the image.
-bool true_pixel(const Scenario& s, std::int64_t exposure_ns, int marker, Eigen::Vector2d& uv);
+// What the camera sees in a plane parallel to the mirror: one of the rig's markers, or (marker < 0)
+// a point fixed in the room (point_n, in n), reflected in the plane z = plane_z of n. The mirror's
+// silvered plane is z = 0; a glass mirror's front surface lies a few millimetres in front of it
+// and shows a faint second image (a ghost).
+struct Reflected {
+  int marker = -1;
+  Eigen::Vector3d point_n = Eigen::Vector3d::Zero();
+  double plane_z = 0.0;
+};
+
+// The true pixel of a reflection in the frame whose row 0 was exposed at IMU time exposure_ns (a
+// rolling shutter reads its row later); false if not visible in the image.
+bool reflection_pixel(const Scenario& s, std::int64_t exposure_ns, const Reflected& what,
+                      Eigen::Vector2d& uv);
+// The same for marker i's reflection in the mirror.
+inline bool true_pixel(const Scenario& s, std::int64_t exposure_ns, int marker,
+                       Eigen::Vector2d& uv) {
+  return reflection_pixel(s, exposure_ns, Reflected{marker}, uv);
+}
 
 // Independent streams for the parts of a run, derived from one seed (SplitMix64).
 std::uint64_t derive_seed(std::uint64_t seed, std::uint64_t stream);

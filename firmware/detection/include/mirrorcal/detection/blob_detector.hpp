@@ -22,6 +22,11 @@ struct BlobConfig {
   int margin = 4;
   // Radius of the disc the centroid is refined on (px): the spot's core, about 3 PSF sigmas.
   double centroid_radius = 3.5;
+  // A blob whose bright pixels spread more than this (px^2) across their widest extent's
+  // perpendicular (Blob::width) is wider than a spot in every direction: a lamp, a window, a lit
+  // surface. A focused LED's is about 1 even where it saturates, and motion smears it along one
+  // direction only; a soft lens's spots need more.
+  double max_width_px2 = 4.0;
 };
 
 struct Blob {
@@ -34,13 +39,17 @@ struct Blob {
   bool crowded = false;
   // The centroid's disc reaches past the image's edge: the spot is cut, the centroid biased.
   bool truncated = false;
+  // The second moment of the pixels above the threshold (weighted by their excess) across their
+  // widest extent (px^2, its smaller eigenvalue), and whether it exceeds max_width_px2.
+  double width = 0.0;
+  bool wide = false;
 };
 
 // A blob that may hold two spots (spread beyond max_spread_px2), whose centroid a neighbour's tail
-// can pull, or whose spot the image's edge cuts is no marker's to measure: a frame without it
-// costs less than a biased or swapped position.
+// can pull, whose spot the image's edge cuts, or that is wider than a spot is no marker's to
+// measure: a frame without it costs less than a biased or swapped position.
 inline bool single_spot(const Blob& b, double max_spread_px2) {
-  return !b.crowded && !b.truncated && b.spread <= max_spread_px2;
+  return !b.crowded && !b.truncated && !b.wide && b.spread <= max_spread_px2;
 }
 
 struct BlobCounters {
@@ -64,9 +73,10 @@ class BlobDetector {
   const BlobCounters& counters() const { return counters_; }
 
  private:
-  // A connected region of bright pixels: its area, brightest luma and bounding box.
+  // A connected region of bright pixels: its area, brightest luma, bounding box and width.
   struct Region {
     int area, peak, x0, y0, x1, y1;
+    double width;
   };
   Region fill(const hal::FrameView& f, int x, int y);
   bool measure(const hal::FrameView& f, int x0, int y0, int x1, int y1, Blob& b) const;

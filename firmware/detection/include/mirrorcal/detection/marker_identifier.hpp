@@ -34,6 +34,9 @@ struct IdentifierConfig {
   // Relative brightness of the markers (any scale); all equal switches the cue off.
   std::array<double, M> brightness = default_brightness();
   double log_flux_sigma = 0.15;  // spread of log(flux) about the brightness model
+  // A blob whose brightest pixel reaches this luma is clipped (an exposure set for the dimmer
+  // LEDs): its flux is only a lower bound on its LED's.
+  int saturated_luma = 250;
   // A runner-up assignment costing less than this much more than the best puts every label it
   // disputes in doubt.
   double ambiguity_margin = 6.0;
@@ -260,21 +263,30 @@ class MarkerIdentifier {
   }
 
   // How badly the labelled blobs' fluxes fit the brightness ratios, with the common scale (the
-  // exposure, the distance) fitted: sum of squared log residuals about their mean over sigma^2.
+  // exposure, the distance) fitted to the unclipped ones: sum of squared log residuals about their
+  // mean over sigma^2. A clipped blob's flux is a lower bound: it costs only where even that is
+  // brighter than its marker's share (the brightest LED's clipped spot named the dimmest).
   double brightness_cost() const {
     double r[M];
-    int n = 0;
+    bool clipped[M];
+    int n = 0, unclipped = 0;
     double mean = 0.0;
     for (int i = 0; i < M; ++i) {
       const int j = current_[i];
       if (j < 0) continue;
       r[n] = std::log(blobs_[j].flux) - log_brightness_[i];
-      mean += r[n++];
+      clipped[n] = blobs_[j].peak >= config_.saturated_luma;
+      if (!clipped[n]) {
+        mean += r[n];
+        ++unclipped;
+      }
+      ++n;
     }
-    if (n < 2) return 0.0;
-    mean /= n;
+    if (n < 2 || unclipped == 0) return 0.0;
+    mean /= unclipped;
     double ss = 0.0;
-    for (int k = 0; k < n; ++k) ss += (r[k] - mean) * (r[k] - mean);
+    for (int k = 0; k < n; ++k)
+      if (!clipped[k] || r[k] > mean) ss += (r[k] - mean) * (r[k] - mean);
     return ss / (config_.log_flux_sigma * config_.log_flux_sigma);
   }
 

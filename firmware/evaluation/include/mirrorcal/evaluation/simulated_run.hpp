@@ -33,6 +33,9 @@ struct FrameMode {
   // each period of this many frames, and the detection names the tracks by the frames they go
   // dark in. 0: the LEDs stay lit.
   int blink_period = 0;
+  // A real room drawn into the frames (sim::RoomConfig): two lights seen in the mirror, a ghost
+  // of each LED from the glass's front surface, the brightest LEDs clipped, motion blur.
+  bool room = false;
 };
 
 // The calibration configuration a scenario implies (the filter is told the true noise levels and,
