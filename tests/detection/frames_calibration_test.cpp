@@ -13,23 +13,20 @@ namespace mc = mirrorcal;
 
 namespace {
 
-// A random rig (seed) calibrated from rendered frames of identical LEDs for duration_s (with the
-// blink code when blink_period > 0): how its detection went and the verdict, printed.
-struct IdenticalLedsRun {
+// A random rig (seed) calibrated from rendered frames (mode) for duration_s: how its detection
+// went and the verdict, printed.
+struct RenderedRun {
   mc::calibration::DetectionReport detection;
   double nees = 0.0;
   bool consistent = false;
 };
-IdenticalLedsRun identical_leds_run(std::uint64_t seed, double duration_s, int blink_period) {
+RenderedRun rendered_run(std::uint64_t seed, double duration_s, mc::evaluation::FrameMode mode) {
   mc::sim::Scenario s = mc::sim::random_scenario(seed);
   s.duration_s = duration_s;
-  mc::evaluation::FrameMode mode;
   mode.enabled = true;
-  mode.identical_leds = true;
-  mode.blink_period = blink_period;
   const auto run = mc::evaluation::run_simulation<3>(s, seed, {}, mode);
-  const IdenticalLedsRun r{run.detection, run.history.back().nees,
-                           mc::calibration::consistent(run.result)};
+  const RenderedRun r{run.detection, run.history.back().nees,
+                      mc::calibration::consistent(run.result)};
   const mc::calibration::DetectionReport& d = r.detection;
   std::printf(
       "seed %llu: %llu of %llu reflections labelled, %llu wrong (%llu before the last pass), "
@@ -38,6 +35,14 @@ IdenticalLedsRun identical_leds_run(std::uint64_t seed, double duration_s, int b
       (unsigned long long)d.markers_drawn, (unsigned long long)d.wrong_labels,
       (unsigned long long)d.wrong_labels_before, r.nees, r.consistent ? "consistent" : "flagged");
   return r;
+}
+
+// The same with identical LEDs (with the blink code when blink_period > 0).
+RenderedRun identical_leds_run(std::uint64_t seed, double duration_s, int blink_period) {
+  mc::evaluation::FrameMode mode;
+  mode.identical_leds = true;
+  mode.blink_period = blink_period;
+  return rendered_run(seed, duration_s, mode);
 }
 
 }  // namespace
@@ -95,7 +100,7 @@ INSTANTIATE_TEST_SUITE_P(PixelFormats, FramesCalibration,
 TEST(IdenticalLeds, RenderedFramesOfRandomRigsAreLabelledAndCalibrated) {
   int unflagged = 0;
   for (std::uint64_t seed = 1; seed <= 3; ++seed) {
-    const IdenticalLedsRun r = identical_leds_run(seed, 20.0, 0);
+    const RenderedRun r = identical_leds_run(seed, 20.0, 0);
     const mc::calibration::DetectionReport& d = r.detection;
     EXPECT_EQ(d.wrong_labels, 0u) << "seed " << seed;
     EXPECT_GE(d.markers_labelled, d.markers_drawn * 80 / 100) << "seed " << seed;
@@ -114,7 +119,7 @@ TEST(IdenticalLeds, RenderedFramesOfRandomRigsAreLabelledAndCalibrated) {
 TEST(IdenticalLeds, ThatBlinkTheirNamesAreLabelledFromTheStartAndCalibrated) {
   int unflagged = 0;
   for (std::uint64_t seed = 4; seed <= 6; ++seed) {
-    const IdenticalLedsRun r = identical_leds_run(seed, 15.0, 8);
+    const RenderedRun r = identical_leds_run(seed, 15.0, 8);
     const mc::calibration::DetectionReport& d = r.detection;
     // Measured: rigs 5 and 6 none wrong in any pass; rig 4, whose reflections leave the image
     // and cross often, 1 of 1,711 in the last pass (the bar is none: a name carried onto
@@ -126,4 +131,31 @@ TEST(IdenticalLeds, ThatBlinkTheirNamesAreLabelledFromTheStartAndCalibrated) {
     EXPECT_LT(r.nees, 37.7) << "seed " << seed;  // chi-square, 15 dof, 99.9 %
   }
   EXPECT_GE(unflagged, 2);
+}
+
+// A real room in the frames (sim --frames --room): two lights of the room and each LED's ghost in
+// the mirror, an exposure that clips the brightest LED, motion blur. With the brightness code and
+// with identical LEDs, on three random rigs each: every calibration is as the self-check says,
+// flagged, or consistent with its NEES within the 99.9 % quantile and no label against the truth
+// in the last pass. Measured: with the code rigs 4 and 5 consistent (0 wrong labels, NEES 10.8
+// and 10.3), rig 6 flagged (its LEDs never told from the room's small light); identical LEDs, all
+// three flagged.
+TEST(RealRoom, RenderedFramesOfRandomRigsAreRightOrFlagged) {
+  for (const bool identical : {false, true}) {
+    int unflagged = 0;
+    for (std::uint64_t seed = 4; seed <= 6; ++seed) {
+      mc::evaluation::FrameMode mode;
+      mode.room = true;
+      mode.identical_leds = identical;
+      const RenderedRun r = rendered_run(seed, 20.0, mode);
+      if (!r.consistent) continue;
+      ++unflagged;
+      EXPECT_EQ(r.detection.wrong_labels, 0u) << "seed " << seed << " identical " << identical;
+      EXPECT_LT(r.nees, 39.3) << "seed " << seed << " identical " << identical;  // 16 dof, 99.9 %
+    }
+    // Identical LEDs in a room are mostly flagged today (docs/campaign/room: 23 of 50 not).
+    if (!identical) {
+      EXPECT_GE(unflagged, 2);
+    }
+  }
 }

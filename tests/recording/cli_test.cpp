@@ -1125,7 +1125,14 @@ TEST(Cli, AnIdentificationThatFailedIsNamedAsTheCause) {
   EXPECT_EQ(failed.rfind("the detection labelled 3 markers in 1201 frames", 0), 0u) << failed;
   EXPECT_NE(failed.find("744 blobs it withheld in doubt and 5984 it left unlabelled"),
             std::string::npos);
+  // 5.6 blobs a frame for 3 LEDs: something else in view is named.
+  EXPECT_NE(failed.find("It saw 5.6 blobs a frame where the rig has 3 LEDs"), std::string::npos)
+      << failed;
   EXPECT_FALSE(mc::calibration::consistent(r));
+  // As many blobs as LEDs, none told apart: the LEDs themselves are in doubt, nothing else.
+  const std::string alone = says({1200, 10, 2500, 1000});
+  EXPECT_EQ(alone.rfind("the detection labelled 10 markers", 0), 0u) << alone;
+  EXPECT_EQ(alone.find("blobs a frame where"), std::string::npos) << alone;
   r.markers_observed = r.markers_used = 3400;
   EXPECT_EQ(says({1200, 2871, 29, 29}), "");    // a good run (sim --frames)
   EXPECT_EQ(says({1200, 3400, 10, 6000}), "");  // room lights and ghosts beside it

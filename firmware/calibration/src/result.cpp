@@ -300,11 +300,22 @@ std::string fit_warning(const CalibrationResult& r) {
 std::string identification_warning(const CalibrationResult& r) {
   if (!identification_failed(r)) return {};
   const CalibrationResult::DetectionCounts& d = r.detection;
-  char text[700];
+  // More blobs a frame than the rig has LEDs: something else in view looks like one, and may be
+  // as bright as the LED it stands in for.
+  const double blobs_a_frame = double(d.labelled + d.in_doubt + d.unlabelled) / double(d.frames);
+  const bool spare_blobs = blobs_a_frame > double(r.markers.size()) + 0.5;
+  char spare[240] = "";
+  if (spare_blobs)
+    std::snprintf(spare, sizeof spare,
+                  " It saw %.1f blobs a frame where the rig has %zu LEDs: a light of the room, its "
+                  "reflection or the glass's ghost looks like an LED. Darken the room or cover "
+                  "it, and calibrate again.",
+                  blobs_a_frame, r.markers.size());
+  char text[940];
   std::snprintf(text, sizeof text,
                 "the detection labelled %llu markers in %llu frames (of up to %zu a frame), "
                 "though it saw %llu blobs it withheld in doubt and %llu it left unlabelled: the "
-                "markers were not told apart, which no motion mends. The labels come from the "
+                "markers were not told apart, which no motion mends.%s The labels come from the "
                 "LEDs' brightness (1 : 1.5 : 2.25 in features_c's order) and from the filter's "
                 "prediction: check the LEDs' order against mirrorcal.yaml's features_c, the "
                 "exposure (a saturated LED loses its brightness code), and the priors' "
@@ -312,7 +323,7 @@ std::string identification_warning(const CalibrationResult& r) {
                 static_cast<unsigned long long>(d.labelled),
                 static_cast<unsigned long long>(d.frames), r.markers.size(),
                 static_cast<unsigned long long>(d.in_doubt),
-                static_cast<unsigned long long>(d.unlabelled));
+                static_cast<unsigned long long>(d.unlabelled), spare);
   return text;
 }
 

@@ -68,10 +68,14 @@ int BlobDetector::detect(const hal::FrameView& f, Blob* out, int capacity) {
       out[found++] = b;
     }
   }
-  const double near = 2.0 * config_.centroid_radius;
+  // A spot's tail reaches the centroid radius; a wide blob's (a lamp's) reaches its bright
+  // region's radius and the margin beyond it.
+  const auto reach = [this](const Blob& b) {
+    return b.wide ? std::sqrt(b.area / M_PI) + config_.margin : config_.centroid_radius;
+  };
   for (int i = 0; i < found; ++i)
     for (int j = i + 1; j < found; ++j)
-      if (std::hypot(out[i].u - out[j].u, out[i].v - out[j].v) < near)
+      if (std::hypot(out[i].u - out[j].u, out[i].v - out[j].v) < reach(out[i]) + reach(out[j]))
         out[i].crowded = out[j].crowded = true;
   return found;
 }

@@ -35,7 +35,8 @@ struct Blob {
   double spread = 0.0;      // largest eigenvalue of the weighted second moment (px^2)
   int area = 0;             // pixels above threshold
   int peak = 0;             // brightest luma
-  // Another blob lies within twice the centroid radius: its tail may pull this centroid.
+  // Another blob lies within twice the centroid radius (a wide one's tail reaches further): its
+  // tail may pull this centroid.
   bool crowded = false;
   // The centroid's disc reaches past the image's edge: the spot is cut, the centroid biased.
   bool truncated = false;
