@@ -182,15 +182,23 @@ void render_frame(sim::FrameRenderer& renderer, const sim::RenderConfig& render,
   renderer.finish(j, pixels);
 }
 
+// How the simulated camera's frames are recorded: their markers in features.csv, with their images
+// too, or as a bag of images; the LEDs drawn with the brightness code or all alike.
+struct FrameOutput {
+  bool images = false, bag = false;
+  sim::RenderConfig render;
+};
+
 // The simulated streams into dir as a EuRoC recording (mav0/: the IMU's samples, the frames'
 // markers in features.csv, with images their PNGs too).
 bool write_simulated_streams(const sim::Scenario& s, std::uint64_t seed, const sim::SimData& data,
-                             const std::string& dir, bool images, std::string& err) {
+                             const std::string& dir, const FrameOutput& out, std::string& err) {
   sim::RecordingWriter writer;
   if (!writer.open(dir, err)) return false;
   for (const ImuSample& smp : data.imu)
     if (!writer.add_imu(smp)) break;
-  const sim::RenderConfig render;
+  const bool images = out.images;
+  const sim::RenderConfig& render = out.render;
   sim::FrameRenderer renderer(s, render, sim::derive_seed(seed, 200));
   std::vector<std::uint8_t> pixels(
       images ? std::size_t(renderer.width()) * std::size_t(renderer.height()) : 0);
@@ -208,11 +216,11 @@ bool write_simulated_streams(const sim::Scenario& s, std::uint64_t seed, const s
 // on the topics the yaml files name; the bag's file is named after name (the user's folder).
 bool write_simulated_bag(const sim::Scenario& s, std::uint64_t seed, const sim::SimData& data,
                          const sim::SensorInfo& sensors, const std::string& dir,
-                         const std::string& name, std::string& err) {
+                         const std::string& name, const sim::RenderConfig& render,
+                         std::string& err) {
 #ifdef MIRRORCAL_BAGS
   sim::BagWriter writer;
   if (!writer.open(dir, name, sensors.imu_rostopic, sensors.rostopic, err)) return false;
-  const sim::RenderConfig render;
   sim::FrameRenderer renderer(s, render, sim::derive_seed(seed, 200));
   std::vector<std::uint8_t> pixels(std::size_t(renderer.width()) * std::size_t(renderer.height()));
   const sim::GrayImage image{renderer.width(), renderer.height(), pixels.data()};
@@ -228,7 +236,7 @@ bool write_simulated_bag(const sim::Scenario& s, std::uint64_t seed, const sim::
   for (; ok && i < data.imu.size(); ++i) ok = writer.add_imu(data.imu[i]);
   return writer.close(err);
 #else
-  (void)s, (void)seed, (void)data, (void)sensors, (void)dir, (void)name;
+  (void)s, (void)seed, (void)data, (void)sensors, (void)dir, (void)name, (void)render;
   err =
       "--bag: this build of mirrorcal (a board's) writes recording folders only; record the bag "
       "with the host's build";
@@ -249,8 +257,8 @@ bool write_simulated_bag(const sim::Scenario& s, std::uint64_t seed, const sim::
 template <int M>
 bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
                                bool hold_skew, bool lens, RecordingFolder& folder,
-                               const std::string& sub, std::string& err, bool images = false,
-                               bool bag = false) {
+                               const std::string& sub, std::string& err, const FrameOutput& out) {
+  const bool bag = out.bag;
   const std::string dir = folder.path() + sub;
   const sim::SimData data = sim::simulate(s, seed);
   const Prior<M> prior = sim::simulation_prior<M>(s, data, seed);
@@ -272,6 +280,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
       sim::from_prior(prior, s.gravity_n, s.told_pixel_sigma.value_or(s.pixel_sigma), intrinsics,
                       hold_skew || lens);
   priors.estimate_distortion = lens;
+  if (out.render.brightness.size() == 1)  // identical LEDs: mirrorcal.yaml says so
+    priors.leds.brightness.assign(std::size_t(M), out.render.brightness.front());
   sim::RecordingTruth truth;
   truth.p_b_c = s.truth.p_b_c;
   truth.q_b_c = s.truth.q_b_c;
@@ -281,8 +291,8 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   truth.has_distortion = lens;
   const std::string target = folder.as_target(dir);
   const std::string name = std::filesystem::path(target).lexically_normal().filename().string();
-  if (!(bag ? write_simulated_bag(s, seed, data, sensors, dir, name, err)
-            : write_simulated_streams(s, seed, data, dir, images, err)) ||
+  if (!(bag ? write_simulated_bag(s, seed, data, sensors, dir, name, out.render, err)
+            : write_simulated_streams(s, seed, data, dir, out, err)) ||
       !sim::write_sensor_yaml(dir, sensors, err) || !sim::write_priors_yaml(dir, priors, err) ||
       !sim::write_truth_yaml(dir, truth, err))
     return false;
@@ -290,7 +300,7 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
       bag ? "metadata.yaml, " + name + "_0.mcap (a ROS 2 bag: " + sensors.imu_rostopic + ", " +
                 sensors.rostopic + " mono8),"
           : std::string("mav0/imu0/data.csv, mav0/cam0/data.csv, mav0/cam0/features.csv,") +
-                (images ? " mav0/cam0/data/*.png," : "");
+                (out.images ? " mav0/cam0/data/*.png," : "");
   std::printf(
       "mirrorcal record: scenario '%s', seed %llu: %zu IMU samples, %zu frames (%.0f s) in %s\n"
       "  %s imu.yaml, camchain.yaml, mirrorcal.yaml, truth.yaml\n",
@@ -309,10 +319,10 @@ int cmd_record(int argc, char** argv) {
     if (std::string(key) != "out") with_value.emplace_back(key);
   Options o;
   std::string error;
-  if (!parse(
-          argc, argv, 2, with_value,
-          {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion", "bag"},
-          o, error))
+  if (!parse(argc, argv, 2, with_value,
+             {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion",
+              "bag", "identical-leds"},
+             o, error))
     fail(error);
   if (!o.flag("out")) fail("record needs --out DIR\n" + usage("record"));
   const std::string dir = o.get("out", "");
@@ -322,6 +332,13 @@ int cmd_record(int argc, char** argv) {
   }
   const bool bag = o.flag("bag");
   if (bag && o.flag("images")) fail("--bag holds the images already; drop --images");
+  FrameOutput out;
+  out.images = o.flag("images");
+  out.bag = bag;
+  if (o.flag("identical-leds")) {
+    if (!out.images && !bag) fail("--identical-leds draws the images: give --images or --bag");
+    out.render.brightness = {out.render.brightness[1]};  // as sim --frames --identical-leds
+  }
   const bool two_stage = o.flag("two-stage"), hold_skew = o.flag("hold-skew");
   if (hold_skew && !o.flag("intrinsics") && !two_stage)
     fail("--hold-skew applies with --intrinsics or --two-stage");
@@ -343,10 +360,9 @@ int cmd_record(int argc, char** argv) {
   return with_markers(int(s.truth.markers.size()), [&](auto markers) {
     constexpr int M = decltype(markers)::value;
     RecordingFolder folder(dir, o.flag("force"));
-    const bool images = o.flag("images");
     if (!two_stage) {
       if (!write_simulated_recording<M>(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
-                                        error, images, bag))
+                                        error, out))
         folder.fail_with(error);
       folder.commit();
       return 0;
@@ -355,9 +371,9 @@ int cmd_record(int argc, char** argv) {
     // together.
     const std::string stage1 = dir + "/stage1", stage2 = dir + "/stage2";
     if (!write_simulated_recording<M>(s, seed, false, false, false, folder, "/stage1", error,
-                                      images, bag) ||
+                                      out) ||
         !write_simulated_recording<M>(s, sim::derive_seed(seed, sim::kStage2SeedStream), true,
-                                      hold_skew, lens, folder, "/stage2", error, images, bag))
+                                      hold_skew, lens, folder, "/stage2", error, out))
       folder.fail_with(error);
     folder.commit();
     std::printf(

@@ -92,6 +92,8 @@ const std::vector<Command>& commands() {
        "              [--bag]  (DIR a ROS 2 bag instead: metadata.yaml and DIR_0.mcap of\n"
        "              sensor_msgs/msg/Imu and the same images as mono8 sensor_msgs/msg/Image,\n"
        "              zstd chunks; the yaml files beside them; calibrate DIR reads it)\n"
+       "              [--identical-leds]  (with --images or --bag: every LED drawn equally\n"
+       "              bright, and mirrorcal.yaml's led_brightness says so)\n"
        "              [--duration S]  (as sim)\n"
        "              or the board's devices: --out DIR --imu SPEC [--camera DEV [--images]]\n"
        "              [--sensors DIR | --markers M]  (the markers to detect: as many as the\n"

@@ -4,12 +4,56 @@
 
 namespace mirrorcal::calibration {
 
+namespace {
+
+// The detection of identical LEDs named by their tracks' names (none yet: the look that finds
+// them).
+template <int M>
+detection::DetectionConfig<M> named_detection_config(const sim::MarkerLeds& leds,
+                                                     const LedNaming* naming) {
+  detection::DetectionConfig<M> c = marker_detection_config<M>(leds);
+  if (naming == nullptr) return c;
+  c.bootstrap_shape = true;
+  for (int i = 0; i < M; ++i) {
+    c.prior.markers_c[std::size_t(i)] = naming->markers_c[std::size_t(i)];
+    if (naming->track_of_label.size() == std::size_t(M))
+      c.names_ahead[std::size_t(i)] = naming->track_of_label[std::size_t(i)];
+  }
+  c.prior.marker_sigma_m = naming->marker_sigma_m;
+  c.prior.camera = naming->camera;
+  c.prior.pixel_sigma = naming->pixel_sigma;
+  return c;
+}
+
+}  // namespace
+
+template <int M>
+LedNaming name_identical_leds(hal::FrameSource& frames, const sim::MarkerLeds& leds,
+                              const detection::RigGeometry<M>& geometry, int width, int height) {
+  LedNaming naming;
+  naming.markers_c.assign(geometry.markers_c.begin(), geometry.markers_c.end());
+  naming.marker_sigma_m = geometry.marker_sigma_m;
+  naming.camera = geometry.camera;
+  naming.pixel_sigma = geometry.pixel_sigma;
+  detection::DetectingMarkerSource<M> look(frames, named_detection_config<M>(leds, &naming), width,
+                                           height);
+  MarkerFrame<M> frame;
+  while (!look.bootstrap().named() && look.poll(frame) == hal::SourceStatus::kOk) {
+  }
+  const detection::TrackNames<M>& names = look.bootstrap().track_of_label();
+  naming.track_of_label.assign(names.begin(), names.end());
+  const detection::RigShape<M>& shape = look.bootstrap().shape();
+  if (shape.made)
+    naming.shape_c.assign(shape.geometry.markers_c.begin(), shape.geometry.markers_c.end());
+  return naming;
+}
+
 template <int M>
 ImageMarkers<M>::ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
                               DetectionReport* report, const sim::MarkerLeds& leds,
-                              ImageBlobs* blobs)
+                              ImageBlobs* blobs, const LedNaming* naming)
     : frames_(std::move(frames)),
-      detect_(*frames_, marker_detection_config<M>(leds), width, height),
+      detect_(*frames_, named_detection_config<M>(leds, naming), width, height),
       report_(report),
       blobs_(blobs),
       replayed_(blobs != nullptr && blobs->complete() > 0) {
@@ -58,7 +102,10 @@ void ImageMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction, Marker
   for (const bool seen : frame.seen) labelled_ += seen ? 1 : 0;
 }
 
-#define MIRRORCAL_IMAGE_MARKERS_(M) template class ImageMarkers<M>;
+#define MIRRORCAL_IMAGE_MARKERS_(M)                                                    \
+  template class ImageMarkers<M>;                                                      \
+  template LedNaming name_identical_leds<M>(hal::FrameSource&, const sim::MarkerLeds&, \
+                                            const detection::RigGeometry<M>&, int, int);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_IMAGE_MARKERS_)
 #undef MIRRORCAL_IMAGE_MARKERS_
 

@@ -1,6 +1,12 @@
 #include "mirrorcal/calibration/recording_run.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <memory>
+#include <numeric>
+#include <tuple>
+#include <utility>
+#include <vector>
 
 #include "mirrorcal/calibration/image_markers.hpp"
 
@@ -14,6 +20,28 @@ CalibrationConfig recording_config(const sim::Recording& r) {
   c.intrinsics = r.sensors.intrinsics;
   return c;
 }
+
+namespace {
+
+// Which of the truth's markers each name is (led[i]: the truth's index of the LED named i): the
+// identity, but for identical LEDs, whose names are the truth's markers nearest to the shape the
+// look fitted (LedNaming): the estimate of marker i is judged against that LED.
+std::vector<std::size_t> truth_order_of_names(const std::vector<Eigen::Vector3d>& truth_c,
+                                              const LedNaming* naming) {
+  std::vector<std::size_t> led(truth_c.size()), best;
+  std::iota(led.begin(), led.end(), std::size_t{0});
+  if (naming == nullptr || naming->shape_c.size() != truth_c.size()) return led;
+  double least = INFINITY;
+  do {
+    double d = 0.0;
+    for (std::size_t i = 0; i < led.size(); ++i)
+      d += (naming->shape_c[i] - truth_c[led[i]]).squaredNorm();
+    if (d < least) std::tie(least, best) = std::make_pair(d, led);
+  } while (std::next_permutation(led.begin(), led.end()));
+  return best;
+}
+
+}  // namespace
 
 LoopData recording_loop_data(const sim::Recording& r) {
   LoopData d;
@@ -45,6 +73,16 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   const auto p0 = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>();
   initialise(prior, x0, *p0);
   if (from != nullptr) start_from(*from, x0, *p0);  // read_calibration_start checked its M
+  LoopData data = recording_loop_data(r);
+  if (data.image_detection && identical_leds(r.priors.leds)) {
+    // Identical LEDs: the names a look at the first images gives the reflections' tracks, which
+    // every pass then labels by (sim --frames --identical-leds makes the same look).
+    const auto images = r.streams->open_images();
+    const CalibrationConfig c = recording_config(r);
+    data.led_naming = std::make_shared<LedNaming>(name_identical_leds<M>(
+        *images, r.priors.leds, detection::prior_geometry(prior, c.intrinsics, c.pixel_sigma),
+        data.width, data.height));
+  }
   // A simulated recording's truth: each history row gets the error and NEES against it.
   typename CalibrationRun<M, NK, NI>::State truth;
   if (r.has_truth) {
@@ -55,8 +93,11 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
     }
     truth.p_b_c = r.truth.p_b_c;
     truth.q_b_c = r.truth.q_b_c;
+    const std::vector<std::size_t> led =
+        truth_order_of_names(r.truth.features_c, data.led_naming.get());
     for (int i = 0; i < M; ++i)
-      truth.markers.template segment<3>(3 * i) = r.truth.features_c[static_cast<std::size_t>(i)];
+      truth.markers.template segment<3>(3 * i) =
+          r.truth.features_c[led[static_cast<std::size_t>(i)]];
     truth.t_d = r.truth.t_d;
     if constexpr (NK > 0) {
       // truth.yaml names the lens's coefficients when camchain.yaml holds a guess of them;
@@ -67,7 +108,6 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
       for (int j = 0; j < NK; ++j) truth.intrinsics(j) = v[static_cast<std::size_t>(j)];
     }
   }
-  const LoopData data = recording_loop_data(r);
   passes.imu_tolerances = r.sensors.imu_tolerances;  // the ideal-IMU check's prior
   run = run_loop<M, NK, NI>(recording_config(r), x0, *p0, data, r.has_truth ? &truth : nullptr,
                             progress, {}, passes);

@@ -25,7 +25,8 @@ template <int M>
 std::unique_ptr<hal::MarkerSource<M>> LoopData::open_markers() const {
   if (streams && image_detection)
     return std::make_unique<ImageMarkers<M>>(streams->open_images(), width, height,
-                                             image_detection.get(), leds, image_blobs.get());
+                                             image_detection.get(), leds, image_blobs.get(),
+                                             led_naming.get());
   if (streams) return std::make_unique<sim::StreamedMarkerSource<M>>(streams->open_frames());
   return std::make_unique<sim::VectorMarkerSource<M>>(frames);
 }
