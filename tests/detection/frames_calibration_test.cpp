@@ -138,8 +138,7 @@ TEST(IdenticalLeds, ThatBlinkTheirNamesAreLabelledFromTheStartAndCalibrated) {
 // with identical LEDs, on three random rigs each: every calibration is as the self-check says,
 // flagged, or consistent with its NEES within the 99.9 % quantile and no label against the truth
 // in the last pass. Measured: with the code rigs 4 and 5 consistent (0 wrong labels, NEES 10.8
-// and 10.3), rig 6 flagged (its LEDs never told from the room's small light); identical LEDs, all
-// three flagged.
+// each), rig 6 flagged (half its reflections labelled); identical LEDs, all three flagged.
 TEST(RealRoom, RenderedFramesOfRandomRigsAreRightOrFlagged) {
   for (const bool identical : {false, true}) {
     int unflagged = 0;

@@ -6,8 +6,7 @@ namespace mirrorcal::calibration {
 
 namespace {
 
-// The detection of identical LEDs named by their tracks' names (none yet: the look that finds
-// them).
+// The detection of LEDs named by their tracks' names (none yet: the look that finds them).
 template <int M>
 detection::DetectionConfig<M> named_detection_config(const sim::MarkerLeds& leds,
                                                      const LedNaming* naming) {
@@ -28,8 +27,8 @@ detection::DetectionConfig<M> named_detection_config(const sim::MarkerLeds& leds
 }  // namespace
 
 template <int M>
-LedNaming name_identical_leds(hal::FrameSource& frames, const sim::MarkerLeds& leds,
-                              const detection::RigGeometry<M>& geometry, int width, int height) {
+LedNaming name_leds_by_shape(hal::FrameSource& frames, const sim::MarkerLeds& leds,
+                             const detection::RigGeometry<M>& geometry, int width, int height) {
   LedNaming naming;
   naming.markers_c.assign(geometry.markers_c.begin(), geometry.markers_c.end());
   naming.marker_sigma_m = geometry.marker_sigma_m;
@@ -102,10 +101,10 @@ void ImageMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction, Marker
   for (const bool seen : frame.seen) labelled_ += seen ? 1 : 0;
 }
 
-#define MIRRORCAL_IMAGE_MARKERS_(M)                                                    \
-  template class ImageMarkers<M>;                                                      \
-  template LedNaming name_identical_leds<M>(hal::FrameSource&, const sim::MarkerLeds&, \
-                                            const detection::RigGeometry<M>&, int, int);
+#define MIRRORCAL_IMAGE_MARKERS_(M)                                                   \
+  template class ImageMarkers<M>;                                                     \
+  template LedNaming name_leds_by_shape<M>(hal::FrameSource&, const sim::MarkerLeds&, \
+                                           const detection::RigGeometry<M>&, int, int);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_IMAGE_MARKERS_)
 #undef MIRRORCAL_IMAGE_MARKERS_
 

@@ -23,9 +23,9 @@ CalibrationConfig recording_config(const sim::Recording& r) {
 
 namespace {
 
-// Which of the truth's markers each name is (led[i]: the truth's index of the LED named i): the
-// identity, but for identical LEDs, whose names are the truth's markers nearest to the shape the
-// look fitted (LedNaming): the estimate of marker i is judged against that LED.
+// Which of the truth's markers each name is (led[i]: the truth's index of the LED named i): those
+// nearest to the shape the look fitted (LedNaming; the identity without one), as identical LEDs
+// may be named otherwise than the truth: the estimate of marker i is judged against that LED.
 std::vector<std::size_t> truth_order_of_names(const std::vector<Eigen::Vector3d>& truth_c,
                                               const LedNaming* naming) {
   std::vector<std::size_t> led(truth_c.size()), best;
@@ -74,12 +74,12 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   initialise(prior, x0, *p0);
   if (from != nullptr) start_from(*from, x0, *p0);  // read_calibration_start checked its M
   LoopData data = recording_loop_data(r);
-  if (data.image_detection && identical_leds(r.priors.leds)) {
-    // Identical LEDs: the names a look at the first images gives the reflections' tracks, which
-    // every pass then labels by (sim --frames --identical-leds makes the same look).
+  if (data.image_detection && r.priors.leds.blink_period == 0) {
+    // The names a look at the first images gives the reflections' tracks by the rig's shape,
+    // which every pass then labels by (sim --frames makes the same look).
     const auto images = r.streams->open_images();
     const CalibrationConfig c = recording_config(r);
-    data.led_naming = std::make_shared<LedNaming>(name_identical_leds<M>(
+    data.led_naming = std::make_shared<LedNaming>(name_leds_by_shape<M>(
         *images, r.priors.leds, detection::prior_geometry(prior, c.intrinsics, c.pixel_sigma),
         data.width, data.height));
   }

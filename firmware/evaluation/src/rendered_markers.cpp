@@ -64,8 +64,7 @@ detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
   for (int i = 0; i < M; ++i)
     c.identify.brightness[static_cast<std::size_t>(i)] =
         render.brightness[static_cast<std::size_t>(i) % render.brightness.size()];
-  c.bootstrap_shape = std::all_of(render.brightness.begin(), render.brightness.end(),
-                                  [&](double b) { return b == render.brightness.front(); });
+  c.bootstrap_shape = true;
   c.prior = prior;
   c.blink = render.blink;
   return c;
@@ -74,7 +73,8 @@ detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
 template <int M>
 RenderedMarkers<M>::RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
                                     const detection::RigGeometry<M>& prior, std::uint64_t seed,
-                                    const TrackNames<M>& names_ahead)
+                                    const TrackNames<M>& names_ahead,
+                                    const std::array<int, M>* naming)
     : frames_(s, render, seed),
       detect_(
           frames_,
@@ -85,6 +85,10 @@ RenderedMarkers<M>::RenderedMarkers(const sim::Scenario& s, const sim::RenderCon
           }(),
           s.truth.width, s.truth.height) {
   std::iota(naming_.begin(), naming_.end(), 0);
+  if (naming != nullptr) {
+    naming_ = *naming;
+    named_ = true;
+  }
 }
 
 template <int M>

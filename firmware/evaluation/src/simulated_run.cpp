@@ -1,5 +1,7 @@
 #include "mirrorcal/evaluation/simulated_run.hpp"
 
+#include <array>
+#include <numeric>
 #include <optional>
 
 #include "mirrorcal/evaluation/rendered_markers.hpp"
@@ -28,25 +30,28 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
-// The scenario with its markers in the order the detection names them. Identical LEDs are named
-// by the rig's shape fitted to their tracks and the priors' guesses, which cannot always tell
-// them apart: the name i may be given to another LED than the truth's i, and the estimate of
-// marker i is then that LED's. A look at the first seconds of frames finds the names (names:
-// which track got each), and every pass then labels those tracks from their first frame: the
-// filter would otherwise go the seconds of the fit's window without a marker.
+// The scenario with its markers in the order the detection names them. The LEDs are named by the
+// rig's shape fitted to their tracks, the priors' guesses and their brightness code, which cannot
+// always tell identical LEDs apart: the name i may be given to another LED than the truth's i,
+// and the estimate of marker i is then that LED's. A look at the first seconds of frames finds the
+// names (names: which track got each; naming: which LED each went to), and every pass then labels
+// those tracks from their first frame: the filter would otherwise go the seconds of the fit's
+// window without a marker.
 template <int M>
 sim::Scenario named_as_detected(const sim::Scenario& s, const FrameMode& frames,
                                 const sim::RenderConfig& render,
                                 const detection::RigGeometry<M>& geometry, std::uint64_t seed,
-                                TrackNames<M>& names) {
+                                TrackNames<M>& names, std::array<int, M>& naming) {
   names = no_track_names<M>();
+  std::iota(naming.begin(), naming.end(), 0);
   // LEDs that blink their names are named as the truth's markers.
-  if (!frames.enabled || !frames.identical_leds || frames.blink_period > 0) return s;
+  if (!frames.enabled || frames.blink_period > 0) return s;
   RenderedMarkers<M> look(s, render, geometry, seed);
   MarkerFrame<M> frame;
   while (!look.named() && look.poll(frame) == hal::SourceStatus::kOk) {
   }
   names = look.track_names();
+  naming = look.naming();
   sim::Scenario named = s;
   for (int i = 0; i < M; ++i)
     named.truth.markers[static_cast<std::size_t>(i)] =
@@ -77,8 +82,9 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
       detection::prior_geometry(prior, config.intrinsics, config.pixel_sigma);
   const std::uint64_t render_seed = sim::derive_seed(seed, 200);
   TrackNames<M> names;
+  std::array<int, M> naming;
   const typename Run::State truth = truth_state<typename Run::State>(
-      named_as_detected<M>(s, frames, render, geometry, render_seed, names));
+      named_as_detected<M>(s, frames, render, geometry, render_seed, names, naming));
   // With frames, every pass renders and detects them afresh (detection follows the prediction).
   std::optional<RenderedMarkers<M>> rendered;
   std::uint64_t wrong_labels_before = 0;
@@ -88,7 +94,7 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
     if (pass == passes.min - 1) h.profiler = profiler;
     if (frames.enabled) {
       if (rendered) wrong_labels_before += rendered->report().wrong_labels;
-      rendered.emplace(s, render, geometry, render_seed, names);
+      rendered.emplace(s, render, geometry, render_seed, names, &naming);
       h.source = &*rendered;
       h.relabeler = &*rendered;
     }

@@ -27,19 +27,13 @@ detection::DetectionConfig<M> marker_detection_config(const sim::MarkerLeds& led
   return c;
 }
 
-// LEDs equally bright that do not blink: only the rig's shape, fitted to their reflections tracked
-// over the first seconds, tells them apart (detection/shape_bootstrap.hpp).
-inline bool identical_leds(const sim::MarkerLeds& leds) {
-  return leds.blink_period == 0 && !leds.brightness.empty() &&
-         std::all_of(leds.brightness.begin(), leds.brightness.end(),
-                     [&](double b) { return b == leds.brightness.front(); });
-}
-
-// Identical LEDs' names: what the rig's shape is fitted with (the priors' guesses of the markers,
-// their sigma, the camera, the pixel noise), the track each name went to in a look at the first
-// frames (track_of_label[i]: the track named i; -1: none named) and the shape fitted, by name.
-// The priors' guesses cannot always tell identical LEDs apart: the LED named i is then another
-// than the one the guess of marker i was for, and marker i's estimate is that LED's.
+// The LEDs' names by the rig's shape (detection/shape_bootstrap.hpp), for LEDs that do not blink
+// theirs: what the shape is fitted with (the priors' guesses of the markers, their sigma, the
+// camera, the pixel noise), the track each name went to in a look at the first frames
+// (track_of_label[i]: the track named i; -1: none named) and the shape fitted, by name. The
+// brightness code names the LEDs with the shape where it has one; the priors' guesses cannot
+// always tell identical LEDs apart: the LED named i is then another than the one the guess of
+// marker i was for, and marker i's estimate is that LED's.
 struct LedNaming {
   std::vector<Eigen::Vector3d> markers_c;
   double marker_sigma_m = 0.0;
@@ -56,8 +50,8 @@ struct LedNaming {
 // tracks (or they end), as every pass will track them; geometry: the priors'. The names found,
 // none if the shape never fitted.
 template <int M>
-LedNaming name_identical_leds(hal::FrameSource& frames, const sim::MarkerLeds& leds,
-                              const detection::RigGeometry<M>& geometry, int width, int height);
+LedNaming name_leds_by_shape(hal::FrameSource& frames, const sim::MarkerLeds& leds,
+                             const detection::RigGeometry<M>& geometry, int width, int height);
 
 // The marker source of a calibration from a recording's images: the board's detection on each
 // image (marker_detection_config, as `run` and `record` on the board use), labelled by its cues
@@ -89,7 +83,7 @@ template <int M>
 class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
   // blobs: where the passes keep and replay the detected frames (nullptr: every pass detects).
-  // naming: identical LEDs' names from a look at the same images (none: by the other cues).
+  // naming: the LEDs' names from a look at the same images (none: by the other cues).
   ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
                DetectionReport* report, const sim::MarkerLeds& leds = {},
                ImageBlobs* blobs = nullptr, const LedNaming* naming = nullptr);
@@ -109,10 +103,10 @@ class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabe
   double read_seconds_ = 0.0;
 };
 // Compiled in image_markers.cpp for every built M.
-#define MIRRORCAL_EXTERN_IMAGE_MARKERS_(M)                                                    \
-  extern template class ImageMarkers<M>;                                                      \
-  extern template LedNaming name_identical_leds<M>(hal::FrameSource&, const sim::MarkerLeds&, \
-                                                   const detection::RigGeometry<M>&, int, int);
+#define MIRRORCAL_EXTERN_IMAGE_MARKERS_(M)                                                   \
+  extern template class ImageMarkers<M>;                                                     \
+  extern template LedNaming name_leds_by_shape<M>(hal::FrameSource&, const sim::MarkerLeds&, \
+                                                  const detection::RigGeometry<M>&, int, int);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_IMAGE_MARKERS_)
 #undef MIRRORCAL_EXTERN_IMAGE_MARKERS_
 

@@ -110,8 +110,9 @@ struct LoopData {
   std::shared_ptr<DetectionReport> image_detection;
   std::shared_ptr<ImageBlobs> image_blobs;  // with image_detection: the images detected once
   sim::MarkerLeds leds;  // the markers' LEDs, as the detection in images needs them
-  // Identical LEDs in images: the names a look at the first frames gave the reflections' tracks
-  // (name_identical_leds), which every pass labels them by from the first frame.
+  // LEDs in images that do not blink their names: the names a look at the first frames gave the
+  // reflections' tracks by the rig's shape (name_leds_by_shape), which every pass labels them by
+  // from the first frame.
   std::shared_ptr<const LedNaming> led_naming;
 
   std::size_t imu_samples() const { return streams ? stats.imu_samples : imu.size(); }

@@ -18,6 +18,7 @@ struct BlobTrack {
   int id = -1;  // -1: the slot is free; else the tracks' count when it started
   Eigen::Vector2d uv = Eigen::Vector2d::Zero(), velocity = Eigen::Vector2d::Zero();
   double flux = 0.0;
+  int peak = 0;    // the last blob's brightest luma
   int missed = 0;  // frames since last seen
   std::int64_t t_ns = 0;
   int label = -1;  // the marker it is, once named
@@ -67,6 +68,7 @@ class BlobTracker {
       if (dt > 0.0) tr.velocity = (uv - tr.uv) / dt;
       tr.uv = uv;
       tr.flux = blobs[bb].flux;
+      tr.peak = blobs[bb].peak;
       tr.missed = 0;
       tr.t_ns = t_ns;
       matched[std::size_t(bt)] = taken[std::size_t(bb)] = true;
@@ -84,6 +86,7 @@ class BlobTracker {
                                               Eigen::Vector2d(blobs[b].u, blobs[b].v),
                                               Eigen::Vector2d::Zero(),
                                               blobs[b].flux,
+                                              blobs[b].peak,
                                               0,
                                               t_ns,
                                               name_new(next_id_)};

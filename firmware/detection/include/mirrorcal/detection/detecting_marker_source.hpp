@@ -23,10 +23,11 @@ template <int M>
 struct DetectionConfig {
   BlobConfig blobs{};
   IdentifierConfig<M> identify{};
-  // Identical LEDs (identify.brightness all equal) under loose priors: the rig's shape fitted to
-  // reflections tracked over the first seconds names the tracks, and each blob is labelled by its
-  // track's name until the prediction is sharp (shape_bootstrap.hpp). prior holds the priors'
-  // guesses of the markers, their sigma, the camera and the pixel noise.
+  // Under loose priors, where no single frame tells the LEDs apart (identical LEDs, or a light of
+  // the room as bright as one): the rig's shape fitted to reflections tracked over the first
+  // seconds names the tracks (the brightness code charged where the LEDs have one), and each blob
+  // is labelled by its track's name until the prediction is sharp (shape_bootstrap.hpp). prior
+  // holds the priors' guesses of the markers, their sigma, the camera and the pixel noise.
   bool bootstrap_shape = false;
   RigGeometry<M> prior{};
   // With bootstrap_shape: the names an earlier look at the same frames gave its tracks
@@ -78,7 +79,7 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
         detector_(config.blobs, max_width, max_height),
         identifier_(config.identify),
         bootstrap_shape_(config.bootstrap_shape && !config.blink.on()),
-        bootstrap_(config.prior, config.identify.max_spread_px2),
+        bootstrap_(config.prior, config.identify),
         blink_on_(config.blink.on()),
         blink_(config.blink, config.identify.max_spread_px2) {
     bootstrap_.name_ahead(config.names_ahead);

@@ -24,6 +24,30 @@
 
 namespace mirrorcal::detection {
 
+// How badly n spots' fluxes fit the brightness ratios of the markers they are named
+// (log_brightness[k]: the log of spot k's marker's brightness), with the common scale (the
+// exposure, the distance) fitted to the unclipped ones: sum of squared log residuals about their
+// mean over sigma^2. A clipped spot's flux is a lower bound: it costs only where even that is
+// brighter than its marker's share (the brightest LED's clipped spot named the dimmest).
+inline double brightness_misfit(const double* flux, const bool* clipped,
+                                const double* log_brightness, int n, double sigma) {
+  double mean = 0.0;
+  int unclipped = 0;
+  for (int k = 0; k < n; ++k)
+    if (!clipped[k]) {
+      mean += std::log(flux[k]) - log_brightness[k];
+      ++unclipped;
+    }
+  if (n < 2 || unclipped == 0) return 0.0;
+  mean /= unclipped;
+  double ss = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const double r = std::log(flux[k]) - log_brightness[k] - mean;
+    if (!clipped[k] || r > 0.0) ss += r * r;
+  }
+  return ss / (sigma * sigma);
+}
+
 template <int M>
 struct IdentifierConfig {
   // Squared Mahalanobis distance (2 dof) beyond which a blob cannot be the marker: 99.9 %.
@@ -262,32 +286,19 @@ class MarkerIdentifier {
     current_[i] = -1;
   }
 
-  // How badly the labelled blobs' fluxes fit the brightness ratios, with the common scale (the
-  // exposure, the distance) fitted to the unclipped ones: sum of squared log residuals about their
-  // mean over sigma^2. A clipped blob's flux is a lower bound: it costs only where even that is
-  // brighter than its marker's share (the brightest LED's clipped spot named the dimmest).
+  // How badly the labelled blobs' fluxes fit the brightness ratios (brightness_misfit).
   double brightness_cost() const {
-    double r[M];
+    double flux[M], log_brightness[M];
     bool clipped[M];
-    int n = 0, unclipped = 0;
-    double mean = 0.0;
+    int n = 0;
     for (int i = 0; i < M; ++i) {
       const int j = current_[i];
       if (j < 0) continue;
-      r[n] = std::log(blobs_[j].flux) - log_brightness_[i];
+      flux[n] = blobs_[j].flux;
       clipped[n] = blobs_[j].peak >= config_.saturated_luma;
-      if (!clipped[n]) {
-        mean += r[n];
-        ++unclipped;
-      }
-      ++n;
+      log_brightness[n++] = log_brightness_[i];
     }
-    if (n < 2 || unclipped == 0) return 0.0;
-    mean /= unclipped;
-    double ss = 0.0;
-    for (int k = 0; k < n; ++k)
-      if (!clipped[k] || r[k] > mean) ss += (r[k] - mean) * (r[k] - mean);
-    return ss / (config_.log_flux_sigma * config_.log_flux_sigma);
+    return brightness_misfit(flux, clipped, log_brightness, n, config_.log_flux_sigma);
   }
 
   // How badly one plane mirror shows the labelled blobs where the rig's markers are: 0 without

@@ -272,13 +272,23 @@ Fit<M, K> adjust_from_offsets(const Problem<M, K>& pb, Fit<M, K> fit) {
 
 }  // namespace rig_shape_detail
 
+// What names cost beyond the shape's fit: nothing.
+struct NoNamingCost {
+  template <class Names>
+  double operator()(const Names&) const {
+    return 0.0;
+  }
+};
+
 // The rig's shape and names from K frames of tracked reflections (see the top of this file).
 // prior: the guesses of the markers (by label), their sigma, the camera and the pixel noise.
 // Each hypothesis of the names is fitted with its guesses as the prior (the maximum a
-// posteriori shape); the likeliest wins. The hypotheses: every permutation up to M = 4, else the
-// kHypotheses whose guesses best explain the first frame.
-template <int M, int K>
-RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& tracks) {
+// posteriori shape); the likeliest wins, its likelihood the fit's and naming_cost(names) (another
+// cue's, -2 log: the LEDs' brightness code), names[j] the marker track j is. The hypotheses: every
+// permutation up to M = 4, else the kHypotheses whose guesses best explain the first frame.
+template <int M, int K, class NamingCost = NoNamingCost>
+RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& tracks,
+                          const NamingCost& naming_cost = {}) {
   namespace d = rig_shape_detail;
   constexpr int kHypotheses = 24;
   std::array<std::array<int, M>, kHypotheses> names{};
@@ -290,7 +300,7 @@ RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& 
     std::array<Eigen::Vector2d, M> uv;
     for (int j = 0; j < M; ++j)
       uv[std::size_t(perm[std::size_t(j)])] = tracks.uv[0][std::size_t(j)];
-    const double c = fit_mirror<M>(prior, all, uv).cost;
+    const double c = fit_mirror<M>(prior, all, uv).cost + naming_cost(perm);
     int at = kHypotheses;
     while (at > 0 && c < first_cost[std::size_t(at - 1)]) --at;
     if (at == kHypotheses) return;
@@ -313,32 +323,39 @@ RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& 
           prior.markers_c[std::size_t(names[std::size_t(h)][std::size_t(j)])];
     return pb;
   };
+  // cost: each hypothesis' fit and naming cost (fit[].cost: the fit's alone).
   std::array<double, kHypotheses> cost{};
   cost.fill(std::numeric_limits<double>::infinity());
   std::array<int, 2> likeliest{-1, -1};
   std::array<d::Fit<M, K>, 2> fit;
+  std::array<double, 2> total{std::numeric_limits<double>::infinity(),
+                              std::numeric_limits<double>::infinity()};
   for (int h = 0; h < kHypotheses; ++h) {
     if (!std::isfinite(first_cost[std::size_t(h)])) continue;
     const d::Problem<M, K> pb = problem(h);
     const d::Fit<M, K> f = d::adjust_from<M, K>(pb, pb.guess);
-    cost[std::size_t(h)] = f.cost;
-    const int at = f.cost < fit[0].cost ? 0 : f.cost < fit[1].cost ? 1 : 2;
+    const double c = f.cost + naming_cost(names[std::size_t(h)]);
+    cost[std::size_t(h)] = c;
+    const int at = c < total[0] ? 0 : c < total[1] ? 1 : 2;
     if (at == 0) {
       fit[1] = fit[0];
+      total[1] = total[0];
       likeliest[1] = likeliest[0];
     }
     if (at < 2) {
       fit[std::size_t(at)] = f;
+      total[std::size_t(at)] = c;
       likeliest[std::size_t(at)] = h;
     }
   }
   for (int r = 0; r < 2; ++r) {
-    if (likeliest[std::size_t(r)] < 0) continue;
-    fit[std::size_t(r)] =
-        d::adjust_from_offsets<M, K>(problem(likeliest[std::size_t(r)]), fit[std::size_t(r)]);
-    cost[std::size_t(likeliest[std::size_t(r)])] = fit[std::size_t(r)].cost;
+    const int h = likeliest[std::size_t(r)];
+    if (h < 0) continue;
+    fit[std::size_t(r)] = d::adjust_from_offsets<M, K>(problem(h), fit[std::size_t(r)]);
+    total[std::size_t(r)] = cost[std::size_t(h)] =
+        fit[std::size_t(r)].cost + naming_cost(names[std::size_t(h)]);
   }
-  const int won = fit[1].cost < fit[0].cost ? 1 : 0;
+  const int won = total[1] < total[0] ? 1 : 0;
   const int h_best = likeliest[std::size_t(won)];
 
   RigShape<M> best;
@@ -351,7 +368,7 @@ RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& 
   double runner_up = std::numeric_limits<double>::infinity();
   for (int h = 0; h < kHypotheses; ++h)
     if (h != h_best) runner_up = std::min(runner_up, cost[std::size_t(h)]);
-  best.naming_margin = runner_up - best.cost;
+  best.naming_margin = runner_up - total[std::size_t(won)];
   // One rig's reflections fit to their chi-square; a track that is no marker's (a room light
   // drifting across the image) does not (mean plus four standard deviations).
   if (!(best.cost < best.dof + 4.0 * std::sqrt(2.0 * best.dof))) return best;

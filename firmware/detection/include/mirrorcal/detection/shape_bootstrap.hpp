@@ -12,10 +12,12 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 
 #include "mirrorcal/detection/blob_detector.hpp"
 #include "mirrorcal/detection/blob_tracker.hpp"
+#include "mirrorcal/detection/marker_identifier.hpp"
 #include "mirrorcal/detection/rig_shape.hpp"
 
 namespace mirrorcal::detection {
@@ -45,14 +47,23 @@ class ShapeBootstrap {
   // Combinations of M among the snapshots' common tracks tried per window, brightest first.
   static constexpr int kMaxSubsets = 20;
 
-  // prior: the guesses (their names and scale), the camera and pixel noise. max_spread_px2: the
-  // identifier's bound on one spot's spread. spacing_s: the time between snapshots (the rig must
-  // turn between them for the shape to be seen).
-  ShapeBootstrap(const RigGeometry<M>& prior, double max_spread_px2, double spacing_s = 0.5)
+  // prior: the guesses (their names and scale), the camera and pixel noise. identify: the
+  // identifier's bound on one spot's spread and the LEDs' brightness code, which names count
+  // against where the LEDs differ (equal: identical LEDs, the shape alone names them).
+  // spacing_s: the time between snapshots (the rig must turn between them for the shape to be
+  // seen).
+  ShapeBootstrap(const RigGeometry<M>& prior, const IdentifierConfig<M>& identify,
+                 double spacing_s = 0.5)
       : prior_(prior),
-        tracker_(max_spread_px2),
-        spacing_ns_(static_cast<std::int64_t>(spacing_s * 1e9)) {
+        tracker_(identify.max_spread_px2),
+        spacing_ns_(static_cast<std::int64_t>(spacing_s * 1e9)),
+        log_flux_sigma_(identify.log_flux_sigma),
+        saturated_luma_(identify.saturated_luma) {
     blob_labels_.fill(-1);
+    for (int i = 0; i < M; ++i) {
+      log_brightness_[std::size_t(i)] = std::log(identify.brightness[std::size_t(i)]);
+      coded_ = coded_ || identify.brightness[std::size_t(i)] != identify.brightness[0];
+    }
   }
 
   // The names an earlier look at the same frames gave (none: no_track_names()). Tracking the same
@@ -153,7 +164,20 @@ class ShapeBootstrap {
           place(ring_[std::size_t((head_ + k) % kWindow)],
                 common[std::size_t(pick[std::size_t(j)])], w.uv[std::size_t(k)][std::size_t(j)]);
       ++counters_.windows_tried;
-      const RigShape<M> shape = fit_rig_shape<M, kWindow>(prior_, w);
+      // The brightness code's cost of naming the picked tracks (names[j]: track j's marker).
+      const auto brightness = [&](const std::array<int, M>& names) {
+        if (!coded_) return 0.0;
+        double flux[M], log_brightness[M];
+        bool clipped[M];
+        for (int j = 0; j < M; ++j) {
+          const BlobTrack& tr = track(common[std::size_t(pick[std::size_t(j)])]);
+          flux[j] = tr.flux;
+          clipped[j] = tr.peak >= saturated_luma_;
+          log_brightness[j] = log_brightness_[std::size_t(names[std::size_t(j)])];
+        }
+        return brightness_misfit(flux, clipped, log_brightness, M, log_flux_sigma_);
+      };
+      const RigShape<M> shape = fit_rig_shape<M, kWindow>(prior_, w, brightness);
       if (shape.made) {
         shape_ = shape;
         counters_.made_at_ns = t_ns;
@@ -175,10 +199,12 @@ class ShapeBootstrap {
     return -1;
   }
 
-  double flux_of(int id) const {
+  double flux_of(int id) const { return track(id).flux; }
+  // The live track of that id (one of a window's common tracks, seen in its newest snapshot).
+  const BlobTrack& track(int id) const {
     for (const BlobTrack& tr : tracker_.tracks())
-      if (tr.id == id) return tr.flux;
-    return 0.0;
+      if (tr.id == id) return tr;
+    return none_;
   }
 
   // The next combination of M indices out of n, in lexicographic order.
@@ -203,6 +229,12 @@ class ShapeBootstrap {
   TrackNames<M> track_of_label_ = no_track_names<M>();
   bool named_ahead_ = false;
   ShapeBootstrapCounters counters_{};
+  // The LEDs' brightness code (coded_: not all equal), as the identifier has it.
+  std::array<double, M> log_brightness_{};
+  bool coded_ = false;
+  double log_flux_sigma_;
+  int saturated_luma_;
+  BlobTrack none_{};
 };
 
 }  // namespace mirrorcal::detection

@@ -23,9 +23,9 @@ DetectionReport combine(const std::vector<DetectionReport>& runs);
 void print_detection(const DetectionReport& d, hal::PixelFormat format);
 
 // The detection settings for frames drawn with the given renderer settings: its brightness
-// ratios are the identification's second cue; where they are all equal (identical LEDs), the
-// rig's shape bootstrapped from the priors' geometry (detection/shape_bootstrap.hpp) is (prior:
-// needed for identical LEDs only).
+// ratios are the identification's second cue, and the rig's shape bootstrapped from the priors'
+// geometry (prior; detection/shape_bootstrap.hpp) names the LEDs with them (alone where they are
+// all equal: identical LEDs).
 template <int M>
 detection::DetectionConfig<M> detection_config(const sim::RenderConfig& render,
                                                const detection::RigGeometry<M>& prior = {});
@@ -39,10 +39,12 @@ using detection::TrackNames;
 template <int M>
 class RenderedMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<M> {
  public:
-  // names_ahead: identical LEDs' names from an earlier look at the same frames (naming_look).
+  // names_ahead: the tracks' names from an earlier look at the same frames, and naming the LED
+  // each name went to there (naming(), which the labels are scored against).
   RenderedMarkers(const sim::Scenario& s, const sim::RenderConfig& render,
                   const detection::RigGeometry<M>& prior, std::uint64_t seed,
-                  const TrackNames<M>& names_ahead = no_track_names<M>());
+                  const TrackNames<M>& names_ahead = no_track_names<M>(),
+                  const std::array<int, M>* naming = nullptr);
   hal::SourceStatus poll(MarkerFrame<M>& frame) override;
   std::int64_t detection_ns() const override { return detect_.detection_ns(); }
   void relabel(const hal::MarkerPrediction<M>& prediction, MarkerFrame<M>& frame) override;
