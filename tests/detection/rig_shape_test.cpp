@@ -52,16 +52,24 @@ bool window_of(const mc::sim::SimData& data, double start_s, const std::array<in
   return false;
 }
 
+// What the fit knows of a random rig: the priors' guesses and sigma, the true camera and noise.
 template <int M>
-void tally_rig(std::uint64_t seed, double start_s, Tally& t) {
-  const mc::sim::Scenario s = mc::sim::random_scenario(seed, M);
-  const mc::sim::SimData data = mc::sim::simulate(s, seed);
-  const mc::Prior<M> prior = mc::sim::draw_prior<M>(s, data, mc::sim::derive_seed(seed, 7));
+mc::detection::RigGeometry<M> priors_geometry(const mc::sim::Scenario& s,
+                                              const mc::Prior<M>& prior) {
   mc::detection::RigGeometry<M> g;
   g.markers_c = prior.markers;
   g.marker_sigma_m = s.priors.marker;
   g.camera = s.truth.intrinsics;
   g.pixel_sigma = s.pixel_sigma;
+  return g;
+}
+
+template <int M>
+void tally_rig(std::uint64_t seed, double start_s, Tally& t) {
+  const mc::sim::Scenario s = mc::sim::random_scenario(seed, M);
+  const mc::sim::SimData data = mc::sim::simulate(s, seed);
+  const mc::Prior<M> prior = mc::sim::draw_prior<M>(s, data, mc::sim::derive_seed(seed, 7));
+  const mc::detection::RigGeometry<M> g = priors_geometry<M>(s, prior);
   std::array<int, M> perm{};
   for (int j = 0; j < M; ++j) perm[std::size_t(j)] = j;
   std::mt19937_64 rng(seed);
@@ -136,11 +144,7 @@ TEST(RigShape, ATrackThatIsNoMarkerIsNotTakenForTheRig) {
     const mc::sim::Scenario s = mc::sim::random_scenario(seed);
     const mc::sim::SimData data = mc::sim::simulate(s, seed);
     const mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
-    mc::detection::RigGeometry<3> g;
-    g.markers_c = prior.markers;
-    g.marker_sigma_m = s.priors.marker;
-    g.camera = s.truth.intrinsics;
-    g.pixel_sigma = s.pixel_sigma;
+    const mc::detection::RigGeometry<3> g = priors_geometry<3>(s, prior);
     mc::detection::TrackWindow<3, kWindow> w;
     if (!window_of<3>(data, 1.0, {0, 1, 2}, w)) continue;
     ++windows;
@@ -164,11 +168,7 @@ TEST(RigShape, TheBrightnessCodeNamesWhatThePriorsCannot) {
     const mc::sim::Scenario s = mc::sim::random_scenario(seed);
     const mc::sim::SimData data = mc::sim::simulate(s, seed);
     const mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
-    mc::detection::RigGeometry<3> g;
-    g.markers_c = prior.markers;
-    g.marker_sigma_m = s.priors.marker;
-    g.camera = s.truth.intrinsics;
-    g.pixel_sigma = s.pixel_sigma;
+    const mc::detection::RigGeometry<3> g = priors_geometry<3>(s, prior);
     std::array<int, 3> perm{0, 1, 2};
     std::mt19937_64 rng(seed);
     std::shuffle(perm.begin(), perm.end(), rng);

@@ -17,6 +17,34 @@ bool any_above(const std::uint8_t* row, int w, int threshold) {
   return brightest > threshold;
 }
 
+// The weighted mean and second moment of pixel offsets (du, dv) from a centre, and the second
+// moment's eigenvalues: a blob's extent along its longest and its shortest axis.
+struct Moments {
+  double ws = 0.0, su = 0.0, sv = 0.0, suu = 0.0, svv = 0.0, suv = 0.0;
+  void add(double wgt, double du, double dv) {
+    ws += wgt;
+    su += wgt * du;
+    sv += wgt * dv;
+    suu += wgt * du * du;
+    svv += wgt * dv * dv;
+    suv += wgt * du * dv;
+  }
+  double mu() const { return su / ws; }
+  double mv() const { return sv / ws; }
+  double cuu() const { return suu / ws - mu() * mu(); }
+  double cvv() const { return svv / ws - mv() * mv(); }
+  double cuv() const { return suv / ws - mu() * mv(); }
+  // The eigenvalues: half the trace, plus (largest) or less (smallest) the root.
+  double largest() const { return 0.5 * (cuu() + cvv()) + root(); }
+  double smallest() const { return 0.5 * (cuu() + cvv()) - root(); }
+
+ private:
+  double root() const {
+    const double d = cuu() - cvv(), c = cuv();
+    return std::sqrt(std::max(0.0, 0.25 * d * d + c * c));
+  }
+};
+
 }  // namespace
 
 BlobDetector::BlobDetector(const BlobConfig& config, int max_width, int max_height)
@@ -93,8 +121,7 @@ BlobDetector::Region BlobDetector::fill(const hal::FrameView& f, int x, int y) {
   };
   int top = 0, area = 0, peak = 0;
   int x0 = x, x1 = x, y0 = y, y1 = y;
-  // Moments about the seed, weighted by each pixel's excess over the threshold.
-  double ws = 0.0, su = 0.0, sv = 0.0, suu = 0.0, svv = 0.0, suv = 0.0;
+  Moments excess;  // about the seed, each pixel weighted by its excess over the threshold
   stack_[static_cast<std::size_t>(top++)] = y * w + x;
   visited_[static_cast<std::size_t>(y * w + x)] = 1;
   while (top > 0) {
@@ -103,13 +130,7 @@ BlobDetector::Region BlobDetector::fill(const hal::FrameView& f, int x, int y) {
     ++area;
     const int value = luma(px, py);
     peak = std::max(peak, value);
-    const double wgt = value - threshold, du = px - x, dv = py - y;
-    ws += wgt;
-    su += wgt * du;
-    sv += wgt * dv;
-    suu += wgt * du * du;
-    svv += wgt * dv * dv;
-    suv += wgt * du * dv;
+    excess.add(value - threshold, px - x, py - y);
     x0 = std::min(x0, px);
     x1 = std::max(x1, px);
     y0 = std::min(y0, py);
@@ -124,11 +145,7 @@ BlobDetector::Region BlobDetector::fill(const hal::FrameView& f, int x, int y) {
       stack_[static_cast<std::size_t>(top++)] = static_cast<std::int32_t>(q);
     }
   }
-  const double mu = su / ws, mv = sv / ws;
-  const double cuu = suu / ws - mu * mu, cvv = svv / ws - mv * mv, cuv = suv / ws - mu * mv;
-  const double width =
-      0.5 * (cuu + cvv) - std::sqrt(std::max(0.0, 0.25 * (cuu - cvv) * (cuu - cvv) + cuv * cuv));
-  return {area, peak, x0, y0, x1, y1, width};
+  return {area, peak, x0, y0, x1, y1, excess.smallest()};
 }
 
 // Centroid, flux and spread over the blob's box grown by the margin: the background is the mean
@@ -159,40 +176,30 @@ bool BlobDetector::measure(const hal::FrameView& f, int x0, int y0, int x1, int 
   // First estimate over the whole window, then re-centre a disc on it: a window symmetric about
   // the estimate makes the clipped noise and the truncated tails pull equally both ways.
   const double r2 = config_.centroid_radius * config_.centroid_radius;
-  double s = 0.0, cu = 0.5 * (x0 + x1), cv = 0.5 * (y0 + y1), cuu = 0.0, cvv = 0.0, cuv = 0.0;
+  double cu = 0.5 * (x0 + x1), cv = 0.5 * (y0 + y1);
+  Moments last;
   for (int pass = 0; pass < 4; ++pass) {
     const bool disc = pass > 0;
-    double ws = 0.0, su = 0.0, sv = 0.0, suu = 0.0, svv = 0.0, suv = 0.0;
+    Moments m;
     for (int y = wy0; y <= wy1; ++y) {
       for (int x = wx0; x <= wx1; ++x) {
         const double du = x - cu, dv = y - cv;
         if (disc && du * du + dv * dv > r2) continue;
         const double wgt = luma(x, y) - background;
-        if (wgt <= 0.0) continue;
-        ws += wgt;
-        su += wgt * du;
-        sv += wgt * dv;
-        suu += wgt * du * du;
-        svv += wgt * dv * dv;
-        suv += wgt * du * dv;
+        if (wgt > 0.0) m.add(wgt, du, dv);
       }
     }
-    if (!(ws > 0.0)) return false;
-    const double mu = su / ws, mv = sv / ws;
-    s = ws;
-    cuu = suu / ws - mu * mu;
-    cvv = svv / ws - mv * mv;
-    cuv = suv / ws - mu * mv;
-    cu += mu;
-    cv += mv;
+    if (!(m.ws > 0.0)) return false;
+    cu += m.mu();
+    cv += m.mv();
+    last = m;
   }
   b.u = cu;
   b.v = cv;
   const double r = config_.centroid_radius;
   b.truncated = cu - r < -0.5 || cv - r < -0.5 || cu + r > f.width - 0.5 || cv + r > f.height - 0.5;
-  b.flux = s;
-  const double half_trace = 0.5 * (cuu + cvv);
-  b.spread = half_trace + std::sqrt(std::max(0.0, 0.25 * (cuu - cvv) * (cuu - cvv) + cuv * cuv));
+  b.flux = last.ws;
+  b.spread = last.largest();
   return true;
 }
 
