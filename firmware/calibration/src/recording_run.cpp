@@ -79,9 +79,20 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
     // which every pass then labels by (sim --frames makes the same look).
     const auto images = r.streams->open_images();
     const CalibrationConfig c = recording_config(r);
-    data.led_naming = std::make_shared<LedNaming>(name_leds_by_shape<M>(
-        *images, r.priors.leds, detection::prior_geometry(prior, c.intrinsics, c.pixel_sigma),
-        data.width, data.height));
+    detection::RigGeometry<M> g = detection::prior_geometry(prior, c.intrinsics, c.pixel_sigma);
+    if (from != nullptr) {  // the markers as the earlier calibration left them, and their sigma
+      using State = typename CalibrationRun<M, NK, NI>::State;
+      const IndexRange markers = State::kCalibration[CalibrationGroup::kMarkers];
+      g.marker_sigma_m = 0.0;
+      for (int j = markers.begin; j < markers.end(); ++j)
+        g.marker_sigma_m =
+            std::max(g.marker_sigma_m,
+                     std::sqrt((*p0)(State::kCalibrationBegin + j, State::kCalibrationBegin + j)));
+      for (int i = 0; i < M; ++i)
+        g.markers_c[std::size_t(i)] = x0.markers.template segment<3>(3 * i);
+    }
+    data.led_naming = std::make_shared<LedNaming>(
+        name_leds_by_shape<M>(*images, r.priors.leds, g, data.width, data.height));
   }
   // A simulated recording's truth: each history row gets the error and NEES against it.
   typename CalibrationRun<M, NK, NI>::State truth;
