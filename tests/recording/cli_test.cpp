@@ -1420,15 +1420,20 @@ TEST(Cli, RecordTwoStageStoppedAtRandomMomentsLeavesBothStagesOrNone) {
 // equal): calibrate names the reflections' tracks by the rig's shape in a look at the first
 // images, as sim --frames --identical-leds does, and every pass labels them from the first frame.
 // The priors' guesses may give an LED another's name; truth.yaml's markers are then judged as the
-// names went (the LED nearest to the shape the look fitted). The calibration is consistent, labels
-// nearly every reflection, and its NEES is within the 99.9 % quantile.
+// names went (the LED nearest to the shape the look fitted). Stage 1 is consistent, labels nearly
+// every reflection, and its NEES is within the 99.9 % quantile. Stage 2 (--from stage 1) names the
+// LEDs about stage 1's markers, as stage 1 named them: a stage-1 name given to another LED would
+// gate that marker in every frame, and the run would be flagged (exit status 3).
 TEST(Cli, IdenticalLedsInImagesAreNamedByTheRigsShape) {
   TempDir dir("cli-identical-leds");
-  const std::string rec = dir.path + "/rec";
+  const std::string& d = dir.path;
   const Result r = run_mirrorcal(
-      "record --scenario random --seed 1 --images --identical-leds --duration 30 --out " + rec,
-      dir.path);
+      "record --scenario random --seed 1 --two-stage --images --identical-leds --duration 30 "
+      "--out " +
+          d + "/rec",
+      d);
   ASSERT_EQ(r.code, 0) << r.output;
+  const std::string rec = d + "/rec/stage1";
   std::string err;
   mc::sim::Recording features, images;
   ASSERT_TRUE(mc::sim::open_recording(rec, mc::sim::kPaperMarkers, features, err)) << err;
@@ -1442,6 +1447,12 @@ TEST(Cli, IdenticalLedsInImagesAreNamedByTheRigsShape) {
   EXPECT_TRUE(mc::calibration::consistent(run.result));
   EXPECT_GT(run.detection.markers_labelled, 0.97 * double(features.stats.markers));
   EXPECT_LT(run.history.back().nees, 39.3);  // 16 states, 99.9 %
+
+  const Result one = run_mirrorcal("calibrate " + rec + " --from-images --out " + d + "/one", d);
+  ASSERT_EQ(one.code, 0) << one.output;
+  const Result two = run_mirrorcal(
+      "calibrate " + d + "/rec/stage2 --from-images --from " + d + "/one --out " + d + "/two", d);
+  EXPECT_EQ(two.code, 0) << two.output;
 }
 
 TEST(Cli, CalibrateFromImagesAgreesWithFeatures) {
