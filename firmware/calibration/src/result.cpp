@@ -311,15 +311,17 @@ std::string identification_warning(const CalibrationResult& r) {
                   "reflection or the glass's ghost looks like an LED. Darken the room or cover "
                   "it, and calibrate again.",
                   blobs_a_frame, r.markers.size());
-  char text[940];
+  char text[1000];
   std::snprintf(text, sizeof text,
                 "the detection labelled %llu markers in %llu frames (of up to %zu a frame), "
                 "though it saw %llu blobs it withheld in doubt and %llu it left unlabelled: the "
                 "markers were not told apart, which no motion mends.%s The labels come from the "
-                "LEDs' brightness (1 : 1.5 : 2.25 in features_c's order) and from the filter's "
-                "prediction: check the LEDs' order against mirrorcal.yaml's features_c, the "
-                "exposure (a saturated LED loses its brightness code), and the priors' "
-                "conventions (q_b_c_wxyz is w first; p_b_c in the IMU frame, in metres).",
+                "LEDs' brightness code (mirrorcal.yaml's led_brightness, in features_c's order; "
+                "1 : 1.5 : 2.25 ... if absent), the rig's shape over the first seconds and the "
+                "filter's prediction: check the LEDs' order and brightness against "
+                "mirrorcal.yaml, the exposure (a saturated LED's flux is only a lower bound), and "
+                "the priors' conventions (q_b_c_wxyz is w first; p_b_c in the IMU frame, in "
+                "metres).",
                 static_cast<unsigned long long>(d.labelled),
                 static_cast<unsigned long long>(d.frames), r.markers.size(),
                 static_cast<unsigned long long>(d.in_doubt),
