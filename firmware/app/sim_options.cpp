@@ -11,6 +11,12 @@ using namespace evaluation;
 bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) {
   frames = FrameMode{};
   frames.enabled = o.flag("frames");
+  // Every option below but --frames itself sets what the frames are: none applies without them.
+  for (const char* key : {"format", "spot-noise", "pixel-sigma", "identical-leds", "room", "blink"})
+    if (o.flag(key) && !frames.enabled) {
+      error = std::string("--") + key + " applies to --frames only";
+      return false;
+    }
   const std::string format = o.get("format", "grey");
   if (format == "yuyv") {
     frames.format = hal::PixelFormat::kYuyv;
@@ -18,16 +24,8 @@ bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) 
     error = "--format: '" + format + "' is not a pixel format (grey or yuyv)";
     return false;
   }
-  if (o.flag("format") && !frames.enabled) {
-    error = "--format applies to --frames only";
-    return false;
-  }
   const auto pixels = [&](const char* key, double& value, bool zero_allowed) {
     if (!o.flag(key)) return true;
-    if (!frames.enabled) {
-      error = std::string("--") + key + " applies to --frames only";
-      return false;
-    }
     const std::string text = o.get(key, "");
     char* end = nullptr;
     value = std::strtod(text.c_str(), &end);
@@ -39,23 +37,11 @@ bool frame_mode_option(const Options& o, FrameMode& frames, std::string& error) 
     return true;
   };
   frames.identical_leds = o.flag("identical-leds");
-  if (frames.identical_leds && !frames.enabled) {
-    error = "--identical-leds applies to --frames only";
-    return false;
-  }
   frames.room = o.flag("room");
-  if (frames.room && !frames.enabled) {
-    error = "--room applies to --frames only";
-    return false;
-  }
   if (o.flag("blink")) {
     const std::string text = o.get("blink", "");
     char* end = nullptr;
     const long period = std::strtol(text.c_str(), &end, 10);
-    if (!frames.enabled) {
-      error = "--blink applies to --frames only";
-      return false;
-    }
     if (end == text.c_str() || *end != '\0' || period < 2 || period > hal::BlinkCode::kMaxPeriod) {
       error = "--blink: '" + text + "' is not a whole number of frames from 2 to " +
               std::to_string(hal::BlinkCode::kMaxPeriod);

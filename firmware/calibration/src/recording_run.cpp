@@ -73,13 +73,14 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
   const auto p0 = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>();
   initialise(prior, x0, *p0);
   if (from != nullptr) start_from(*from, x0, *p0);  // read_calibration_start checked its M
+  const CalibrationConfig config = recording_config(r);
   LoopData data = recording_loop_data(r);
   if (data.image_detection && r.priors.leds.blink_period == 0) {
     // The names a look at the first images gives the reflections' tracks by the rig's shape,
     // which every pass then labels by (sim --frames makes the same look).
     const auto images = r.streams->open_images();
-    const CalibrationConfig c = recording_config(r);
-    detection::RigGeometry<M> g = detection::prior_geometry(prior, c.intrinsics, c.pixel_sigma);
+    detection::RigGeometry<M> g =
+        detection::prior_geometry(prior, config.intrinsics, config.pixel_sigma);
     if (from != nullptr) {  // the markers as the earlier calibration left them, and their sigma
       using State = typename CalibrationRun<M, NK, NI>::State;
       const IndexRange markers = State::kCalibration[CalibrationGroup::kMarkers];
@@ -120,8 +121,8 @@ bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run
     }
   }
   passes.imu_tolerances = r.sensors.imu_tolerances;  // the ideal-IMU check's prior
-  run = run_loop<M, NK, NI>(recording_config(r), x0, *p0, data, r.has_truth ? &truth : nullptr,
-                            progress, {}, passes);
+  run = run_loop<M, NK, NI>(config, x0, *p0, data, r.has_truth ? &truth : nullptr, progress, {},
+                            passes);
   if (from != nullptr) note_start(*from, run.result);
   if (r.streams && !r.streams->error().empty()) {
     error = r.streams->error();

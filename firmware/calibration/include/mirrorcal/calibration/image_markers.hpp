@@ -2,7 +2,6 @@
 // when a recording holds images instead of (or beside) features.csv.
 #pragma once
 
-#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -41,14 +40,12 @@ struct LedNaming {
   double pixel_sigma = 1.0;
   std::vector<int> track_of_label;
   std::vector<Eigen::Vector3d> shape_c;
-  bool named() const {
-    return std::any_of(track_of_label.begin(), track_of_label.end(), [](int t) { return t >= 0; });
-  }
 };
 
 // Looks at a recording's images from the first until the rig's shape names the reflections'
-// tracks (or they end), as every pass will track them; geometry: the priors'. The names found,
-// none if the shape never fitted.
+// tracks (or they end), as every pass will track them; geometry: the markers' guesses (the
+// priors', or an earlier calibration's) and their sigma. The names found, none if the shape never
+// fitted.
 template <int M>
 LedNaming name_leds_by_shape(hal::FrameSource& frames, const sim::MarkerLeds& leds,
                              const detection::RigGeometry<M>& geometry, int width, int height);
