@@ -26,6 +26,9 @@ int cmd_sim(int, char**) {
 int cmd_montecarlo(int, char**) {
   return host_only("montecarlo");
 }
+int cmd_batch(int, char**) {
+  return host_only("batch");
+}
 
 ReportPlots report_plots(bool draw) {
   ReportPlots plots;

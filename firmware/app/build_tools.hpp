@@ -13,6 +13,8 @@ using calibration::ReportPlots;
 
 int cmd_sim(int argc, char** argv);
 int cmd_montecarlo(int argc, char** argv);
+// The batch maximum-likelihood reference (cmd_batch.cpp; a build without Ceres says so).
+int cmd_batch(int argc, char** argv);
 
 // How report.html gets its plots in this build (draw: false for --no-plots).
 ReportPlots report_plots(bool draw = true);

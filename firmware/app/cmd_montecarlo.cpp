@@ -19,6 +19,9 @@
 #include "mirrorcal/evaluation/plots.hpp"
 #include "mirrorcal/evaluation/rendered_markers.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
+#ifdef MIRRORCAL_BATCH
+#include "mirrorcal/evaluation/batch.hpp"
+#endif
 #include "mirrorcal/sim_host/simulator.hpp"
 #include "sim_options.hpp"
 
@@ -46,6 +49,14 @@ struct Outcome {
   DetectionReport detection;  // --frames only
   sim::Scenario scenario;     // the run's rig (a family draws one per run)
   std::vector<double> limit;  // data_limit_sigmas(), display units (a family's campaign only)
+  // --batch: the filter's error (SI), and the batch solution of the same data and prior: its
+  // error (SI), sigma (display units), NEES and CPU time, or why it failed.
+  Eigen::VectorXd filter_error;
+  Eigen::VectorXd batch_error;
+  std::vector<double> batch_sigma;
+  double batch_nees = 0.0, batch_cpu_s = 0.0;
+  bool batch_converged = false;
+  std::string batch_failure;
 };
 
 double median(std::vector<double> v) {
@@ -281,6 +292,7 @@ void report_family(const std::vector<Outcome>& out, std::size_t groups_used,
 struct Campaign {
   bool intrinsics = false, hold_skew = false, one_stage = false;
   bool lens = false;                 // --estimate-distortion: the lens's coefficients in stage 2
+  bool batch = false;                // --batch: the batch solution of every run beside it
   bool family = false;               // a rig of its own for every run (the random family)
   std::optional<std::uint64_t> rig;  // --rig: the family's one rig for every run, by its seed
   FrameMode frames;
@@ -318,6 +330,15 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
         "room lights");
   if (c.intrinsics && c.frames.enabled)
     return refuse("--intrinsics runs on listed markers (not yet with --frames)");
+  c.batch = o.flag("batch");
+#ifndef MIRRORCAL_BATCH
+  if (c.batch) return refuse("--batch: this build has no batch solver (Ceres; MIRRORCAL_BATCH)");
+#endif
+  if (c.batch && (c.intrinsics || c.frames.enabled || o.flag("outliers") || o.flag("label-swaps") ||
+                  o.flag("estimate-noise")))
+    return refuse(
+        "--batch solves stage 1 on the listed, correctly labelled markers with the noise levels "
+        "stated: not with --intrinsics, --frames, --outliers, --label-swaps or --estimate-noise");
   if (!o.flag("runs"))
     return refuse(std::string("montecarlo needs --runs N\n") + usage("montecarlo"));
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
@@ -353,6 +374,8 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if (c.intrinsics && o.flag("passes"))
     return refuse("--passes applies to stage 1 only (without --intrinsics)");
   if (!imu_model_option(o, simulated_imu_model(c.scenario), c.imu_model, error)) return false;
+  if (c.batch && c.imu_model != ImuModel::kCalibrated)
+    return refuse("--batch models an ideal IMU (--imu-model calibrated)");
   // --estimate-noise: as sim (the mems family states noise levels 0.5-5x the true ones).
   c.passes.estimate_noise = o.flag("estimate-noise");
   if (c.intrinsics && c.passes.estimate_noise)
@@ -386,6 +409,28 @@ void print_campaign_title(const Campaign& c) {
       (unsigned long long)c.jobs, (unsigned long long)c.seed);
 }
 
+#ifdef MIRRORCAL_BATCH
+// The batch solution of run i's data and prior (those run_simulation draws from its seed), into
+// oc.
+template <int M>
+void run_batch(const sim::Scenario& rs, std::uint64_t run_seed, Outcome& oc) {
+  const sim::SimData data = sim::simulate(rs, run_seed);
+  const sim::RecordingPriors priors = sim::from_prior(sim::simulation_prior<M>(rs, data, run_seed),
+                                                      rs.gravity_n, rs.pixel_sigma, false);
+  CalibrationResult r;
+  BatchReport report;
+  if (!solve_batch(simulated_batch_input(rs, data, priors), {}, r, report, oc.batch_failure))
+    return;
+  const TruthError t = truth_error(r, sim::recording_truth(rs));
+  oc.batch_error = t.error;
+  oc.batch_nees = t.nees;
+  for (std::size_t j = 0; j < r.params.size(); ++j)
+    oc.batch_sigma.push_back(r.sigma[j] * r.params[j].scale);
+  oc.batch_cpu_s = report.cpu_s;
+  oc.batch_converged = report.converged;
+}
+#endif
+
 // Run i of the campaign into oc; the parameters' names and units into params (from the first run
 // to finish, under mu).
 void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamInfo>& params,
@@ -404,6 +449,7 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
       oc.sigma.push_back(last.sigma(int(j)) * r.result.params[j].scale);
     }
     oc.nees = last.nees;
+    oc.filter_error = last.error.template cast<double>();
     oc.gated = r.filter_counters.markers_gated;
     oc.suspect = !convergence_warning(r.result).empty();
     for (const std::uint64_t n : r.result.markers_screened) oc.screened += n;
@@ -431,11 +477,15 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
     constexpr int M = decltype(markers)::value;
     return with_filter_blocks(estimated_intrinsics(c), c.imu_model, [&](auto k, auto imu) {
       constexpr int NK = decltype(k)::value, NI = decltype(imu)::value;
-      if constexpr (NK == 0)
+      if constexpr (NK == 0) {
         record(run_simulation<M, NI>(rs, run_seed, {}, c.frames, nullptr, c.passes));
-      else
+#ifdef MIRRORCAL_BATCH
+        if (c.batch) run_batch<M>(rs, run_seed, oc);
+#endif
+      } else {
         record(c.one_stage ? run_one_stage_simulation<M, NK, NI>(rs, run_seed)
                            : run_two_stage_simulation<M, NK, NI>(rs, run_seed));
+      }
       return 0;
     });
   });
@@ -646,6 +696,58 @@ void write_paper_summary(std::FILE* f, const Campaign& c, const std::vector<Para
                  detection.centroid_max_px, detection.ms_per_frame);
 }
 
+#ifdef MIRRORCAL_BATCH
+// --batch: each group's RMS error of the filter over the batch's on the same runs, the batch's own
+// NEES and both's time, on stdout; batch.csv: a row per run of the batch's errors and sigmas.
+void report_batch(const Campaign& c, const std::vector<Outcome>& out,
+                  const std::vector<ParamInfo>& params, std::FILE* f) {
+  const int markers = static_cast<int>(c.scenario.truth.markers.size());
+  BatchComparison cmp(calibration_layout(markers, 0));
+  std::vector<double> filter_s, batch_s;
+  int unconverged = 0;
+  std::fprintf(f, "run,seed,batch_nees,batch_cpu_s,batch_converged,filter_wall_s");
+  for (const auto& p : params) std::fprintf(f, ",err_%s [%s]", p.name.c_str(), p.unit.c_str());
+  for (const auto& p : params) std::fprintf(f, ",sigma_%s [%s]", p.name.c_str(), p.unit.c_str());
+  std::fprintf(f, "\n");
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const Outcome& oc = out[i];
+    if (!oc.batch_failure.empty()) {
+      std::printf("run %zu: the batch failed: %s\n", i, oc.batch_failure.c_str());
+      continue;
+    }
+    cmp.add(oc.filter_error, oc.batch_error, oc.batch_nees);
+    filter_s.push_back(oc.wall_s);
+    batch_s.push_back(oc.batch_cpu_s);
+    unconverged += oc.batch_converged ? 0 : 1;
+    std::fprintf(f, "%zu,%llu,%.4f,%.3f,%d,%.3f", i, (unsigned long long)oc.seed, oc.batch_nees,
+                 oc.batch_cpu_s, oc.batch_converged ? 1 : 0, oc.wall_s);
+    for (std::size_t j = 0; j < params.size(); ++j)
+      std::fprintf(f, ",%.6g", oc.batch_error(static_cast<long>(j)) * params[j].scale);
+    for (const double sg : oc.batch_sigma) std::fprintf(f, ",%.6g", sg);
+    std::fprintf(f, "\n");
+  }
+  if (cmp.runs() == 0) return;
+  // SI to the family tables' units: cm, deg, mm, ms.
+  constexpr double kUnit[] = {100.0, 180.0 / M_PI, 1000.0, 1000.0};
+  std::printf(
+      "\nthe filter against the batch maximum-likelihood solution of the same data and priors "
+      "(%zu runs):\n  %-15s %11s %11s %13s\n",
+      cmp.runs(), "group", "filter RMS", "batch RMS", "filter/batch");
+  for (std::size_t k = 0; k < 4; ++k) {
+    const auto g = static_cast<CalibrationGroup>(k);
+    std::printf("  %-15s %11.5f %11.5f %13.3f\n", kGroupName[k], cmp.filter_rms(g) * kUnit[k],
+                cmp.batch_rms(g) * kUnit[k], cmp.ratio(g));
+  }
+  const NeesInterval i = average_nees_interval99(double(cmp.runs()), params.size());
+  std::printf(
+      "  the batch's average NEES %.2f (99 %% interval %.2f..%.2f): %s; %d of its solves did not "
+      "converge\n  median time per run: the filter %.2f s (wall, passes and refinement), the "
+      "batch %.2f s (CPU)\n",
+      cmp.mean_batch_nees(), i.lo, i.hi, i.verdict(cmp.mean_batch_nees()), unconverged,
+      median(filter_s), median(batch_s));
+}
+#endif
+
 // runs.csv: a row per run, its errors, sigmas, counters, rig and (--frames) detection.
 void write_runs_csv(std::FILE* f, const std::vector<Outcome>& out,
                     const std::vector<ParamInfo>& params, bool frames) {
@@ -696,7 +798,7 @@ int cmd_montecarlo(int argc, char** argv) {
               "passes", "timeshift", "distortion", "line-delay", "filter-line-delay", "markers",
               "outliers", "label-swaps", "rig", "imu-model", "blink"},
              {"no-plots", "intrinsics", "hold-skew", "one-stage", "frames", "estimate-distortion",
-              "estimate-noise", "identical-leds", "room"},
+              "estimate-noise", "identical-leds", "room", "batch"},
              o, error) ||
       !campaign_options(o, c, error))
     fail(error);
@@ -722,12 +824,17 @@ int cmd_montecarlo(int argc, char** argv) {
   std::string err;
   std::FILE* const summary = results.add(dir + "/summary.csv", err);
   std::FILE* const runs_csv = summary != nullptr ? results.add(dir + "/runs.csv", err) : nullptr;
-  if (runs_csv == nullptr) fail(err, 1);
+  std::FILE* const batch_csv =
+      c.batch && runs_csv != nullptr ? results.add(dir + "/batch.csv", err) : nullptr;
+  if (runs_csv == nullptr || (c.batch && batch_csv == nullptr)) fail(err, 1);
   if (c.family)
     report_family_campaign(c, out, np, st.nees, summary);
   else
     print_paper_tables(c, params, truth, st);
   print_notable_runs(out);
+#ifdef MIRRORCAL_BATCH
+  if (c.batch) report_batch(c, out, params, batch_csv);
+#endif
   DetectionReport detection;
   if (c.frames.enabled) {
     std::vector<DetectionReport> each;
@@ -740,7 +847,8 @@ int cmd_montecarlo(int argc, char** argv) {
   if (!c.family) write_paper_summary(summary, c, params, truth, st, wall, detection);
   write_runs_csv(runs_csv, out, params, c.frames.enabled);
   if (!results.commit(err)) fail(err, 1);
-  std::printf("wrote %s/summary.csv, %s/runs.csv\n", dir.c_str(), dir.c_str());
+  std::printf("wrote %s/summary.csv, %s/runs.csv%s\n", dir.c_str(), dir.c_str(),
+              c.batch ? ", batch.csv" : "");
   if (c.plots) {
     std::vector<ErrorSeries> series;
     for (auto& oc : out) series.push_back(std::move(oc.series));

@@ -282,13 +282,7 @@ bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool 
   priors.estimate_distortion = lens;
   if (out.render.brightness.size() == 1)  // identical LEDs: mirrorcal.yaml says so
     priors.leds.brightness.assign(std::size_t(M), out.render.brightness.front());
-  sim::RecordingTruth truth;
-  truth.p_b_c = s.truth.p_b_c;
-  truth.q_b_c = s.truth.q_b_c;
-  truth.features_c = s.truth.markers;
-  truth.intrinsics = s.truth.intrinsics;
-  truth.t_d = s.truth.t_d;
-  truth.has_distortion = lens;
+  const sim::RecordingTruth truth = sim::recording_truth(s, lens);
   const std::string target = folder.as_target(dir);
   const std::string name = std::filesystem::path(target).lexically_normal().filename().string();
   if (!(bag ? write_simulated_bag(s, seed, data, sensors, dir, name, out.render, err)

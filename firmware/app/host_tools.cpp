@@ -1,5 +1,7 @@
 #include "build_tools.hpp"
 
+#include <cstdio>
+
 #include "mirrorcal/evaluation/allan_plot.hpp"
 #include "mirrorcal/evaluation/report_plots.hpp"
 
@@ -18,5 +20,14 @@ ReportPlots report_plots(bool draw) {
 AllanPlotter allan_plotter() {
   return draw_allan_plot;
 }
+
+#ifndef MIRRORCAL_BATCH
+int cmd_batch(int, char**) {
+  std::fprintf(stderr,
+               "mirrorcal batch: this build has no batch solver (MIRRORCAL_BATCH off: Ceres, "
+               "Debian's libceres-dev, was not built in)\n");
+  return 2;
+}
+#endif
 
 }  // namespace mirrorcal::app

@@ -74,7 +74,10 @@ const std::vector<Command>& commands() {
        "              [--rig SEED]  (random: every run the rig sim --seed SEED draws, with\n"
        "              noise and prior guesses of its own: how well that one rig calibrates)\n"
        "              [--imu-model MODEL]  (as sim; --scenario mems for MEMS IMUs)\n"
-       "              [--estimate-noise]  (as sim)\n",
+       "              [--estimate-noise]  (as sim)\n"
+       "              [--batch]  (stage 1: the batch maximum-likelihood solution of every run's\n"
+       "              data and priors beside it, each group's RMS as filter over batch, the\n"
+       "              batch's own NEES; batch.csv)\n",
        cmd_montecarlo},
       {"record",
        "  record      write the simulated rig's data and priors as a EuRoC recording\n"
@@ -154,6 +157,13 @@ const std::vector<Command>& commands() {
        "              camera_info YAML) [--force]  (a result that says consistent: false is\n"
        "              refused, exit status 3, unless --force)\n",
        cmd_export},
+      {"batch",
+       "  batch       the batch maximum-likelihood solution of a recording: the reference\n"
+       "              the filter is measured against (host only; Ceres)\n"
+       "              DIR [--out OUT] [--intrinsics [--hold-skew]]  (DIR: a recording folder\n"
+       "              with features.csv; the same model, priors and output files as calibrate,\n"
+       "              with the ideal IMU's model; default --out out/batch)\n",
+       cmd_batch},
       {"imu-noise",
        "  imu-noise   an IMU's noise from a still recording, as Kalibr's imu.yaml\n"
        "              PATH [--out DIR]  (PATH: a recording's folder, whose mav0/imu0/data.csv\n"

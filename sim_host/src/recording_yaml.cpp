@@ -669,6 +669,17 @@ bool write_priors_yaml(const std::string& dir, const RecordingPriors& r, std::st
   return files::write_file(dir + "/mirrorcal.yaml", t, error);
 }
 
+RecordingTruth recording_truth(const Scenario& s, bool lens_guessed) {
+  RecordingTruth truth;
+  truth.p_b_c = s.truth.p_b_c;
+  truth.q_b_c = s.truth.q_b_c;
+  truth.features_c = s.truth.markers;
+  truth.intrinsics = s.truth.intrinsics;
+  truth.t_d = s.truth.t_d;
+  truth.has_distortion = lens_guessed;
+  return truth;
+}
+
 bool write_truth_yaml(const std::string& dir, const RecordingTruth& t, std::string& error) {
   std::string y =
       "# The truth of a simulated recording (SI units, px): calibrate reports its error.\n";

@@ -26,7 +26,7 @@ ALLOWED = {
     'sim_host': {'sim_host', 'hal', 'estimator'},
 }
 # The program's files that only the host's build compiles (firmware/app/CMakeLists.txt).
-HOST_ONLY_APP = {'cmd_sim.cpp', 'cmd_montecarlo.cpp', 'sim_options.hpp', 'sim_options.cpp',
+HOST_ONLY_APP = {'cmd_batch.cpp', 'cmd_sim.cpp', 'cmd_montecarlo.cpp', 'sim_options.hpp', 'sim_options.cpp',
                  'host_tools.cpp'}
 INCLUDE = re.compile(r'^\s*#\s*include\s*"mirrorcal/([a-z_]+)/', re.M)
 LOCAL = re.compile(r'^\s*#\s*include\s*"([a-z_]+\.hpp)"', re.M)

@@ -101,8 +101,7 @@ inline std::array<double, 4> default_sigma_distortion(Distortion d) {
 // pinhole says 3, and two of 100 paper runs lost their markers in the first pass and never found
 // them again. So the radial factor is held at its value there (the model stays continuous in r
 // and in the coefficients, and exact within the field, where every observation lies).
-template <typename S>
-constexpr S kRadtanMaxR2 = S(3);
+constexpr double kRadtanMaxR2 = 3.0;
 
 // The distorted normalised point of (x, y).
 template <typename S>
@@ -111,15 +110,16 @@ Vec2<S> distort(const Pinhole<S>& k, S x, S y) {
   switch (k.distortion) {
     case Distortion::kRadtan: {
       const S r2 = x * x + y * y;
-      const S rr = std::min(r2, kRadtanMaxR2<S>);
+      const S rr = std::min(r2, S(kRadtanMaxR2));
       const S radial = S(1) + rr * (c[0] + rr * c[1]);
       return Vec2<S>(x * radial + S(2) * c[2] * x * y + c[3] * (r2 + S(2) * x * x),
                      y * radial + c[2] * (r2 + S(2) * y * y) + S(2) * c[3] * x * y);
     }
     case Distortion::kEquidistant: {
-      const S r = std::sqrt(x * x + y * y);
+      using std::atan, std::sqrt;  // unqualified: autodiff's scalars bring their own
+      const S r = sqrt(x * x + y * y);
       if (r < S(1e-9)) return Vec2<S>(x, y);  // theta_d / r -> 1 on the axis
-      const S theta = std::atan(r), t2 = theta * theta;
+      const S theta = atan(r), t2 = theta * theta;
       const S theta_d = theta * (S(1) + t2 * (c[0] + t2 * (c[1] + t2 * (c[2] + t2 * c[3]))));
       return Vec2<S>(x, y) * (theta_d / r);
     }
@@ -138,13 +138,12 @@ struct MarkerFrame {
 };
 
 // Points nearer than this to the camera plane (m) are not projected: behind the camera or at it.
-template <typename S>
-constexpr S kMinDepth = S(1e-3);
+constexpr double kMinDepth = 1e-3;
 
 // Projection through the lens; false when the point is not in front of the camera.
 template <typename S>
 bool project(const Pinhole<S>& k, const Vec3<S>& p_c, Vec2<S>& uv) {
-  if (!(p_c.z() > kMinDepth<S>)) return false;
+  if (!(p_c.z() > S(kMinDepth))) return false;
   const S inv_z = S(1) / p_c.z();
   const Vec2<S> d = distort(k, p_c.x() * inv_z, p_c.y() * inv_z);
   uv.x() = k.fu * d.x() + k.skew * d.y() + k.cu;

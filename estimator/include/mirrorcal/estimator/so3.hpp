@@ -51,9 +51,10 @@ Quat<S> exp(const Vec3<S>& phi) {
     w = S(1) - a2 / S(8) * (S(1) - a2 / S(48) * (S(1) - a2 / S(120)));
     k = S(0.5) * (S(1) - a2 / S(24) * (S(1) - a2 / S(80) * (S(1) - a2 / S(168))));
   } else {
-    const S angle = std::sqrt(a2);
-    w = std::cos(S(0.5) * angle);
-    k = std::sin(S(0.5) * angle) / angle;
+    using std::cos, std::sin, std::sqrt;  // unqualified: autodiff's scalars bring their own
+    const S angle = sqrt(a2);
+    w = cos(S(0.5) * angle);
+    k = sin(S(0.5) * angle) / angle;
   }
   Quat<S> q(w, k * phi.x(), k * phi.y(), k * phi.z());
   return q;
@@ -65,24 +66,29 @@ Vec3<S> log(const Quat<S>& q_in) {
   Quat<S> q = q_in;
   if (q.w() < S(0)) q.coeffs() = -q.coeffs();
   const Vec3<S> v = q.vec();
-  const S sin_half = v.norm();
-  if (sin_half < small_angle<S>()) {
+  // The series in sin^2, not sin: the norm's square root has no derivative at the identity, which
+  // an autodiff scalar (the batch solver's) would carry as NaN.
+  const S sin_half2 = v.squaredNorm();
+  if (sin_half2 < small_angle<S>() * small_angle<S>()) {
     // angle = 2 asin(s) ~ 2 s (1 + s^2/6); divide by w for the tan form's accuracy.
-    return (S(2) / q.w()) * (S(1) - sin_half * sin_half / (S(3) * q.w() * q.w())) * v;
+    return (S(2) / q.w()) * (S(1) - sin_half2 / (S(3) * q.w() * q.w())) * v;
   }
-  const S angle = S(2) * std::atan2(sin_half, q.w());
+  using std::atan2, std::sqrt;
+  const S sin_half = sqrt(sin_half2);
+  const S angle = S(2) * atan2(sin_half, q.w());
   return (angle / sin_half) * v;
 }
 
-// Right (body-frame) perturbation: q boxplus d = q * Exp(d); boxminus is its inverse.
+// Right (body-frame) perturbation: q boxplus d = q * Exp(d); boxminus is its inverse. (Qualified
+// calls: unqualified, argument-dependent lookup would offer Eigen's array exp and log too.)
 template <typename S>
 Quat<S> boxplus(const Quat<S>& q, const Vec3<S>& d) {
-  return (q * exp<S>(d)).normalized();
+  return (q * so3::exp<S>(d)).normalized();
 }
 
 template <typename S>
 Vec3<S> boxminus(const Quat<S>& a, const Quat<S>& b) {
-  return log<S>(b.conjugate() * a);
+  return so3::log<S>(b.conjugate() * a);
 }
 
 }  // namespace mirrorcal::so3

@@ -118,6 +118,8 @@ struct RecordingTruth {
   // (a recording for estimate_distortion); otherwise camchain.yaml's are the truth.
   bool has_distortion = false;
 };
+// A simulated rig's truth; lens_guessed: camchain.yaml holds a guess of its lens's coefficients.
+RecordingTruth recording_truth(const Scenario& s, bool lens_guessed = false);
 
 // What the input checks and the loop need to know of a recording's streams, gathered in one
 // pass over its files (recording_checks.hpp).

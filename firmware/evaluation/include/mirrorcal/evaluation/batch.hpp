@@ -1,0 +1,109 @@
+// The batch maximum-likelihood solution of a calibration (`mirrorcal batch`, montecarlo --batch):
+// the reference the filter is measured against, and the tool a user would otherwise reach for.
+//
+// The same model and priors as the filter (mirror_model.hpp, prior.hpp), solved over the whole
+// recording at once by sparse Levenberg-Marquardt (Ceres): one IMU state [p, v, q_n_b, b_a, b_g]
+// at every frame with markers (and one at the first IMU sample, where the priors' guesses hold),
+// joined by the IMU's integration between them (propagate_imu, the filter's own Runge-Kutta) with
+// its covariance, the bias random walks, every marker's reprojection through the mirror, and the
+// priors. Its covariance is the inverse of the information at the solution, in the calibration
+// block's layout (CalibrationLayout), so it writes mirrorcal-result.yaml as a calibration does.
+// Host only: it allocates freely and needs Ceres.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "mirrorcal/calibration/result.hpp"
+#include "mirrorcal/estimator/calibration_filter.hpp"
+#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/sim_host/simulator.hpp"
+
+namespace mirrorcal::evaluation {
+
+// What the batch solves: the streams, the filter's configuration for them (gravity, IMU noise,
+// pixel noise, the camera where it is not estimated), the priors, and the camera parameters
+// estimated as the filter's NK counts them (0, 4, 5 or 8; the app's camera_block). With NK > 0
+// the camera's guess is priors.intrinsics_guess.
+struct BatchInput {
+  const std::vector<ImuSample>* imu = nullptr;
+  const std::vector<sim::ObservedFrame>* frames = nullptr;
+  CalibrationConfig config;
+  sim::RecordingPriors priors;
+  int camera_parameters = 0;
+  int width = 640, height = 480;  // the image's, for the result files
+};
+
+struct BatchOptions {
+  // The initial trajectory is grown window by window (batch.cpp, grow_trajectory): each new
+  // stretch of this many seconds starts from the IMU integrated on from the last, and is solved
+  // with the stretch before it.
+  double window_s = 1.0;
+  int max_iterations = 200;  // per Levenberg-Marquardt solve
+  // One line per stage (the growth, each full solve), for a user waiting on a long recording.
+  std::function<void(const std::string&)> progress;
+};
+
+// How the solution went.
+struct BatchReport {
+  std::size_t frames = 0;       // frames with markers: one state each
+  std::size_t imu_samples = 0;  // within the frames' span
+  std::size_t reprojections = 0;
+  std::size_t residuals = 0, parameters = 0;  // the final problem's sizes (tangent parameters)
+  int solves = 0;                             // Levenberg-Marquardt solves, growth included
+  int iterations = 0;                         // their iterations, in all
+  int final_iterations = 0;                   // the last full solve's
+  bool converged = false;                     // the last full solve met its tolerances
+  int retimings = 0;        // the frames' IMU times moved to the time offset's estimate
+  double final_cost = 0.0;  // half the sum of the whitened residuals' squares
+  double reprojection_rms_px = 0.0;
+  double cpu_s = 0.0;  // process CPU time, from reading the input to the covariance
+};
+
+// Solves input; false with a message when it cannot (no frames within the IMU's span, a solver
+// failure, a covariance that cannot be computed). result holds the estimate in the filter's format
+// (mirrorcal-result.yaml; the self-check's fields that only a filter fills are left empty).
+bool solve_batch(const BatchInput& input, const BatchOptions& options,
+                 calibration::CalibrationResult& result, BatchReport& report, std::string& error);
+
+// The batch's input for a simulated run of s on data, from the priors of the prior drawn for it
+// (sim::simulation_prior, sim::from_prior): the configuration the filter is given
+// (scenario_config).
+BatchInput simulated_batch_input(const sim::Scenario& s, const sim::SimData& data,
+                                 const sim::RecordingPriors& priors, int camera_parameters = 0);
+
+// A result's calibration block against the truth, as the filter's history judges its estimate
+// (the rotation's error log(R_true^T R_est)), and its NEES under the result's covariance.
+struct TruthError {
+  Eigen::VectorXd error;  // calibration_params() order, SI
+  double nees = 0.0;
+};
+TruthError truth_error(const calibration::CalibrationResult& r, const sim::RecordingTruth& truth);
+
+// A campaign's filter against the batch on the same runs (montecarlo --batch): each parameter
+// group's RMS error of both over the runs, and the batch's own NEES.
+class BatchComparison {
+ public:
+  explicit BatchComparison(const CalibrationLayout& layout) : layout_(layout) {}
+  // One run's errors (calibration_params() order, SI) and the batch's NEES.
+  void add(const Eigen::VectorXd& filter_error, const Eigen::VectorXd& batch_error,
+           double batch_nees);
+  std::size_t runs() const { return batch_nees_.size(); }
+  // The group's RMS error of the filter and of the batch (SI), and the first over the second
+  // (0 for a group the layout does not have).
+  double filter_rms(CalibrationGroup g) const;
+  double batch_rms(CalibrationGroup g) const;
+  double ratio(CalibrationGroup g) const;
+  double mean_batch_nees() const;
+  int states() const { return layout_.size(); }
+
+ private:
+  static std::size_t index(CalibrationGroup g) { return static_cast<std::size_t>(g); }
+  CalibrationLayout layout_;
+  std::array<double, kCalibrationGroups> filter_sq_{}, batch_sq_{}, count_{};
+  std::vector<double> batch_nees_;
+};
+
+}  // namespace mirrorcal::evaluation
