@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 
+#include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/sim_host/files.hpp"
 
 namespace mirrorcal::app {
@@ -130,6 +131,13 @@ std::string imu_model_not_built(ImuModel model) {
   return std::string("the IMU model ") + to_string(model) + " is not in this build (it has " +
          built + "); rebuild with -DMIRRORCAL_IMU_MODELS=\"" + option + ";" + to_string(model) +
          "\"";
+}
+
+void print_final_nees(std::size_t states, double nees, const char* against) {
+  const double k = static_cast<double>(states);
+  std::printf("\nNEES of the %zu calibration states%s: %.2f (95 %% interval %.2f..%.2f)\n", states,
+              against, nees, calibration::chi2_quantile(0.025, k),
+              calibration::chi2_quantile(0.975, k));
 }
 
 void print_result_warnings(const calibration::CalibrationResult& r) {

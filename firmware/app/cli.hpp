@@ -44,6 +44,9 @@ struct Options {
 // and say so): distinct from 1 (a failure) and 2 (bad input), so that no script takes a flagged
 // calibration for a good one. export refusing such a result (without --force) exits with it too.
 constexpr int kExitNotConsistent = 3;
+// The NEES of a calibration's `states` states against the truth (`against`: where it comes from,
+// "" for a simulation's) with its 95 % interval, as sim, calibrate and batch end their tables.
+void print_final_nees(std::size_t states, double nees, const char* against = "");
 // A calibration's warnings on stderr, a WARNING line each.
 void print_result_warnings(const calibration::CalibrationResult& r);
 // The status a command that wrote the calibration r exits with: 0, or kExitNotConsistent with a

@@ -51,12 +51,7 @@ void print_solution(const CalibrationResult& r, const sim::Recording& rec) {
     if (rec.has_truth) std::printf(" %+10.2f", t.error(static_cast<long>(j)) / r.sigma[j]);
     std::printf("\n");
   }
-  if (rec.has_truth)
-    std::printf(
-        "\nNEES of the %zu calibration states against truth.yaml: %.2f (95 %% interval "
-        "%.2f..%.2f)\n",
-        r.params.size(), t.nees, chi2_quantile(0.025, double(r.params.size())),
-        chi2_quantile(0.975, double(r.params.size())));
+  if (rec.has_truth) print_final_nees(r.params.size(), t.nees, " against truth.yaml");
 }
 
 }  // namespace

@@ -97,12 +97,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
     if (rec.has_truth) std::printf(" %+10.2f", last.error(int(j)) / last.sigma(int(j)));
     std::printf("\n");
   }
-  if (rec.has_truth)
-    std::printf(
-        "\nNEES of the %zu calibration states against truth.yaml: %.2f (95 %% interval "
-        "%.2f..%.2f)\n",
-        r.params.size(), last.nees, chi2_quantile(0.025, double(r.params.size())),
-        chi2_quantile(0.975, double(r.params.size())));
+  if (rec.has_truth) print_final_nees(r.params.size(), last.nees, " against truth.yaml");
   const auto& lc = run.loop_counters;
   const auto& fc = run.filter_counters;
   std::printf(

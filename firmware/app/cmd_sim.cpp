@@ -48,9 +48,7 @@ void print_estimates(const Run& run, const sim::Scenario& s) {
                 truth[j] + last.error(int(j)) * sc, last.sigma(int(j)) * sc,
                 last.error(int(j)) / last.sigma(int(j)));
   }
-  std::printf("\nNEES of the %zu calibration states: %.2f (95 %% interval %.2f..%.2f)\n",
-              params.size(), last.nees, chi2_quantile(0.025, double(params.size())),
-              chi2_quantile(0.975, double(params.size())));
+  print_final_nees(params.size(), last.nees);
 }
 
 template <class Run>

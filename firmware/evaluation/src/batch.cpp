@@ -533,18 +533,11 @@ void BatchSolver::fill_result(calibration::CalibrationResult& r) {
   r.markers.clear();
   for (const auto& mk : markers_) r.markers.emplace_back(mk[0], mk[1], mk[2]);
   r.t_d = t_d_;
-  r.intrinsics = camera_model_;
-  Pinhole<double>& k = r.intrinsics;
-  k.fu = camera_[0];
-  k.fv = camera_[1];
-  k.cu = camera_[2];
-  k.cv = camera_[3];
-  k.skew = camera_[4];
-  for (std::size_t j = 0; j < 4; ++j) k.coeffs[j] = camera_[5 + j];
+  r.intrinsics = camera_of(camera_model_, camera_.data());
   r.estimated_intrinsics = nk_;
   r.width = in_.width;
   r.height = in_.height;
-  r.params = calibration::calibration_params(static_cast<int>(m_), nk_, k.distortion);
+  r.params = calibration::calibration_params(static_cast<int>(m_), nk_, camera_model_.distortion);
   // The reprojections' fit, as the filter's normalised innovations.
   double squares = 0.0;
   std::size_t used = 0;

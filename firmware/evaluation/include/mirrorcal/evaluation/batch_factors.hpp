@@ -58,6 +58,19 @@ MirrorState<T, 1, 0> motion_state(const T* motion, const T* q_n_b) {
   return s;
 }
 
+// The camera a camera block describes: model's lens and shutter, the block's parameters.
+template <typename T>
+Pinhole<T> camera_of(const Pinhole<double>& model, const T* camera) {
+  Pinhole<T> k = model.cast<T>();
+  k.fu = camera[0];
+  k.fv = camera[1];
+  k.cu = camera[2];
+  k.cv = camera[3];
+  k.skew = camera[4];
+  for (std::size_t j = 0; j < 4; ++j) k.coeffs[j] = camera[5 + j];
+  return k;
+}
+
 // A stretch of the IMU signal the filter would integrate in one step: from s0 to s1, on the
 // parabola through `before` when there is one (propagate_imu).
 struct ImuPiece {
@@ -139,13 +152,7 @@ class ReprojectionFactor {
     e.gyro_rate = exposure_.gyro_rate.cast<T>();
     e.accel = exposure_.accel.cast<T>();
     e.gravity_n = gravity_n_.cast<T>();
-    Pinhole<T> k = camera_.cast<T>();
-    k.fu = camera[0];
-    k.fv = camera[1];
-    k.cu = camera[2];
-    k.cv = camera[3];
-    k.skew = camera[4];
-    for (std::size_t j = 0; j < 4; ++j) k.coeffs[j] = camera[5 + j];
+    const Pinhole<T> k = camera_of(camera_, camera);
     Vec2<T> uv;
     if (!project<T>(k, mirror_in_camera(s, e).image(Eigen::Map<const Vec3<T>>(marker)), uv))
       return false;  // behind the camera: the step that put it there is rejected
