@@ -59,7 +59,8 @@ void print_solution(const CalibrationResult& r, const sim::Recording& rec) {
 int cmd_batch(int argc, char** argv) {
   Options o;
   std::string err;
-  if (!parse(argc, argv, 2, {"out"}, {"intrinsics", "hold-skew"}, o, err, 1)) fail(err);
+  if (!parse(argc, argv, 2, {"out", "imu-model"}, {"intrinsics", "hold-skew"}, o, err, 1))
+    fail(err);
   if (o.positional.size() != 1) fail("batch needs a recording folder DIR\n" + usage("batch"));
   const std::string in = o.positional[0];
   if (!sim::has_features_csv(in))
@@ -76,6 +77,9 @@ int cmd_batch(int argc, char** argv) {
   const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
   if (o.flag("hold-skew") && !intrinsics)
     fail("--hold-skew applies when the intrinsics are estimated (--intrinsics)");
+  // The IMU model as calibrate takes it: --imu-model, imu.yaml's imu_model, or a MEMS part's.
+  ImuModel imu_model = kDefaultImuModel;
+  if (!calibration_imu_model(o, rec.sensors, in, imu_model, err)) fail(err);
   std::string out;
   if (!make_out_dir(o, "out/batch", out, err)) fail(err, 1);
 
@@ -85,12 +89,14 @@ int cmd_batch(int argc, char** argv) {
   input.config = recording_config(rec);
   input.priors = rec.priors;
   input.camera_parameters = camera_block(intrinsics, hold_skew, rec.priors.estimate_distortion);
+  input.imu_model = imu_model;
+  input.imu_tolerances = rec.sensors.imu_tolerances;
   input.width = rec.sensors.width;
   input.height = rec.sensors.height;
   evaluation::BatchOptions options;
   options.progress = [](const std::string& line) { std::printf("%s\n", line.c_str()); };
-  std::printf("mirrorcal batch: %s: %zu IMU samples, %zu frames; the ideal IMU's model, %s\n",
-              in.c_str(), rec.imu.size(), rec.frames.size(),
+  std::printf("mirrorcal batch: %s: %zu IMU samples, %zu frames; IMU model %s; %s\n", in.c_str(),
+              rec.imu.size(), rec.frames.size(), to_string(imu_model),
               input.camera_parameters > 0 ? "camera intrinsics estimated too"
                                           : "camera intrinsics from camchain.yaml");
   std::fflush(stdout);

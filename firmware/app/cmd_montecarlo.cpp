@@ -374,8 +374,6 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   if (c.intrinsics && o.flag("passes"))
     return refuse("--passes applies to stage 1 only (without --intrinsics)");
   if (!imu_model_option(o, simulated_imu_model(c.scenario), c.imu_model, error)) return false;
-  if (c.batch && c.imu_model != ImuModel::kCalibrated)
-    return refuse("--batch models an ideal IMU (--imu-model calibrated)");
   // --estimate-noise: as sim (the mems family states noise levels 0.5-5x the true ones).
   c.passes.estimate_noise = o.flag("estimate-noise");
   if (c.intrinsics && c.passes.estimate_noise)
@@ -413,13 +411,14 @@ void print_campaign_title(const Campaign& c) {
 // The batch solution of run i's data and prior (those run_simulation draws from its seed), into
 // oc.
 template <int M>
-void run_batch(const sim::Scenario& rs, std::uint64_t run_seed, Outcome& oc) {
+void run_batch(const sim::Scenario& rs, std::uint64_t run_seed, ImuModel imu_model, Outcome& oc) {
   const sim::SimData data = sim::simulate(rs, run_seed);
   const sim::RecordingPriors priors = sim::from_prior(sim::simulation_prior<M>(rs, data, run_seed),
                                                       rs.gravity_n, rs.pixel_sigma, false);
   CalibrationResult r;
   BatchReport report;
-  if (!solve_batch(simulated_batch_input(rs, data, priors), {}, r, report, oc.batch_failure))
+  if (!solve_batch(simulated_batch_input(rs, data, priors, 0, imu_model), {}, r, report,
+                   oc.batch_failure))
     return;
   const TruthError t = truth_error(r, sim::recording_truth(rs));
   oc.batch_error = t.error;
@@ -480,7 +479,7 @@ void run_one(const Campaign& c, std::uint64_t i, Outcome& oc, std::vector<ParamI
       if constexpr (NK == 0) {
         record(run_simulation<M, NI>(rs, run_seed, {}, c.frames, nullptr, c.passes));
 #ifdef MIRRORCAL_BATCH
-        if (c.batch) run_batch<M>(rs, run_seed, oc);
+        if (c.batch) run_batch<M>(rs, run_seed, c.imu_model, oc);
 #endif
       } else {
         record(c.one_stage ? run_one_stage_simulation<M, NK, NI>(rs, run_seed)

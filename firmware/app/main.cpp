@@ -160,9 +160,10 @@ const std::vector<Command>& commands() {
       {"batch",
        "  batch       the batch maximum-likelihood solution of a recording: the reference\n"
        "              the filter is measured against (host only; Ceres)\n"
-       "              DIR [--out OUT] [--intrinsics [--hold-skew]]  (DIR: a recording folder\n"
-       "              with features.csv; the same model, priors and output files as calibrate,\n"
-       "              with the ideal IMU's model; default --out out/batch)\n",
+       "              DIR [--out OUT] [--intrinsics [--hold-skew]] [--imu-model MODEL]\n"
+       "              (DIR: a recording folder with features.csv; the same model, priors and\n"
+       "              output files as calibrate, the IMU model as calibrate chooses it;\n"
+       "              default --out out/batch)\n",
        cmd_batch},
       {"imu-noise",
        "  imu-noise   an IMU's noise from a still recording, as Kalibr's imu.yaml\n"

@@ -19,10 +19,11 @@ struct Solved {
 };
 // From the priors drawn for the run, or (guess_truth) with every guess at the truth and the
 // drawn sigmas: the solution then owes nothing to the priors' pull. camera_parameters: the
-// filter's NK.
+// filter's NK; imu_model: the IMU's intrinsics estimated.
 inline Solved solve_simulated(const mc::sim::Scenario& s, const mc::sim::SimData& data,
                               std::uint64_t seed, bool guess_truth = false,
-                              int camera_parameters = 0) {
+                              int camera_parameters = 0,
+                              mc::ImuModel imu_model = mc::ImuModel::kCalibrated) {
   mc::Prior<3> prior = mc::sim::simulation_prior<3>(s, data, seed);
   if (guess_truth) {
     const mc::sim::Kinematics k =
@@ -40,7 +41,8 @@ inline Solved solve_simulated(const mc::sim::Scenario& s, const mc::sim::SimData
   }
   const mc::sim::RecordingPriors priors =
       mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, camera_parameters > 0);
-  const ev::BatchInput in = ev::simulated_batch_input(s, data, priors, camera_parameters);
+  ev::BatchInput in = ev::simulated_batch_input(s, data, priors, camera_parameters, imu_model);
+  if (guess_truth) in.imu_guess = s.imu_intrinsics;
   Solved out;
   std::string error;
   EXPECT_TRUE(ev::solve_batch(in, {}, out.result, out.report, error)) << error;

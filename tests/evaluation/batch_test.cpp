@@ -138,12 +138,21 @@ TEST(BatchFactors, ImuIntegrationDerivativesMatchFiniteDifferences) {
   const double t0 = static_cast<double>(data.imu[100].t_ns) * 1e-9;
   const double t1 = static_cast<double>(data.imu[110].t_ns) * 1e-9;
   StateBlocks a = state_at(s, t0), b = state_at(s, t1);
-  std::unique_ptr<ceres::CostFunction> f(bf::ImuFactor::create(pieces, s.gravity_n, w));
+  std::unique_ptr<ceres::CostFunction> f(bf::ImuFactor::create(pieces, s.gravity_n, w, false));
   bf::RightQuaternionManifold q;
   std::string why;
   EXPECT_TRUE(derivatives_match(*f, {nullptr, &q, nullptr, &q},
                                 {a.motion.data(), a.q.data(), b.motion.data(), b.q.data()}, why))
       << why;
+  // With a MEMS part's intrinsics (scale factors, axes, g-sensitivity: every entry the block has).
+  mc::sim::Scenario mems = s;
+  mc::sim::add_mems_imperfections(mems, 3);
+  const std::array<double, bf::kImuIntrinsicsSize> imu = bf::imu_block_of(mems.imu_intrinsics);
+  std::unique_ptr<ceres::CostFunction> g(bf::ImuFactor::create(pieces, s.gravity_n, w, true));
+  EXPECT_TRUE(derivatives_match(
+      *g, {nullptr, &q, nullptr, &q, nullptr},
+      {a.motion.data(), a.q.data(), b.motion.data(), b.q.data(), imu.data()}, why))
+      << "with the IMU's intrinsics: " << why;
   // At the state the integration itself ends at: a zero rotation residual (the logarithm's
   // series at the identity, where its norm has no derivative).
   mc::MirrorState<double, 1, 0> x = bf::motion_state(a.motion.data(), a.q.data());
@@ -172,7 +181,12 @@ TEST(BatchFactors, ReprojectionDerivativesMatchFiniteDifferencesForEveryCamera) 
       e.gyro_rate = Vector3d(0.3, -0.2, 0.5);
       e.accel = k.q_n_b.conjugate() * (k.a - s.gravity_n) + Vector3d(0.05, -0.02, 0.03);
       std::unique_ptr<ceres::CostFunction> f(bf::ReprojectionFactor::create(
-          e, Eigen::Vector2d(300.0, 200.0), line_delay * 200.0, camera, s.gravity_n, 0.7));
+          e, Eigen::Vector2d(300.0, 200.0), line_delay * 200.0, camera, s.gravity_n, 0.7, false));
+      std::unique_ptr<ceres::CostFunction> g(bf::ReprojectionFactor::create(
+          e, Eigen::Vector2d(300.0, 200.0), line_delay * 200.0, camera, s.gravity_n, 0.7, true));
+      mc::sim::Scenario mems = s;
+      mc::sim::add_mems_imperfections(mems, 5);
+      const std::array<double, bf::kImuIntrinsicsSize> imu = bf::imu_block_of(mems.imu_intrinsics);
       std::array<double, 3> p_b_c = {s.truth.p_b_c.x(), s.truth.p_b_c.y(), s.truth.p_b_c.z()};
       std::array<double, 4> q_b_c = coeffs_of(s.truth.q_b_c);
       const Vector3d m = s.truth.markers[1];
@@ -188,6 +202,13 @@ TEST(BatchFactors, ReprojectionDerivativesMatchFiniteDifferencesForEveryCamera) 
                                      marker.data(), &t_d, cam.data()},
                                     why))
           << mc::to_string(lens) << ", line delay " << line_delay << ": " << why;
+      EXPECT_TRUE(derivatives_match(*g,
+                                    {nullptr, &q, nullptr, &q, nullptr, nullptr, nullptr, nullptr},
+                                    {x.motion.data(), x.q.data(), p_b_c.data(), q_b_c.data(),
+                                     marker.data(), &t_d, cam.data(), imu.data()},
+                                    why))
+          << mc::to_string(lens) << ", line delay " << line_delay
+          << ", the IMU's intrinsics: " << why;
     }
   }
 }
@@ -228,25 +249,43 @@ TEST(Batch, NoiseFreeDataGiveTheTruthToASmallFractionOfItsSigmas) {
     std::uint64_t seed;
     int camera_parameters;  // NK
     mc::Distortion lens;
+    mc::ImuModel imu_model;
   };
-  // Stage 1 on two rigs; the camera too (fu fv cu cv skew), and with the lens's coefficients.
-  for (const Case c : {Case{2, 0, mc::Distortion::kNone}, Case{9, 0, mc::Distortion::kNone},
-                       Case{5, 5, mc::Distortion::kNone}, Case{6, 8, mc::Distortion::kRadtan}}) {
+  // Stage 1 on two rigs; the camera too (fu fv cu cv skew), and with the lens's coefficients; a
+  // MEMS part's IMU, its scale factors and axes estimated.
+  constexpr mc::ImuModel kIdeal = mc::ImuModel::kCalibrated;
+  for (const Case c :
+       {Case{2, 0, mc::Distortion::kNone, kIdeal}, Case{9, 0, mc::Distortion::kNone, kIdeal},
+        Case{5, 5, mc::Distortion::kNone, kIdeal}, Case{6, 8, mc::Distortion::kRadtan, kIdeal},
+        Case{7, 0, mc::Distortion::kNone, mc::ImuModel::kScaleMisalignment}}) {
     mc::sim::Scenario s = short_random(c.seed, 20.0);
     mc::sim::set_lens(s, c.lens);
+    if (c.imu_model != kIdeal) s = mc::sim::mems_scenario(c.seed);
+    s.duration_s = 20.0;
     mc::sim::Scenario clean = s;  // the same rig and motion; no noise, no bias walk
     clean.pixel_sigma = 0.0;
     clean.imu.gyro_noise_density = clean.imu.accel_noise_density = 0.0;
     clean.imu.gyro_random_walk = clean.imu.accel_random_walk = 0.0;
-    const Solved r =
-        solve_simulated(s, mc::sim::simulate(clean, c.seed), c.seed, true, c.camera_parameters);
+    const Solved r = solve_simulated(s, mc::sim::simulate(clean, c.seed), c.seed, true,
+                                     c.camera_parameters, c.imu_model);
     ASSERT_EQ(r.error.error.size(), static_cast<long>(r.result.sigma.size()));
     ASSERT_EQ(r.result.estimated_intrinsics, c.camera_parameters);
+    ASSERT_EQ(r.result.imu.estimated(), c.imu_model != kIdeal);
     double worst = 0.0;
     for (std::size_t j = 0; j < r.result.sigma.size(); ++j) {
       const double off = std::abs(r.error.error(static_cast<long>(j))) / r.result.sigma[j];
       EXPECT_LT(off, 0.1) << "seed " << c.seed << ", " << r.result.params[j].name;
       worst = std::max(worst, off);
+    }
+    if (c.imu_model == mc::ImuModel::kScaleMisalignment) {
+      Eigen::Matrix<double, 12, 1> d;
+      r.result.imu.intrinsics.difference<12>(s.imu_intrinsics, d);
+      ASSERT_EQ(r.result.imu.sigma.size(), 12u);
+      for (int j = 0; j < 12; ++j) {
+        const double off = std::abs(d(j)) / r.result.imu.sigma[static_cast<std::size_t>(j)];
+        EXPECT_LT(off, 0.1) << "seed " << c.seed << ", the IMU's intrinsic " << j;
+        worst = std::max(worst, off);
+      }
     }
     EXPECT_TRUE(r.report.converged) << "seed " << c.seed;
     std::printf("seed %llu, NK %d: the largest error %.3f sigma\n",

@@ -162,12 +162,21 @@ class BatchSolver {
     return static_cast<double>(times_[k] - times_[0]) * kNsToS;
   }
   std::vector<const double*> calibration_blocks() const;
-  // The parameter blocks of state k's r-th reprojection, in ReprojectionFactor's order.
-  std::array<double*, 7> reprojection_blocks(std::size_t k, std::size_t r) {
+  // The parameter blocks of state k's IMU factor (from state k - 1) and of its r-th
+  // reprojection, in their factors' order.
+  std::vector<double*> imu_factor_blocks(std::size_t k) {
+    std::vector<double*> b = {motion_[k - 1].data(), attitude_[k - 1].data(), motion_[k].data(),
+                              attitude_[k].data()};
+    if (ni_ > 0) b.push_back(imu_intrinsics_.data());
+    return b;
+  }
+  std::vector<double*> reprojection_blocks(std::size_t k, std::size_t r) {
     const auto marker = static_cast<std::size_t>(frames_[k - 1].markers[r].id);
-    return {motion_[k].data(), attitude_[k].data(),     p_b_c_.data(),
-            q_b_c_.data(),     markers_[marker].data(), &t_d_,
-            camera_.data()};
+    std::vector<double*> b = {motion_[k].data(), attitude_[k].data(),     p_b_c_.data(),
+                              q_b_c_.data(),     markers_[marker].data(), &t_d_,
+                              camera_.data()};
+    if (ni_ > 0) b.push_back(imu_intrinsics_.data());
+    return b;
   }
 
   const BatchInput& in_;
@@ -192,8 +201,11 @@ class BatchSolver {
   std::vector<std::array<double, 3>> markers_;
   double t_d_ = 0.0, t_d_anchor_ = 0.0;
   std::array<double, kCameraSize> camera_{};
+  // The IMU's intrinsics (ni_ of the block's 24 estimated; none for the ideal IMU's model).
+  int ni_ = 0;
+  std::array<double, kImuIntrinsicsSize> imu_intrinsics_{};
   RightQuaternionManifold quaternion_manifold_;
-  std::unique_ptr<ceres::Manifold> camera_manifold_;
+  std::unique_ptr<ceres::Manifold> camera_manifold_, imu_manifold_;
   BatchReport report_;
 };
 
@@ -260,6 +272,22 @@ void BatchSolver::start_parameters() {
     for (std::size_t j = 0; j < 4; ++j) sigma[5 + j] = pr.sigma_distortion[j];
     for (const int j : held) sigma[static_cast<std::size_t>(j)] = 0.0;
     calibration_priors_.emplace_back(vector_prior(camera_.data(), sigma.data(), kCameraSize));
+  }
+  // The IMU's intrinsics: the model's first ni_ entries of the block (for_each_entry's order),
+  // the rest held at the guess's (an ideal IMU's beyond the model).
+  ni_ = imu_intrinsics_dim(in_.imu_model);
+  imu_intrinsics_ = imu_block_of(in_.imu_guess);
+  if (ni_ > 0) {
+    std::vector<int> held_imu;
+    for (int j = ni_; j < kImuIntrinsicsSize; ++j) held_imu.push_back(j);
+    if (!held_imu.empty())
+      imu_manifold_ = std::make_unique<ceres::SubsetManifold>(kImuIntrinsicsSize, held_imu);
+    const std::array<double, kImuIntrinsicsSize> all =
+        imu_intrinsics_sigmas<kImuIntrinsicsSize>(in_.imu_tolerances);
+    std::array<double, kImuIntrinsicsSize> sigma{};
+    for (std::size_t j = 0; j < static_cast<std::size_t>(ni_); ++j) sigma[j] = all[j];
+    calibration_priors_.emplace_back(
+        vector_prior(imu_intrinsics_.data(), sigma.data(), kImuIntrinsicsSize));
   }
 
   // The first state: the priors' guess at the first IMU sample, where the filter starts.
@@ -328,7 +356,7 @@ void BatchSolver::make_factors(std::size_t k, std::vector<ImuPiece> pieces,
   }
   const ImuSqrtInformation sqrt_information = Eigen::LLT<Cov>(p).matrixL().solve(Cov::Identity());
   imu_factors_[k].reset(
-      ImuFactor::create(std::move(pieces), in_.config.gravity_n, sqrt_information));
+      ImuFactor::create(std::move(pieces), in_.config.gravity_n, sqrt_information, ni_ > 0));
 
   const StateFrame& frame = frames_[k - 1];
   FrameExposure e = imu_.exposure_at(times_[k]);
@@ -338,7 +366,7 @@ void BatchSolver::make_factors(std::size_t k, std::vector<ImuPiece> pieces,
     const double readout_s = camera_model_.line_delay_s * mk.v;
     reprojections_[k].emplace_back(
         ReprojectionFactor::create(e, Eigen::Vector2d(mk.u, mk.v), readout_s, camera_model_,
-                                   in_.config.gravity_n, in_.config.pixel_sigma));
+                                   in_.config.gravity_n, in_.config.pixel_sigma, ni_ > 0));
   }
 }
 
@@ -347,6 +375,7 @@ std::vector<const double*> BatchSolver::calibration_blocks() const {
   for (const auto& mk : markers_) blocks.push_back(mk.data());
   blocks.push_back(&t_d_);
   if (nk_ > 0) blocks.push_back(camera_.data());
+  if (ni_ > 0) blocks.push_back(imu_intrinsics_.data());
   return blocks;
 }
 
@@ -356,6 +385,8 @@ void BatchSolver::add_calibration(ceres::Problem& problem, bool free) {
   for (auto& mk : markers_) problem.AddParameterBlock(mk.data(), 3);
   problem.AddParameterBlock(&t_d_, 1);
   problem.AddParameterBlock(camera_.data(), kCameraSize, camera_manifold_.get());
+  if (ni_ > 0)
+    problem.AddParameterBlock(imu_intrinsics_.data(), kImuIntrinsicsSize, imu_manifold_.get());
   if (!free || nk_ == 0) problem.SetParameterBlockConstant(camera_.data());
   if (!free) {
     for (const double* b : calibration_blocks())
@@ -389,16 +420,14 @@ void BatchSolver::build_problem(ceres::Problem& problem, std::size_t a, std::siz
     problem.SetParameterBlockConstant(attitude_[a].data());
   }
   for (std::size_t k = a + 1; k <= b; ++k) {
-    problem.AddResidualBlock(imu_factors_[k].get(), nullptr, motion_[k - 1].data(),
-                             attitude_[k - 1].data(), motion_[k].data(), attitude_[k].data());
+    problem.AddResidualBlock(imu_factors_[k].get(), nullptr, imu_factor_blocks(k));
     for (std::size_t r = 0; r < reprojections_[k].size(); ++r) {
-      const std::array<double*, 7> blocks = reprojection_blocks(k, r);
+      const std::vector<double*> blocks = reprojection_blocks(k, r);
       // A marker the estimate puts behind the camera cannot start a solve (Ceres refuses a
       // problem it cannot evaluate at its start): it waits for a later solve from a better one.
       double residual[2];
       if (!reprojections_[k][r]->Evaluate(blocks.data(), residual, nullptr)) continue;
-      problem.AddResidualBlock(reprojections_[k][r].get(), nullptr, blocks[0], blocks[1], blocks[2],
-                               blocks[3], blocks[4], blocks[5], blocks[6]);
+      problem.AddResidualBlock(reprojections_[k][r].get(), nullptr, blocks);
     }
   }
 }
@@ -515,15 +544,21 @@ bool BatchSolver::covariance(calibration::CalibrationResult& result, std::string
     error = "the information matrix is singular: the data and priors do not fix the calibration";
     return false;
   }
+  // The calibration block, then the IMU's intrinsics (as the filter's result keeps them apart).
   const int dim = calibration_layout(static_cast<int>(m_), nk_).size();
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c(dim, dim);
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c(dim + ni_, dim + ni_);
   if (!covariance.GetCovarianceMatrixInTangentSpace(blocks, c.data())) {
     error = "the covariance could not be read";
     return false;
   }
-  result.covariance = c;
+  result.covariance = c.topLeftCorner(dim, dim);
   result.sigma.clear();
   for (int j = 0; j < dim; ++j) result.sigma.push_back(std::sqrt(c(j, j)));
+  if (ni_ > 0) {
+    result.imu.covariance = c.bottomRows(ni_);
+    result.imu.sigma.clear();
+    for (int j = dim; j < dim + ni_; ++j) result.imu.sigma.push_back(std::sqrt(c(j, j)));
+  }
   return true;
 }
 
@@ -543,7 +578,7 @@ void BatchSolver::fill_result(calibration::CalibrationResult& r) {
   std::size_t used = 0;
   for (std::size_t s = 1; s < times_.size(); ++s)
     for (std::size_t j = 0; j < reprojections_[s].size(); ++j) {
-      const std::array<double*, 7> blocks = reprojection_blocks(s, j);
+      const std::vector<double*> blocks = reprojection_blocks(s, j);
       double res[2] = {0.0, 0.0};
       if (!reprojections_[s][j]->Evaluate(blocks.data(), res, nullptr)) continue;
       squares += res[0] * res[0] + res[1] * res[1];
@@ -558,7 +593,8 @@ void BatchSolver::fill_result(calibration::CalibrationResult& r) {
   report_.reprojection_rms_px = used > 0 ? in_.config.pixel_sigma * std::sqrt(r.nis_per_dof) : 0.0;
   r.passes = 1;
   const MotionState last = state(times_.size() - 1);
-  r.imu.model = ImuModel::kCalibrated;
+  r.imu.model = in_.imu_model;
+  if (ni_ > 0) r.imu.intrinsics = imu_intrinsics_of(imu_intrinsics_.data());
   r.imu.noise = in_.config.imu;
   r.imu.accel_bias = last.b_a;
   r.imu.gyro_bias = last.b_g;
@@ -590,13 +626,16 @@ bool BatchSolver::solve(calibration::CalibrationResult& result, BatchReport& rep
 }  // namespace
 
 BatchInput simulated_batch_input(const sim::Scenario& s, const sim::SimData& data,
-                                 const sim::RecordingPriors& priors, int camera_parameters) {
+                                 const sim::RecordingPriors& priors, int camera_parameters,
+                                 ImuModel imu_model) {
   BatchInput in;
   in.imu = &data.imu;
   in.frames = &data.frames;
   in.config = scenario_config(s);
   in.priors = priors;
   in.camera_parameters = camera_parameters;
+  in.imu_model = imu_model;
+  in.imu_tolerances = s.priors.imu_intrinsics;  // about the ideal IMU, as simulation_prior
   in.width = s.truth.width;
   in.height = s.truth.height;
   return in;

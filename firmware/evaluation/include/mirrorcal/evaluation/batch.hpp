@@ -8,7 +8,8 @@
 // its covariance, the bias random walks, every marker's reprojection through the mirror, and the
 // priors. Its covariance is the inverse of the information at the solution, in the calibration
 // block's layout (CalibrationLayout), so it writes mirrorcal-result.yaml as a calibration does.
-// Host only: it allocates freely and needs Ceres.
+// With an IMU model of intrinsics they are estimated too, as calibrate --imu-model does. Host
+// only: it allocates freely and needs Ceres.
 #pragma once
 
 #include <cstdint>
@@ -33,6 +34,11 @@ struct BatchInput {
   CalibrationConfig config;
   sim::RecordingPriors priors;
   int camera_parameters = 0;
+  // The IMU's intrinsics estimated (the filter's NI): the model, its guess and the datasheet's
+  // tolerances as their 1-sigma (imu.yaml's; calibrate's start).
+  ImuModel imu_model = ImuModel::kCalibrated;
+  ImuIntrinsics<double> imu_guess{};
+  ImuIntrinsicsSigma imu_tolerances{};
   int width = 640, height = 480;  // the image's, for the result files
 };
 
@@ -72,7 +78,8 @@ bool solve_batch(const BatchInput& input, const BatchOptions& options,
 // (sim::simulation_prior, sim::from_prior): the configuration the filter is given
 // (scenario_config).
 BatchInput simulated_batch_input(const sim::Scenario& s, const sim::SimData& data,
-                                 const sim::RecordingPriors& priors, int camera_parameters = 0);
+                                 const sim::RecordingPriors& priors, int camera_parameters = 0,
+                                 ImuModel imu_model = ImuModel::kCalibrated);
 
 // A result's calibration block against the truth, as the filter's history judges its estimate
 // (the rotation's error log(R_true^T R_est)), and its NEES under the result's covariance.

@@ -8,8 +8,12 @@
 //   attitude q_n_b, 4 numbers in Eigen's order (x, y, z, w), on RightQuaternionManifold
 //   p_b_c (3); q_b_c (4, RightQuaternionManifold); one block per marker (3); t_d (1)
 //   camera   [fu fv cu cv skew c0 c1 c2 c3]    those not estimated held on a SubsetManifold
+//   imu      the IMU's intrinsics, ImuIntrinsics's 24 entries as values, those beyond the
+//            model's held on a SubsetManifold (only with a model that has them)
+// The IMU's and the reprojection's factors take the imu block last when the model has one.
 #pragma once
 
+#include <array>
 #include <vector>
 
 #include <ceres/autodiff_manifold.h>
@@ -20,7 +24,7 @@
 
 namespace mirrorcal::evaluation::batch {
 
-constexpr int kMotionSize = 12, kQuatSize = 4, kCameraSize = 9;
+constexpr int kMotionSize = 12, kQuatSize = 4, kCameraSize = 9, kImuIntrinsicsSize = 24;
 // The IMU residual's order, MirrorState's dynamic block: [v, b_a, b_g, p, theta].
 constexpr int kImuResiduals = 15;
 using ImuSqrtInformation = Eigen::Matrix<double, kImuResiduals, kImuResiduals>;
@@ -45,16 +49,40 @@ struct RightQuaternionPlus {
 };
 using RightQuaternionManifold = ceres::AutoDiffManifold<RightQuaternionPlus, kQuatSize, 3>;
 
-// The state the model's functions take, from a motion block and an attitude (M = 1: the
-// markers are separate blocks).
+// The IMU's intrinsics an imu block holds (ImuIntrinsics<T>::for_each_entry<24>'s order), and
+// the block of some.
 template <typename T>
-MirrorState<T, 1, 0> motion_state(const T* motion, const T* q_n_b) {
-  MirrorState<T, 1, 0> s;
+ImuIntrinsics<T> imu_intrinsics_of(const T* block) {
+  using K = ImuIntrinsics<T>;
+  K k;
+  k.d_a.setZero();
+  k.d_g.setZero();
+  K::template for_each_entry<kImuIntrinsicsSize>(
+      [&](typename K::Matrix m, int row, int col, int j) { k.matrix(m)(row, col) = block[j]; });
+  return k;
+}
+inline std::array<double, kImuIntrinsicsSize> imu_block_of(const ImuIntrinsics<double>& k) {
+  using K = ImuIntrinsics<double>;
+  std::array<double, kImuIntrinsicsSize> block{};
+  K::for_each_entry<kImuIntrinsicsSize>([&](K::Matrix m, int row, int col, int j) {
+    block[static_cast<std::size_t>(j)] = k.matrix(m)(row, col);
+  });
+  return block;
+}
+
+// The state the model's functions take, from a motion block and an attitude (M = 1: the
+// markers are separate blocks), and with NI > 0 the imu block (the full 24-entry model, which
+// holds every smaller one).
+template <int NI = 0, typename T>
+MirrorState<T, 1, 0, NI> motion_state(const T* motion, const T* q_n_b, const T* imu = nullptr) {
+  MirrorState<T, 1, 0, NI> s;
   s.p = Eigen::Map<const Vec3<T>>(motion);
   s.v = Eigen::Map<const Vec3<T>>(motion + 3);
   s.b_a = Eigen::Map<const Vec3<T>>(motion + 6);
   s.b_g = Eigen::Map<const Vec3<T>>(motion + 9);
   s.q_n_b = Eigen::Map<const Eigen::Quaternion<T>>(q_n_b);
+  if constexpr (NI > 0) s.imu = imu_intrinsics_of(imu);
+  (void)imu;
   return s;
 }
 
@@ -89,8 +117,31 @@ class ImuFactor {
 
   template <typename T>
   bool operator()(const T* motion0, const T* q0, const T* motion1, const T* q1, T* r) const {
-    MirrorState<T, 1, 0> s = motion_state(motion0, q0);
-    const MirrorState<T, 1, 0> next = motion_state(motion1, q1);
+    return evaluate<0>(motion0, q0, motion1, q1, static_cast<const T*>(nullptr), r);
+  }
+  template <typename T>
+  bool operator()(const T* motion0, const T* q0, const T* motion1, const T* q1, const T* imu,
+                  T* r) const {
+    return evaluate<kImuIntrinsicsSize>(motion0, q0, motion1, q1, imu, r);
+  }
+
+  // With the imu block (intrinsics) or without.
+  static ceres::CostFunction* create(std::vector<ImuPiece> pieces, const Eigen::Vector3d& gravity_n,
+                                     const ImuSqrtInformation& sqrt_information, bool intrinsics) {
+    auto* f = new ImuFactor(std::move(pieces), gravity_n, sqrt_information);
+    if (intrinsics)
+      return new ceres::AutoDiffCostFunction<ImuFactor, kImuResiduals, kMotionSize, kQuatSize,
+                                             kMotionSize, kQuatSize, kImuIntrinsicsSize>(f);
+    return new ceres::AutoDiffCostFunction<ImuFactor, kImuResiduals, kMotionSize, kQuatSize,
+                                           kMotionSize, kQuatSize>(f);
+  }
+
+ private:
+  template <int NI, typename T>
+  bool evaluate(const T* motion0, const T* q0, const T* motion1, const T* q1, const T* imu,
+                T* r) const {
+    MirrorState<T, 1, 0, NI> s = motion_state<NI>(motion0, q0, imu);
+    const MirrorState<T, 1, 0, NI> next = motion_state<NI>(motion1, q1, imu);
     const Vec3<T> gravity = gravity_n_.cast<T>();
     for (const ImuPiece& piece : pieces_)
       propagate_imu(s, piece.s0, piece.s1, gravity, piece.has_before ? &piece.before : nullptr);
@@ -102,14 +153,6 @@ class ImuFactor {
     return true;
   }
 
-  static ceres::CostFunction* create(std::vector<ImuPiece> pieces, const Eigen::Vector3d& gravity_n,
-                                     const ImuSqrtInformation& sqrt_information) {
-    return new ceres::AutoDiffCostFunction<ImuFactor, kImuResiduals, kMotionSize, kQuatSize,
-                                           kMotionSize, kQuatSize>(
-        new ImuFactor(std::move(pieces), gravity_n, sqrt_information));
-  }
-
- private:
   std::vector<ImuPiece> pieces_;
   Eigen::Vector3d gravity_n_;
   ImuSqrtInformation sqrt_information_;
@@ -142,7 +185,33 @@ class ReprojectionFactor {
   template <typename T>
   bool operator()(const T* motion, const T* q_n_b, const T* p_b_c, const T* q_b_c, const T* marker,
                   const T* t_d, const T* camera, T* r) const {
-    MirrorState<T, 1, 0> s = motion_state(motion, q_n_b);
+    return evaluate<0>(motion, q_n_b, p_b_c, q_b_c, marker, t_d, camera,
+                       static_cast<const T*>(nullptr), r);
+  }
+  template <typename T>
+  bool operator()(const T* motion, const T* q_n_b, const T* p_b_c, const T* q_b_c, const T* marker,
+                  const T* t_d, const T* camera, const T* imu, T* r) const {
+    return evaluate<kImuIntrinsicsSize>(motion, q_n_b, p_b_c, q_b_c, marker, t_d, camera, imu, r);
+  }
+
+  // With the imu block (intrinsics) or without.
+  static ceres::CostFunction* create(const FrameExposure& exposure, const Eigen::Vector2d& uv,
+                                     double readout_s, const Pinhole<double>& camera,
+                                     const Eigen::Vector3d& gravity_n, double pixel_sigma,
+                                     bool intrinsics) {
+    auto* f = new ReprojectionFactor(exposure, uv, readout_s, camera, gravity_n, pixel_sigma);
+    if (intrinsics)
+      return new ceres::AutoDiffCostFunction<ReprojectionFactor, 2, kMotionSize, kQuatSize, 3,
+                                             kQuatSize, 3, 1, kCameraSize, kImuIntrinsicsSize>(f);
+    return new ceres::AutoDiffCostFunction<ReprojectionFactor, 2, kMotionSize, kQuatSize, 3,
+                                           kQuatSize, 3, 1, kCameraSize>(f);
+  }
+
+ private:
+  template <int NI, typename T>
+  bool evaluate(const T* motion, const T* q_n_b, const T* p_b_c, const T* q_b_c, const T* marker,
+                const T* t_d, const T* camera, const T* imu, T* r) const {
+    MirrorState<T, 1, 0, NI> s = motion_state<NI>(motion, q_n_b, imu);
     s.p_b_c = Eigen::Map<const Vec3<T>>(p_b_c);
     s.q_b_c = Eigen::Map<const Eigen::Quaternion<T>>(q_b_c);
     s.t_d = t_d[0];
@@ -161,15 +230,6 @@ class ReprojectionFactor {
     return true;
   }
 
-  static ceres::CostFunction* create(const FrameExposure& exposure, const Eigen::Vector2d& uv,
-                                     double readout_s, const Pinhole<double>& camera,
-                                     const Eigen::Vector3d& gravity_n, double pixel_sigma) {
-    return new ceres::AutoDiffCostFunction<ReprojectionFactor, 2, kMotionSize, kQuatSize, 3,
-                                           kQuatSize, 3, 1, kCameraSize>(
-        new ReprojectionFactor(exposure, uv, readout_s, camera, gravity_n, pixel_sigma));
-  }
-
- private:
   FrameExposure exposure_;
   Eigen::Vector2d uv_;
   double readout_s_;
