@@ -113,12 +113,18 @@ int cmd_batch(int argc, char** argv) {
       report.iterations, report.final_iterations, report.converged ? "converged" : "NOT converged",
       report.retimings, report.cpu_s);
   print_result_warnings(r);
+  if (!report.converged)
+    std::fprintf(stderr,
+                 "mirrorcal: WARNING: the batch solution did not converge (the solver's last solve "
+                 "met none of its tolerances in %d iterations, or the time offset still moved): "
+                 "its estimate and covariance are not the maximum-likelihood solution\n",
+                 report.final_iterations);
   files::OutputSet files;
   if (!write_camchain_imucam(files, out + "/camchain-imucam.yaml", r, err) ||
       !write_result_yaml(files, out + "/mirrorcal-result.yaml", r, err) || !files.commit(err))
     fail(err, 1);
   std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml\n", out.c_str());
-  return calibration_exit_status(r);
+  return report.converged ? calibration_exit_status(r) : kExitNotConsistent;
 }
 
 }  // namespace mirrorcal::app

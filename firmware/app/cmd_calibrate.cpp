@@ -34,7 +34,7 @@ bool open_bag(const std::string& path, const sim::BagOptions& options, int marke
 
 template <int M, int NK, int NI = 0>
 int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
-              const sim::CalibrationStart* from, const Passes& passes) {
+              const sim::CalibrationStart* from, const Passes& passes, bool plots) {
   if constexpr (NI > 0)
     std::printf("mirrorcal calibrate: the IMU's intrinsics estimated too (model %s)\n",
                 to_string(imu_model_of_dim(NI)));
@@ -129,7 +129,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   }
   print_result_warnings(run.result);
   if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
-                                    report_plots(), err, rec.warnings))
+                                    report_plots(plots), err, rec.warnings))
     fail(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
@@ -146,7 +146,9 @@ int cmd_calibrate(int argc, char** argv) {
   Options o;
   std::string err;
   if (!parse(argc, argv, 2, {"out", "from", "imu-model", "sensors", "imu-topic", "camera-topic"},
-             {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise"}, o, err,
+             {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise",
+              "no-plots"},
+             o, err,
              1))
     fail(err);
   if (o.positional.size() != 1)
@@ -233,7 +235,8 @@ int cmd_calibrate(int argc, char** argv) {
     // the lens's coefficients too, skew held.
     const int nk = camera_block(intrinsics, hold_skew, rec.priors.estimate_distortion);
     return with_filter_blocks(nk, imu_model, [&](auto k, auto imu) {
-      return calibrate<M, decltype(k)::value, decltype(imu)::value>(rec, in, out, from, passes);
+      return calibrate<M, decltype(k)::value, decltype(imu)::value>(rec, in, out, from, passes,
+                                                                    !o.flag("no-plots"));
     });
   });
 }

@@ -115,6 +115,7 @@ const std::vector<Command>& commands() {
        "              yaml files are, default beside it; its topics, default the yaml files')\n"
        "              [--out OUT] [--from-images] [--estimate-noise]  (the IMU's noise\n"
        "              densities and the pixel noise from the data; writes imu.yaml with them)\n"
+       "              [--no-plots]  (report.html without its figures: no gnuplot)\n"
        "              (the markers: mav0/cam0/features.csv; a recording without it, whose\n"
        "              images are in mav0/cam0/data/ (8-bit PNG or PGM, as cam0/data.csv names\n"
        "              them), has them detected in its images by the board's detection and\n"

@@ -28,7 +28,10 @@ constexpr double kFullSolveGrowth = 1.5;
 // the model extrapolates from a state's time to the exposure at second order, exact enough over
 // a fraction of a millisecond (a 30 ms guess's first solve is off by 13 % in the cost).
 constexpr double kRetimeS = 2e-4;
-constexpr int kMaxRetimings = 6;
+// A slow rig's offset is weakly seen, and each whole solve of the growing trajectory may move it by
+// milliseconds: a cap reached too soon leaves the last solve extrapolating that far, off its
+// optimum (docs/estimator.md, "The batch reference").
+constexpr int kMaxRetimings = 16;
 // Levenberg-Marquardt stops when a step changes the cost by less than this share of it. The
 // in-plane position of the rig, which the mirror does not see, drifts along the IMU's integration
 // with next to no cost, and the iteration creeps along it for a hundred steps without moving the
@@ -496,7 +499,11 @@ bool BatchSolver::solve_trajectory(std::string& error) {
           " ms");
       continue;
     }
-    if (all) return true;
+    if (all) {
+      // Converged only where the states' times are the offset's estimate too.
+      report_.converged = report_.converged && std::abs(t_d_ - t_d_anchor_) <= kRetimeS;
+      return true;
+    }
   }
 }
 

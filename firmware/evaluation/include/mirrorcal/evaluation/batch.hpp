@@ -61,7 +61,7 @@ struct BatchReport {
   int solves = 0;                             // Levenberg-Marquardt solves, growth included
   int iterations = 0;                         // their iterations, in all
   int final_iterations = 0;                   // the last full solve's
-  bool converged = false;                     // the last full solve met its tolerances
+  bool converged = false;   // the last full solve met its tolerances, at the offset's own times
   int retimings = 0;        // the frames' IMU times moved to the time offset's estimate
   double final_cost = 0.0;  // half the sum of the whitened residuals' squares
   double reprojection_rms_px = 0.0;
