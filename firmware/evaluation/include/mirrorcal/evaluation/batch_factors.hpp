@@ -141,7 +141,7 @@ class ImuFactor {
   bool evaluate(const T* motion0, const T* q0, const T* motion1, const T* q1, const T* imu,
                 T* r) const {
     MirrorState<T, 1, 0, NI> s = motion_state<NI>(motion0, q0, imu);
-    const MirrorState<T, 1, 0, NI> next = motion_state<NI>(motion1, q1, imu);
+    const MirrorState<T, 1, 0> next = motion_state(motion1, q1);  // its motion alone
     const Vec3<T> gravity = gravity_n_.cast<T>();
     for (const ImuPiece& piece : pieces_)
       propagate_imu(s, piece.s0, piece.s1, gravity, piece.has_before ? &piece.before : nullptr);
