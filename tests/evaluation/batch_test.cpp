@@ -294,7 +294,7 @@ TEST(Batch, NoiseFreeDataGiveTheTruthToASmallFractionOfItsSigmas) {
 }
 
 TEST(Batch, ReplaysAreBitIdentical) {
-  const mc::sim::Scenario s = short_random(4, 10.0);
+  const mc::sim::Scenario s = short_random(4, 6.0);
   const mc::sim::SimData data = mc::sim::simulate(s, 4);
   const Solved a = solve_simulated(s, data, 4), b = solve_simulated(s, data, 4);
   EXPECT_EQ(a.result.p_b_c, b.result.p_b_c);
