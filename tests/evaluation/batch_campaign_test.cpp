@@ -18,9 +18,9 @@ using batch_runs::solve_simulated;
 
 constexpr int kRigs = 8;
 constexpr double kDurationS = 30.0;
-// The bar for the random family is 1.2 over 200 runs; eight rigs' RMS moves more with
-// chance, though the two estimates share their data and move together (over these rigs they lie
-// within a few percent of each other: docs/estimator.md, "The batch reference").
+// The filter's RMS error over the batch's on the same runs, at most: eight rigs' ratio moves with
+// chance more than a campaign's, though the two estimates share their data and move together
+// (docs/campaign/batch/README.md has the family's ratios).
 constexpr double kMaxFilterOverBatch = 1.25;
 
 TEST(BatchCampaign, FilterMatchesTheBatchAndTheBatchItsCovariance) {
