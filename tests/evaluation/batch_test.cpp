@@ -258,10 +258,10 @@ TEST(Batch, NoiseFreeDataGiveTheTruthToASmallFractionOfItsSigmas) {
        {Case{2, 0, mc::Distortion::kNone, kIdeal}, Case{9, 0, mc::Distortion::kNone, kIdeal},
         Case{5, 5, mc::Distortion::kNone, kIdeal}, Case{6, 8, mc::Distortion::kRadtan, kIdeal},
         Case{7, 0, mc::Distortion::kNone, mc::ImuModel::kScaleMisalignment}}) {
-    mc::sim::Scenario s = short_random(c.seed, 20.0);
+    mc::sim::Scenario s = short_random(c.seed, 15.0);
     mc::sim::set_lens(s, c.lens);
     if (c.imu_model != kIdeal) s = mc::sim::mems_scenario(c.seed);
-    s.duration_s = 20.0;
+    s.duration_s = 15.0;
     mc::sim::Scenario clean = s;  // the same rig and motion; no noise, no bias walk
     clean.pixel_sigma = 0.0;
     clean.imu.gyro_noise_density = clean.imu.accel_noise_density = 0.0;
