@@ -26,7 +26,8 @@ constexpr double kFirstSolveS = 3.0;
 constexpr double kFullSolveGrowth = 1.5;
 // The frames' IMU times follow the time offset's estimate until it moves by less than this (s):
 // the model extrapolates from a state's time to the exposure at second order, exact enough over
-// a fraction of a millisecond (a 30 ms guess's first solve is off by 13 % in the cost).
+// a fraction of a millisecond, not over a guess's tens (docs/estimator.md, "The batch
+// reference").
 constexpr double kRetimeS = 2e-4;
 // A slow rig's offset is weakly seen, and each whole solve of the growing trajectory may move it by
 // milliseconds: a cap reached too soon leaves the last solve extrapolating that far, off its
@@ -34,9 +35,9 @@ constexpr double kRetimeS = 2e-4;
 constexpr int kMaxRetimings = 16;
 // Levenberg-Marquardt stops when a step changes the cost by less than this share of it. The
 // in-plane position of the rig, which the mirror does not see, drifts along the IMU's integration
-// with next to no cost, and the iteration creeps along it for a hundred steps without moving the
-// calibration: on random rig 1, 1e-6 left p_b_c 0.18 sigma from 1e-10's solution, 1e-8 0.02
-// sigma (the markers 0.01 and 0.003), at a third and a half of 1e-10's time.
+// with next to no cost, and the iteration creeps along it for a hundred steps while the
+// calibration hardly moves; the final tolerance keeps it within a few hundredths of its sigmas
+// of a far tighter one's solution (docs/estimator.md, "The batch reference").
 constexpr double kGrowthTolerance = 1e-6, kFinalTolerance = 1e-8;
 
 // The IMU's signal cut at the states' times, as the loop's filter integrates it.
