@@ -63,12 +63,12 @@ int cmd_batch(int argc, char** argv) {
     fail(err);
   if (o.positional.size() != 1) fail("batch needs a recording folder DIR\n" + usage("batch"));
   const std::string in = o.positional[0];
+  int markers = sim::kPaperMarkers;
+  if (!sim::recording_marker_count(in, markers, err)) fail(err);
   if (!sim::has_features_csv(in))
     fail(in +
          " has no mav0/cam0/features.csv: batch solves labelled markers. Calibrate the recording "
          "first (calibrate finds the markers in its images and writes them to its features.csv)");
-  int markers = sim::kPaperMarkers;
-  if (!sim::recording_marker_count(in, markers, err)) fail(err);
   sim::Recording rec;
   if (!sim::read_recording(in, markers, rec, err)) fail(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
