@@ -148,8 +148,7 @@ int cmd_calibrate(int argc, char** argv) {
   if (!parse(argc, argv, 2, {"out", "from", "imu-model", "sensors", "imu-topic", "camera-topic"},
              {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise",
               "no-plots"},
-             o, err,
-             1))
+             o, err, 1))
     fail(err);
   if (o.positional.size() != 1)
     fail("calibrate needs a recording folder DIR or a bag\n" + usage("calibrate"));
