@@ -55,7 +55,7 @@ struct BatchOptions {
 // How the solution went.
 struct BatchReport {
   std::size_t frames = 0;       // frames with markers: one state each
-  std::size_t imu_samples = 0;  // within the frames' span
+  std::size_t imu_samples = 0;  // the input's
   std::size_t reprojections = 0;
   std::size_t residuals = 0, parameters = 0;  // the final problem's sizes (tangent parameters)
   int solves = 0;                             // Levenberg-Marquardt solves, growth included
@@ -65,7 +65,8 @@ struct BatchReport {
   int retimings = 0;        // the frames' IMU times moved to the time offset's estimate
   double final_cost = 0.0;  // half the sum of the whitened residuals' squares
   double reprojection_rms_px = 0.0;
-  double cpu_s = 0.0;  // process CPU time, from reading the input to the covariance
+  double cpu_s =
+      0.0;  // the calling thread's CPU time, from the frames' selection to the covariance
 };
 
 // Solves input; false with a message when it cannot (no frames within the IMU's span, a solver
