@@ -471,9 +471,6 @@ bool BatchSolver::solve_range(std::size_t a, std::size_t b, bool calibration_fre
   if (last) {
     report_.final_iterations = static_cast<int>(summary.iterations.size());
     report_.converged = summary.termination_type == ceres::CONVERGENCE;
-    report_.final_cost = summary.final_cost;
-    report_.residuals = static_cast<std::size_t>(summary.num_residuals_reduced);
-    report_.parameters = static_cast<std::size_t>(summary.num_effective_parameters_reduced);
   }
   return true;
 }
@@ -634,7 +631,6 @@ bool BatchSolver::solve(calibration::CalibrationResult& result, BatchReport& rep
   fill_result(result);
   if (!covariance(result, error)) return false;
   report_.frames = times_.size() - 1;
-  report_.imu_samples = in_.imu->size();
   report_.cpu_s = thread_cpu_s() - start;
   report = report_;
   return true;

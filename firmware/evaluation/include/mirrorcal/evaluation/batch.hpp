@@ -54,19 +54,16 @@ struct BatchOptions {
 
 // How the solution went.
 struct BatchReport {
-  std::size_t frames = 0;       // frames with markers: one state each
-  std::size_t imu_samples = 0;  // the input's
+  std::size_t frames = 0;  // frames with markers: one state each
   std::size_t reprojections = 0;
-  std::size_t residuals = 0, parameters = 0;  // the final problem's sizes (tangent parameters)
-  int solves = 0;                             // Levenberg-Marquardt solves, growth included
-  int iterations = 0;                         // their iterations, in all
-  int final_iterations = 0;                   // the last full solve's
-  bool converged = false;   // the last full solve met its tolerances, at the offset's own times
-  int retimings = 0;        // the frames' IMU times moved to the time offset's estimate
-  double final_cost = 0.0;  // half the sum of the whitened residuals' squares
+  int solves = 0;            // Levenberg-Marquardt solves, growth included
+  int iterations = 0;        // their iterations, in all
+  int final_iterations = 0;  // the last full solve's
+  bool converged = false;    // the last full solve met its tolerances, at the offset's own times
+  int retimings = 0;         // the frames' IMU times moved to the time offset's estimate
   double reprojection_rms_px = 0.0;
-  double cpu_s =
-      0.0;  // the calling thread's CPU time, from the frames' selection to the covariance
+  // The calling thread's CPU time (s), from the frames' selection to the covariance.
+  double cpu_s = 0.0;
 };
 
 // Solves input; false with a message when it cannot (no frames within the IMU's span, a solver
