@@ -113,18 +113,22 @@ int cmd_batch(int argc, char** argv) {
       report.iterations, report.final_iterations, report.converged ? "converged" : "NOT converged",
       report.retimings, report.cpu_s);
   print_result_warnings(r);
-  if (!report.converged)
+  // An unconverged solution is not the reference: its files, which say nothing of it, are not
+  // written, so that neither export nor a campaign takes it for one (an earlier result stays).
+  if (!report.converged) {
     std::fprintf(stderr,
-                 "mirrorcal: WARNING: the batch solution did not converge (the solver's last solve "
-                 "met none of its tolerances in %d iterations, or the time offset still moved): "
-                 "its estimate and covariance are not the maximum-likelihood solution\n",
-                 report.final_iterations);
+                 "mirrorcal: the batch solution did not converge (the solver's last solve met none "
+                 "of its tolerances in %d iterations, or the time offset still moved): it is not "
+                 "the maximum-likelihood solution, and no files were written (exit status %d)\n",
+                 report.final_iterations, kExitNotConsistent);
+    return kExitNotConsistent;
+  }
   files::OutputSet files;
   if (!write_camchain_imucam(files, out + "/camchain-imucam.yaml", r, err) ||
       !write_result_yaml(files, out + "/mirrorcal-result.yaml", r, err) || !files.commit(err))
     fail(err, 1);
   std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml\n", out.c_str());
-  return report.converged ? calibration_exit_status(r) : kExitNotConsistent;
+  return calibration_exit_status(r);
 }
 
 }  // namespace mirrorcal::app
