@@ -114,12 +114,12 @@ std::vector<std::string> write_error_plot_script(const std::string& dir, const s
         << "\n";
       for (std::size_t j : grp.params) {
         const std::size_t c = j + 2;  // 1-based column in both files
-        if (from_prior)
-          g << "set autoscale y\n";
-        else
+        // stats keeps to the y range set last: the parameter before's range, which may hold
+        // none of this one's band (then STATS_min is undefined and gnuplot stops).
+        g << "set autoscale y\n";
+        if (!from_prior)
           g << "stats 'band.dat' using " << c << " nooutput\n"
-            << "if (STATS_min > 0) { set yrange [-4 * STATS_min : 4 * STATS_min] } "
-               "else { set autoscale y }\n";
+            << "if (STATS_min > 0) { set yrange [-4 * STATS_min : 4 * STATS_min] }\n";
         g << "set title " << gnuplot_quoted(params[j].name) << "\nset ylabel "
           << gnuplot_quoted(params[j].unit) << "\nplot 'errors.dat' using 1:" << c << " with lines "
           << line << ", 'band.dat' using 1:" << c << " with lines lc rgb '#cc2222' lw 1.5"
