@@ -25,12 +25,12 @@ std::string usage(const std::string& command) {
   return usage();
 }
 
-void fail(const std::string& msg, int code) {
+int refuse(const std::string& msg, int code) {
   // What the command printed so far comes first, also when both streams go to one file (a run
   // that ends on a device error prints its counters, then why it ended).
   std::fflush(stdout);
   std::fprintf(stderr, "mirrorcal: %s\n", msg.c_str());
-  std::exit(code);
+  return code;
 }
 
 bool asks_for_help(int argc, char** argv, int first) {

@@ -35,21 +35,23 @@ struct Options {
   }
 };
 
-// Prints "mirrorcal: msg" to stderr and exits with code. Only the commands (cmd_*.cpp) and main
-// call it: the helpers return false with the message, and the command chooses the exit code (2: the
-// command line or the files it names are wrong; 1: a file, a device or an output failed).
-[[noreturn]] void fail(const std::string& msg, int code = 2);
+// Prints "mirrorcal: msg" to stderr and returns code, the exit status the command returns to main
+// (the program's one exit, so that every object unwinds: files closed, temporary ones removed).
+// Only the commands (cmd_*.cpp) and main call it: the helpers return false with the message, and
+// the command chooses the code (2: the command line or the files it names are wrong; 1: a file, a
+// device or an output failed).
+int refuse(const std::string& msg, int code = 2);
 
 // The exit status of a command whose calibration says consistent: false (its files are written,
 // and say so): distinct from 1 (a failure) and 2 (bad input), so that no script takes a flagged
-// calibration for a good one. export refusing such a result (without --force) exits with it too.
+// calibration for a good one. export refusing such a result (without --force) returns it too.
 constexpr int kExitNotConsistent = 3;
 // The NEES of a calibration's `states` states against the truth (`against`: where it comes from,
 // "" for a simulation's) with its 95 % interval, as sim, calibrate and batch end their tables.
 void print_final_nees(std::size_t states, double nees, const char* against = "");
 // A calibration's warnings on stderr, a WARNING line each.
 void print_result_warnings(const calibration::CalibrationResult& r);
-// The status a command that wrote the calibration r exits with: 0, or kExitNotConsistent with a
+// The status a command that wrote the calibration r returns: 0, or kExitNotConsistent with a
 // last line on stderr saying so.
 int calibration_exit_status(const calibration::CalibrationResult& r);
 
@@ -110,13 +112,13 @@ std::string imu_model_not_built(ImuModel model);
 bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
                            const std::string& folder, ImuModel& model, std::string& error);
 
-// Calls f(ImuIntrinsicsCount<NI>{}) for model's NI (marker_counts.hpp); a model not built fails
-// (exit code 2).
+// Calls f(ImuIntrinsicsCount<NI>{}) for model's NI (marker_counts.hpp) and returns its exit code; a
+// model not built is refused (exit code 2).
 template <class F>
 int with_imu_model_of(ImuModel model, F&& f) {
   int code = 0;
   if (!with_imu_model(imu_intrinsics_dim(model), [&](auto ni) { code = f(ni); }))
-    fail(imu_model_not_built(model));
+    return refuse(imu_model_not_built(model));
   return code;
 }
 
@@ -153,12 +155,12 @@ int with_filter_blocks(int nk, ImuModel model, F&& f) {
 
 // Calls f(MarkerCount<M>{}) (marker_counts.hpp) for the built M equal to markers and returns its
 // exit code: every command reaches its instantiation for the rig's number of markers through here.
-// A count not built fails, saying which are and how to build another (exit code 2).
+// A count not built is refused, saying which are and how to build another (exit code 2).
 template <class F>
 int with_markers(int markers, F&& f) {
   int code = 0;
   if (!with_marker_count(markers, [&](auto m) { code = f(m); }))
-    fail(marker_count_not_built(markers));
+    return refuse(marker_count_not_built(markers));
   return code;
 }
 

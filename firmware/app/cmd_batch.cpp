@@ -60,28 +60,30 @@ int cmd_batch(int argc, char** argv) {
   Options o;
   std::string err;
   if (!parse(argc, argv, 2, {"out", "imu-model"}, {"intrinsics", "hold-skew"}, o, err, 1))
-    fail(err);
-  if (o.positional.size() != 1) fail("batch needs a recording folder DIR\n" + usage("batch"));
+    return refuse(err);
+  if (o.positional.size() != 1)
+    return refuse("batch needs a recording folder DIR\n" + usage("batch"));
   const std::string in = o.positional[0];
   int markers = sim::kPaperMarkers;
-  if (!sim::recording_marker_count(in, markers, err)) fail(err);
+  if (!sim::recording_marker_count(in, markers, err)) return refuse(err);
   if (!sim::has_features_csv(in))
-    fail(in +
-         " has no mav0/cam0/features.csv: batch solves labelled markers. Calibrate the recording "
-         "first (calibrate finds the markers in its images and writes them to its features.csv)");
+    return refuse(
+        in +
+        " has no mav0/cam0/features.csv: batch solves labelled markers. Calibrate the recording "
+        "first (calibrate finds the markers in its images and writes them to its features.csv)");
   sim::Recording rec;
-  if (!sim::read_recording(in, markers, rec, err)) fail(err, 1);
+  if (!sim::read_recording(in, markers, rec, err)) return refuse(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
   for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
   const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
   if (o.flag("hold-skew") && !intrinsics)
-    fail("--hold-skew applies when the intrinsics are estimated (--intrinsics)");
+    return refuse("--hold-skew applies when the intrinsics are estimated (--intrinsics)");
   // The IMU model as calibrate takes it: --imu-model, imu.yaml's imu_model, or a MEMS part's.
   ImuModel imu_model = kDefaultImuModel;
-  if (!calibration_imu_model(o, rec.sensors, in, imu_model, err)) fail(err);
+  if (!calibration_imu_model(o, rec.sensors, in, imu_model, err)) return refuse(err);
   std::string out;
-  if (!make_out_dir(o, "out/batch", out, err)) fail(err, 1);
+  if (!make_out_dir(o, "out/batch", out, err)) return refuse(err, 1);
 
   evaluation::BatchInput input;
   input.imu = &rec.imu;
@@ -102,7 +104,7 @@ int cmd_batch(int argc, char** argv) {
   std::fflush(stdout);
   CalibrationResult r;
   evaluation::BatchReport report;
-  if (!evaluation::solve_batch(input, options, r, report, err)) fail(in + ": " + err, 1);
+  if (!evaluation::solve_batch(input, options, r, report, err)) return refuse(in + ": " + err, 1);
   r.recording_fingerprint = rec.fingerprint;
   r.rostopic = rec.sensors.rostopic;
   print_solution(r, rec);
@@ -126,7 +128,7 @@ int cmd_batch(int argc, char** argv) {
   files::OutputSet files;
   if (!write_camchain_imucam(files, out + "/camchain-imucam.yaml", r, err) ||
       !write_result_yaml(files, out + "/mirrorcal-result.yaml", r, err) || !files.commit(err))
-    fail(err, 1);
+    return refuse(err, 1);
   std::printf("wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml\n", out.c_str());
   return calibration_exit_status(r);
 }

@@ -57,7 +57,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   const auto t0 = std::chrono::steady_clock::now();
   if (!calibrate_recording<M, NK, NI>(
           rec, run, err, [](double f) { print_progress("calibrating", f); }, from, passes))
-    fail(err, 1);
+    return refuse(err, 1);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   end_progress("calibrating done");
 
@@ -130,7 +130,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
   print_result_warnings(run.result);
   if (!write_run_outputs_and_report(out, run, "mirrorcal calibrate " + in, from != nullptr,
                                     report_plots(plots), err, rec.warnings))
-    fail(err, 1);
+    return refuse(err, 1);
   std::printf(
       "wrote %s/camchain-imucam.yaml, mirrorcal-result.yaml, estimates.csv, report.txt, "
       "report.html, residuals.csv, imu_residuals.csv%s%s%s\n",
@@ -149,15 +149,16 @@ int cmd_calibrate(int argc, char** argv) {
              {"intrinsics", "hold-skew", "from-same-data", "from-images", "estimate-noise",
               "no-plots"},
              o, err, 1))
-    fail(err);
+    return refuse(err);
   if (o.positional.size() != 1)
-    fail("calibrate needs a recording folder DIR or a bag\n" + usage("calibrate"));
+    return refuse("calibrate needs a recording folder DIR or a bag\n" + usage("calibrate"));
   const std::string in = o.positional[0];
   const bool bag = sim::is_bag(in);
   const sim::BagOptions bag_options{o.get("sensors", ""), o.get("imu-topic", ""),
                                     o.get("camera-topic", "")};
   if (!bag && (o.flag("sensors") || o.flag("imu-topic") || o.flag("camera-topic")))
-    fail(in + " is a recording folder: --sensors, --imu-topic and --camera-topic apply to bags");
+    return refuse(
+        in + " is a recording folder: --sensors, --imu-topic and --camera-topic apply to bags");
   // The filter of the recording's number of markers (mirrorcal.yaml's features_c). Where the
   // files cannot tell, open_recording says what is wrong with them, checking them in order.
   const std::string yaml_dir = bag ? sim::bag_sensors_dir(in, bag_options) : in;
@@ -173,11 +174,11 @@ int cmd_calibrate(int argc, char** argv) {
         bag || o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
     // Streamed from its files in each pass: memory does not grow with the recording.
     if (bag) {
-      if (!open_bag(in, bag_options, M, rec, err)) fail(err, 1);
+      if (!open_bag(in, bag_options, M, rec, err)) return refuse(err, 1);
       std::printf("mirrorcal calibrate: the markers are detected in the images of the bag %s\n",
                   in.c_str());
     } else {
-      if (!sim::open_recording(in, M, rec, err, from_images)) fail(err, 1);
+      if (!sim::open_recording(in, M, rec, err, from_images)) return refuse(err, 1);
       if (from_images)
         std::printf(
             "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
@@ -192,13 +193,14 @@ int cmd_calibrate(int argc, char** argv) {
     sim::CalibrationStart start;
     const sim::CalibrationStart* from = nullptr;
     if (o.flag("from")) {
-      if (!sim::read_calibration_start(o.get("from", ""), M, start, err)) fail(err, 1);
+      if (!sim::read_calibration_start(o.get("from", ""), M, start, err)) return refuse(err, 1);
       if (start.recording_fingerprint == rec.fingerprint && !o.flag("from-same-data"))
-        fail(o.get("from", "") + " was calibrated from this recording's data (" + in +
-                 ", recording_fingerprint " + rec.fingerprint +
-                 "): calibrating it again would count the data twice and shrink every sigma. "
-                 "Calibrate another recording from it, or give --from-same-data if that is meant.",
-             1);
+        return refuse(
+            o.get("from", "") + " was calibrated from this recording's data (" + in +
+                ", recording_fingerprint " + rec.fingerprint +
+                "): calibrating it again would count the data twice and shrink every sigma. "
+                "Calibrate another recording from it, or give --from-same-data if that is meant.",
+            1);
       from = &start;
       std::printf(
           "mirrorcal calibrate: the camera pose and markers start from %s (estimate and "
@@ -206,11 +208,11 @@ int cmd_calibrate(int argc, char** argv) {
           o.get("from", "").c_str());
     }
     std::string out;
-    if (!make_out_dir(o, "out/calibrate", out, err)) fail(err, 1);
+    if (!make_out_dir(o, "out/calibrate", out, err)) return refuse(err, 1);
     const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
     const bool hold_skew = o.flag("hold-skew") || rec.priors.hold_skew;
     if (o.flag("hold-skew") && !intrinsics)
-      fail(
+      return refuse(
           "--hold-skew applies when the intrinsics are estimated (--intrinsics, or "
           "estimate_intrinsics: true in " +
           yaml_dir + "/mirrorcal.yaml)");
@@ -221,7 +223,7 @@ int cmd_calibrate(int argc, char** argv) {
           "not estimated\n",
           yaml_dir.c_str());
     ImuModel imu_model = kDefaultImuModel;
-    if (!calibration_imu_model(o, rec.sensors, yaml_dir, imu_model, err)) fail(err);
+    if (!calibration_imu_model(o, rec.sensors, yaml_dir, imu_model, err)) return refuse(err);
     if (from && imu_model != ImuModel::kCalibrated && from->imu_model == imu_model &&
         from->imu_covariance.rows() > 0)
       std::printf("mirrorcal calibrate: the IMU's intrinsics (%s) start from it too\n",

@@ -30,29 +30,32 @@ CalibrationResult result_of(const sim::CalibrationStart& file) {
 int cmd_export(int argc, char** argv) {
   Options o;
   std::string err;
-  if (!parse(argc, argv, 2, {"format"}, {"force"}, o, err, 2)) fail(err);
+  if (!parse(argc, argv, 2, {"format"}, {"force"}, o, err, 2)) return refuse(err);
   if (o.positional.size() != 2 || !o.flag("format"))
-    fail("export needs --format FORMAT, a RESULT and an OUT file\n" + usage("export"));
+    return refuse("export needs --format FORMAT, a RESULT and an OUT file\n" + usage("export"));
   ExportFormat format{};
   const std::string name = o.get("format", "");
   if (!export_format_from_string(name, format))
-    fail("--format: '" + name + "' is not a format (openvins, vins-fusion or ros-camera-info)");
+    return refuse("--format: '" + name +
+                  "' is not a format (openvins, vins-fusion or ros-camera-info)");
   const std::string& in = o.positional[0];
   const std::string& out = o.positional[1];
   sim::CalibrationStart file;
-  if (!sim::read_calibration_result(in, file, err)) fail(err, 1);
-  if (!file.has_camera) fail(in + ": holds no camera (intrinsics, resolution) to export", 1);
+  if (!sim::read_calibration_result(in, file, err)) return refuse(err, 1);
+  if (!file.has_camera)
+    return refuse(in + ": holds no camera (intrinsics, resolution) to export", 1);
   // A flagged calibration handed to another tool would be used as a good one.
   if (!file.trusted && !o.flag("force"))
-    fail(in + ": says consistent: false (its self-check's WARNINGs and report.txt say why); "
-              "exporting it would hand it to another tool as a good calibration. Calibrate again, "
-              "or give --force to export it anyway (the file then says it is not to be trusted)",
-         kExitNotConsistent);
+    return refuse(
+        in + ": says consistent: false (its self-check's WARNINGs and report.txt say why); "
+             "exporting it would hand it to another tool as a good calibration. Calibrate again, "
+             "or give --force to export it anyway (the file then says it is not to be trusted)",
+        kExitNotConsistent);
   if (!file.trusted)
     std::fprintf(stderr,
                  "mirrorcal: WARNING: exporting a calibration that says consistent: "
                  "false (--force); the file says so\n");
-  if (!write_export(format, out, result_of(file), err, !file.trusted)) fail(err, 1);
+  if (!write_export(format, out, result_of(file), err, !file.trusted)) return refuse(err, 1);
   std::printf("wrote %s", out.c_str());
   if (format == ExportFormat::kVinsFusion) std::printf(" and %s", vins_camera_file(out).c_str());
   std::printf("\n");

@@ -314,33 +314,34 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   // --estimate-distortion: stage 2 estimates the lens's coefficients with fu fv cu cv, skew held
   // (at the scenario camera's; --hold-skew: a camera without skew).
   c.lens = o.flag("estimate-distortion");
-  const auto refuse = [&](const std::string& why) {
+  // Options that are wrong or clash: error says why.
+  const auto wrong = [&](const std::string& why) {
     error = why;
     return false;
   };
   if (c.lens && (!c.intrinsics || !o.flag("distortion") || o.get("distortion", "") == "none"))
-    return refuse(
+    return wrong(
         "--estimate-distortion applies with --intrinsics and --distortion radtan|equidistant");
   if ((c.hold_skew || c.one_stage) && !c.intrinsics)
-    return refuse("--hold-skew and --one-stage apply with --intrinsics");
+    return wrong("--hold-skew and --one-stage apply with --intrinsics");
   if (!frame_mode_option(o, c.frames, error)) return false;
   if ((o.flag("outliers") || o.flag("label-swaps")) && c.frames.enabled)
-    return refuse(
+    return wrong(
         "--outliers and --label-swaps mis-detect listed markers; rendered frames (--frames) have "
         "room lights");
   if (c.intrinsics && c.frames.enabled)
-    return refuse("--intrinsics runs on listed markers (not yet with --frames)");
+    return wrong("--intrinsics runs on listed markers (not yet with --frames)");
   c.batch = o.flag("batch");
 #ifndef MIRRORCAL_BATCH
-  if (c.batch) return refuse("--batch: this build has no batch solver (Ceres; MIRRORCAL_BATCH)");
+  if (c.batch) return wrong("--batch: this build has no batch solver (Ceres; MIRRORCAL_BATCH)");
 #endif
   if (c.batch && (c.intrinsics || c.frames.enabled || o.flag("outliers") || o.flag("label-swaps") ||
                   o.flag("estimate-noise")))
-    return refuse(
+    return wrong(
         "--batch solves stage 1 on the listed, correctly labelled markers with the noise levels "
         "stated: not with --intrinsics, --frames, --outliers, --label-swaps or --estimate-noise");
   if (!o.flag("runs"))
-    return refuse(std::string("montecarlo needs --runs N\n") + usage("montecarlo"));
+    return wrong(std::string("montecarlo needs --runs N\n") + usage("montecarlo"));
   // --hold-skew: a camera without skew, and a stage 2 that holds it at zero. A family (random)
   // draws each run's rig from the run's seed.
   const auto scenario_for = [&](std::uint64_t run_seed, sim::Scenario& scenario) {
@@ -354,7 +355,7 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   c.family = c.scenario.name == "random" || c.scenario.name == "mems";
   // --rig SEED: one rig of the family for every run; each run draws its own noise and guesses.
   if (o.flag("rig")) {
-    if (!c.family) return refuse("--rig applies with --scenario random or mems");
+    if (!c.family) return wrong("--rig applies with --scenario random or mems");
     std::uint64_t rig = 0;
     if (!parse_count(o, "rig", 0, 0, rig, error)) return false;
     c.rig = rig;
@@ -372,12 +373,12 @@ bool campaign_options(const Options& o, Campaign& c, std::string& error) {
   // last gated too many.
   if (!passes_option(o, c.passes, error)) return false;
   if (c.intrinsics && o.flag("passes"))
-    return refuse("--passes applies to stage 1 only (without --intrinsics)");
+    return wrong("--passes applies to stage 1 only (without --intrinsics)");
   if (!imu_model_option(o, simulated_imu_model(c.scenario), c.imu_model, error)) return false;
   // --estimate-noise: as sim (the mems family states noise levels 0.5-5x the true ones).
   c.passes.estimate_noise = o.flag("estimate-noise");
   if (c.intrinsics && c.passes.estimate_noise)
-    return refuse("--estimate-noise applies to stage 1 only (without --intrinsics)");
+    return wrong("--estimate-noise applies to stage 1 only (without --intrinsics)");
   return true;
 }
 
@@ -800,9 +801,9 @@ int cmd_montecarlo(int argc, char** argv) {
               "estimate-noise", "identical-leds", "room", "batch"},
              o, error) ||
       !campaign_options(o, c, error))
-    fail(error);
+    return refuse(error);
   std::string dir;
-  if (!make_out_dir(o, "out/montecarlo", dir, error)) fail(error, 1);
+  if (!make_out_dir(o, "out/montecarlo", dir, error)) return refuse(error, 1);
   print_campaign_title(c);
 
   std::vector<Outcome> out(c.runs);
@@ -810,7 +811,7 @@ int cmd_montecarlo(int argc, char** argv) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!run_campaign(c, out, params, error)) {
     end_progress("stopped");
-    fail(error, 1);
+    return refuse(error, 1);
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   end_progress("all runs done");
@@ -825,7 +826,7 @@ int cmd_montecarlo(int argc, char** argv) {
   std::FILE* const runs_csv = summary != nullptr ? results.add(dir + "/runs.csv", err) : nullptr;
   std::FILE* const batch_csv =
       c.batch && runs_csv != nullptr ? results.add(dir + "/batch.csv", err) : nullptr;
-  if (runs_csv == nullptr || (c.batch && batch_csv == nullptr)) fail(err, 1);
+  if (runs_csv == nullptr || (c.batch && batch_csv == nullptr)) return refuse(err, 1);
   if (c.family)
     report_family_campaign(c, out, np, st.nees, summary);
   else
@@ -845,7 +846,7 @@ int cmd_montecarlo(int argc, char** argv) {
               wall / double(c.runs) * double(c.jobs), (unsigned long long)c.jobs);
   if (!c.family) write_paper_summary(summary, c, params, truth, st, wall, detection);
   write_runs_csv(runs_csv, out, params, c.frames.enabled);
-  if (!results.commit(err)) fail(err, 1);
+  if (!results.commit(err)) return refuse(err, 1);
   std::printf("wrote %s/summary.csv, %s/runs.csv%s\n", dir.c_str(), dir.c_str(),
               c.batch ? ", batch.csv" : "");
   if (c.plots) {

@@ -23,31 +23,14 @@ using namespace calibration;
 
 namespace {
 
-// A recording's folder, written whole or not at all: into a temporary folder beside it that
-// replaces it when complete. fail() exits without unwinding, so the temporary folder goes first.
-class RecordingFolder {
- public:
-  RecordingFolder(const std::string& dir, bool replace) {
-    std::string err;
-    if (!staged_.begin(dir, replace, err)) fail(err, 1);
-  }
-  // Where the files go until commit().
-  const std::string& path() const { return staged_.path(); }
-  // A path within path() as the user will find it.
-  std::string as_target(const std::string& path) const { return staged_.as_target(path); }
-  [[noreturn]] void fail_with(const std::string& err) {
-    const std::string message = staged_.as_target(err);
-    staged_.discard();
-    fail(message, 1);
-  }
-  void commit() {
-    std::string err;
-    if (!staged_.commit(err)) fail_with(err);
-  }
-
- private:
-  files::StagedFolder staged_;
-};
+// A recording's folder is written whole or not at all, into the temporary folder of a
+// files::StagedFolder that replaces it when committed. An error returned before then leaves
+// nothing: the StagedFolder removes its temporary folder as it goes out of scope, after the writer
+// declared after it has closed its files. refuse_recording refuses err, about a file in folder,
+// naming the file as the user will find it (exit code 1).
+int refuse_recording(const files::StagedFolder& folder, const std::string& err) {
+  return refuse(folder.as_target(err), 1);
+}
 
 // The camera's last frame as the image beside its markers: its luma copied into luma (sized for
 // the camera's frames) and grey pointing at it; nullptr for a frame larger than that.
@@ -119,56 +102,59 @@ int record_devices(const Options& o, const std::string& dir) {
   std::string error;
   if (!device_settings(o, "record", false, s, error) ||
       (!s.sensors.empty() && !read_sensors(s.sensors, sensors, error)))
-    fail(error, 2);
+    return refuse(error, 2);
   const double imu_rate_hz = s.sensors.empty() ? s.rate_hz : sensors.sensors.imu_rate_hz;
   // The markers the camera's frames are searched for: as many as --sensors' mirrorcal.yaml lists,
   // else --markers (three by default).
   std::uint64_t markers = sensors.priors.features_c.size();
   if (!s.sensors.empty() && o.flag("markers"))
-    fail("--markers applies without --sensors (its mirrorcal.yaml lists the markers)");
+    return refuse("--markers applies without --sensors (its mirrorcal.yaml lists the markers)");
   if (s.sensors.empty() && !parse_count(o, "markers", sim::kPaperMarkers, 1, markers, error, 64))
-    fail(error);
-  if (!marker_count_built(int(markers))) fail(marker_count_not_built(int(markers)));
+    return refuse(error);
+  if (!marker_count_built(int(markers))) return refuse(marker_count_not_built(int(markers)));
   Devices devices;
   int exit_code = 1;
   if (!open_devices(s, int(markers), sensors.priors.leds, sensors.sensors.width,
                     sensors.sensors.height, imu_rate_hz, devices, error, exit_code))
-    fail(error, exit_code);
-  RecordingFolder folder(dir, o.flag("force"));
+    return refuse(error, exit_code);
+  files::StagedFolder folder;
+  if (!folder.begin(dir, o.flag("force"), error)) return refuse(error, 1);
 
   std::string err;
   sim::RecordingWriter writer;
-  if (!writer.open(folder.path(), err)) folder.fail_with(err);
+  if (!writer.open(folder.path(), err)) return refuse_recording(folder, err);
   // --images: each frame's luma too, as PNG in mav0/cam0/data/ (a buffer allocated here; the
   // writer allocates its PNG buffers with the first image).
   const bool images = o.flag("images");
-  if (images && !devices.camera) fail("--images needs a camera (--camera DEV)");
+  if (images && !devices.camera) return refuse("--images needs a camera (--camera DEV)");
   std::vector<std::uint8_t> luma(
       images ? std::size_t(sensors.sensors.width) * std::size_t(sensors.sensors.height) : 0);
   print_record_start(s, devices, imu_rate_hz, dir);
   StoppingImu imu(devices.imu_stream(), static_cast<std::int64_t>(s.duration_s * 1e9));
   RecordEnd end;
-  with_markers(int(markers), [&](auto count) {
+  const int status = with_markers(int(markers), [&](auto count) {
     end = record_streams<decltype(count)::value>(devices, imu, writer, images, luma);
     return 0;
   });
+  if (status != 0) return status;
   StopOnSignal::report("closing the recording");
   const bool written = writer.close(err);
   std::printf("record: %llu IMU samples over %.3f s, %llu frames\n",
               static_cast<unsigned long long>(imu.samples()), imu.seconds(),
               static_cast<unsigned long long>(end.frames));
   print_device_counters(devices);
-  if (!written) folder.fail_with(err);
-  if (end.imu_status == hal::SourceStatus::kError) folder.fail_with(imu.error());
-  if (end.frame_status == hal::SourceStatus::kError) folder.fail_with(end.camera_error);
+  if (!written) return refuse_recording(folder, err);
+  if (end.imu_status == hal::SourceStatus::kError) return refuse_recording(folder, imu.error());
+  if (end.frame_status == hal::SourceStatus::kError)
+    return refuse_recording(folder, end.camera_error);
   if (!s.sensors.empty()) {
     std::string text;
     for (const char* f : {"imu.yaml", "camchain.yaml", "mirrorcal.yaml"})
       if (!files::read_file(s.sensors + "/" + f, text, err) ||
           !files::write_file(folder.path() + "/" + f, text, err))
-        folder.fail_with(err);
+        return refuse_recording(folder, err);
   }
-  folder.commit();
+  if (!folder.commit(err)) return refuse_recording(folder, err);
   std::printf("wrote %s/mav0%s\n", dir.c_str(),
               s.sensors.empty() ? "" : " and the sensor files of --sensors");
   return 0;
@@ -256,7 +242,7 @@ bool write_simulated_bag(const sim::Scenario& s, std::uint64_t seed, const sim::
 // when a file cannot be written.
 template <int M>
 bool write_simulated_recording(const sim::Scenario& s, std::uint64_t seed, bool intrinsics,
-                               bool hold_skew, bool lens, RecordingFolder& folder,
+                               bool hold_skew, bool lens, const files::StagedFolder& folder,
                                const std::string& sub, std::string& err, const FrameOutput& out) {
   const bool bag = out.bag;
   const std::string dir = folder.path() + sub;
@@ -317,48 +303,52 @@ int cmd_record(int argc, char** argv) {
              {"intrinsics", "hold-skew", "two-stage", "force", "images", "estimate-distortion",
               "bag", "identical-leds"},
              o, error))
-    fail(error);
-  if (!o.flag("out")) fail("record needs --out DIR\n" + usage("record"));
+    return refuse(error);
+  if (!o.flag("out")) return refuse("record needs --out DIR\n" + usage("record"));
   const std::string dir = o.get("out", "");
   if (o.flag("imu") || o.flag("config")) {
-    if (o.flag("bag")) fail("--bag records the simulated rig; the board's devices record a folder");
+    if (o.flag("bag"))
+      return refuse("--bag records the simulated rig; the board's devices record a folder");
     return record_devices(o, dir);
   }
   const bool bag = o.flag("bag");
-  if (bag && o.flag("images")) fail("--bag holds the images already; drop --images");
+  if (bag && o.flag("images")) return refuse("--bag holds the images already; drop --images");
   FrameOutput out;
   out.images = o.flag("images");
   out.bag = bag;
   if (o.flag("identical-leds")) {
-    if (!out.images && !bag) fail("--identical-leds draws the images: give --images or --bag");
+    if (!out.images && !bag)
+      return refuse("--identical-leds draws the images: give --images or --bag");
     out.render.brightness = {out.render.brightness[1]};  // as sim --frames --identical-leds
   }
   const bool two_stage = o.flag("two-stage"), hold_skew = o.flag("hold-skew");
   if (hold_skew && !o.flag("intrinsics") && !two_stage)
-    fail("--hold-skew applies with --intrinsics or --two-stage");
+    return refuse("--hold-skew applies with --intrinsics or --two-stage");
   if (two_stage && o.flag("intrinsics"))
-    fail("--two-stage records stage 1 without and stage 2 with the intrinsics; drop --intrinsics");
+    return refuse(
+        "--two-stage records stage 1 without and stage 2 with the intrinsics; drop --intrinsics");
   // --estimate-distortion: the recording (stage 2's) asks calibrate to estimate the lens's
   // coefficients too (mirrorcal.yaml's estimate_distortion), skew held as with --hold-skew.
   const bool lens = o.flag("estimate-distortion");
   if (lens && ((!o.flag("intrinsics") && !two_stage) || o.get("distortion", "none") == "none"))
-    fail(
+    return refuse(
         "--estimate-distortion applies with --intrinsics or --two-stage and --distortion "
         "radtan|equidistant");
   // --hold-skew: a camera without skew, whose recording asks calibrate to hold it at zero.
   std::uint64_t seed = 0;
   sim::Scenario s;
   if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error))
-    fail(error);
+    return refuse(error);
   if (hold_skew) s = sim::without_skew(s);
   return with_markers(int(s.truth.markers.size()), [&](auto markers) {
     constexpr int M = decltype(markers)::value;
-    RecordingFolder folder(dir, o.flag("force"));
+    files::StagedFolder folder;
+    if (!folder.begin(dir, o.flag("force"), error)) return refuse(error, 1);
     if (!two_stage) {
       if (!write_simulated_recording<M>(s, seed, o.flag("intrinsics"), hold_skew, lens, folder, "",
-                                        error, out))
-        folder.fail_with(error);
-      folder.commit();
+                                        error, out) ||
+          !folder.commit(error))
+        return refuse_recording(folder, error);
       return 0;
     }
     // The two minutes `sim --intrinsics` calibrates (run_two_stage_simulation's seeds), committed
@@ -367,9 +357,9 @@ int cmd_record(int argc, char** argv) {
     if (!write_simulated_recording<M>(s, seed, false, false, false, folder, "/stage1", error,
                                       out) ||
         !write_simulated_recording<M>(s, sim::derive_seed(seed, sim::kStage2SeedStream), true,
-                                      hold_skew, lens, folder, "/stage2", error, out))
-      folder.fail_with(error);
-    folder.commit();
+                                      hold_skew, lens, folder, "/stage2", error, out) ||
+        !folder.commit(error))
+      return refuse_recording(folder, error);
     std::printf(
         "calibrate them as `sim --intrinsics%s%s%s%s --seed %llu` does (the same bytes):\n"
         "  mirrorcal calibrate %s --out OUT1\n  mirrorcal calibrate %s --from OUT1 --out OUT2\n",

@@ -277,14 +277,14 @@ template <int M, int NI>
 int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& sensors) {
   std::string error;
   Prior<M> prior;
-  if (!run_prior(s, sensors, prior, error)) fail(error, 2);
+  if (!run_prior(s, sensors, prior, error)) return refuse(error, 2);
   prior.sigma_imu_intrinsics = sensors.sensors.imu_tolerances;
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
   // one (stage 2 after stage 1, as calibrate --from).
   sim::CalibrationStart start;
   const sim::CalibrationStart* from = nullptr;
   if (o.flag("from")) {
-    if (!sim::read_calibration_start(o.get("from", ""), M, start, error)) fail(error, 1);
+    if (!sim::read_calibration_start(o.get("from", ""), M, start, error)) return refuse(error, 1);
     from = &start;
   }
 
@@ -293,8 +293,8 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   int exit_code = 1;
   if (!open_devices(s, M, sensors.priors.leds, sensors.sensors.width, sensors.sensors.height,
                     sensors.sensors.imu_rate_hz, devices, error, exit_code))
-    fail(error, exit_code);
-  if (!create_out_dir(s.out, error)) fail(error, 1);
+    return refuse(error, exit_code);
+  if (!create_out_dir(s.out, error)) return refuse(error, 1);
 
   const auto estimator = std::make_unique<LiveEstimator<M, NI>>(prior, recording_config(sensors),
                                                                 isatty(STDOUT_FILENO) == 1);
@@ -306,7 +306,7 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   std::unique_ptr<firmware::LoopProfiler> profiler;
   if (!make_profiler(o, clock, imu_period, frame_period, profiler, error) ||
       !apply_realtime_options(o, error))
-    fail(error);
+    return refuse(error);
   firmware::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
@@ -322,13 +322,13 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
 
   print_loop_counters(loop.counters(), streams.seconds());
   print_device_counters(devices);
-  if (profiler && !report_profile(*profiler, "timing", s.out, error)) fail(error, 1);
+  if (profiler && !report_profile(*profiler, "timing", s.out, error)) return refuse(error, 1);
   CalibrationResult result = make_result(filter, sensors.sensors.width, sensors.sensors.height);
   const std::string title = "mirrorcal run, IMU " + s.imu;
   ReportData report = report_data_without_history(result, title);
   if (!streams.log().frames.empty() &&
       !calibrate_log<M, NI>(streams.log(), sensors, from, title, result, report, error))
-    fail(error, 1);
+    return refuse(error, 1);
   // The camera's stamps against the IMU's clock (a V4L2 driver stamping the end of the frame, the
   // bus's latency): what the calibration found.
   const auto t_row = std::size_t(calibration_layout(M, 0)[CalibrationGroup::kTimeOffset].begin);
@@ -336,16 +336,16 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
               1e3 * result.t_d, t_row < result.sigma.size() ? 1e3 * result.sigma[t_row] : 0.0);
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
   report.result = result;
-  if (!write_run_result(s.out, result, report, error)) fail(error, 1);
-  if (end == firmware::LoopEnd::kImuError) fail(streams.imu().error(), 1);
-  if (end == firmware::LoopEnd::kMarkerError) fail(streams.markers().error(), 1);
+  if (!write_run_result(s.out, result, report, error)) return refuse(error, 1);
+  if (end == firmware::LoopEnd::kImuError) return refuse(streams.imu().error(), 1);
+  if (end == firmware::LoopEnd::kMarkerError) return refuse(streams.markers().error(), 1);
   return calibration_exit_status(result);
 }
 
 int cmd_run(int argc, char** argv) {
   Options o;
   std::string error;
-  if (!parse_run_options(argc, argv, o, error)) fail(error);
+  if (!parse_run_options(argc, argv, o, error)) return refuse(error);
   // The settings (--config, then the command line) and the sensor description (--sensors), whose
   // mirrorcal.yaml says how many markers the camera's frames hold and imu.yaml which IMU model
   // the calibration estimates (or --imu-model).
@@ -354,7 +354,7 @@ int cmd_run(int argc, char** argv) {
   ImuModel imu_model = kDefaultImuModel;
   if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error) ||
       !calibration_imu_model(o, sensors.sensors, s.sensors, imu_model, error))
-    fail(error, 2);
+    return refuse(error, 2);
   return with_markers(int(sensors.priors.features_c.size()), [&](auto markers) {
     return with_imu_model_of(imu_model, [&](auto imu) {
       return run_on_devices<decltype(markers)::value, decltype(imu)::value>(o, s, sensors);

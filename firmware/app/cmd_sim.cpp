@@ -152,8 +152,8 @@ int cmd_sim(int argc, char** argv) {
   FrameMode frames;
   std::string error;
   if (!parse(argc, argv, 2, with_value, flags, o, error) || !frame_mode_option(o, frames, error))
-    fail(error);
-  if (!check_stage_options(o, frames, error)) fail(error);
+    return refuse(error);
+  if (!check_stage_options(o, frames, error)) return refuse(error);
   const bool intrinsics = o.flag("intrinsics"), one_stage = o.flag("one-stage");
   // --estimate-distortion: stage 2 estimates the lens's coefficients with fu fv cu cv, skew held
   // (at the scenario camera's; --hold-skew: a camera without skew).
@@ -163,28 +163,28 @@ int cmd_sim(int argc, char** argv) {
   sim::Scenario s;
   if (!parse_count(o, "seed", 1, 0, seed, error) || !scenario_option(o, seed, s, error) ||
       !blink_fits(frames, static_cast<int>(s.truth.markers.size()), error))
-    fail(error);
+    return refuse(error);
   if (o.flag("hold-skew")) s = sim::without_skew(s);
   // --passes N: exactly N (at most kMaxRequestedPasses); by default kDefaultPasses, more while the
   // last gated too many.
   Passes passes;
-  if (!passes_option(o, passes, error)) fail(error);
+  if (!passes_option(o, passes, error)) return refuse(error);
   if (intrinsics && o.flag("passes"))
-    fail("--passes applies to stage 1 only (without --intrinsics)");
+    return refuse("--passes applies to stage 1 only (without --intrinsics)");
   ImuModel imu_model = ImuModel::kCalibrated;
-  if (!imu_model_option(o, simulated_imu_model(s), imu_model, error)) fail(error);
+  if (!imu_model_option(o, simulated_imu_model(s), imu_model, error)) return refuse(error);
   // --estimate-noise: the noise levels from the data, the calibration made again with them.
   passes.estimate_noise = o.flag("estimate-noise");
   if (intrinsics && passes.estimate_noise)
-    fail("--estimate-noise applies to stage 1 only (without --intrinsics)");
+    return refuse("--estimate-noise applies to stage 1 only (without --intrinsics)");
   std::string dir;
-  if (!make_out_dir(o, "out/sim", dir, error)) fail(error, 1);
+  if (!make_out_dir(o, "out/sim", dir, error)) return refuse(error, 1);
   firmware::SteadyClock clock;  // the simulation's own clock is simulated time
   std::unique_ptr<firmware::LoopProfiler> profiler;
   if (!make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz), profiler, error) ||
       !apply_realtime_options(o, error))
-    fail(error);
+    return refuse(error);
   const std::string note = markers_note(s);  // the number of markers, where not three
   std::printf(
       "mirrorcal sim: scenario '%s'%s, seed %llu, %.0f s of data (IMU %.0f Hz, camera %.0f Hz)\n",
@@ -206,13 +206,13 @@ int cmd_sim(int argc, char** argv) {
   const auto progress = [](double f) { print_progress("calibrating", f); };
   return with_markers(int(s.truth.markers.size()), [&](auto markers) {
     constexpr int M = decltype(markers)::value;
-    std::string err;
-    bool written = false;
-    int status = 0;
-    with_filter_blocks(
+    return with_filter_blocks(
         camera_block(intrinsics || lens, o.flag("hold-skew"), lens), imu_model,
         [&](auto k, auto imu) {
           constexpr int NK = decltype(k)::value, NI = decltype(imu)::value;
+          std::string err;
+          int status = 0;
+          bool written = false;
           if constexpr (NK == 0)
             written =
                 report_run(run_simulation<M, NI>(s, seed, progress, frames, profiler.get(), passes),
@@ -221,10 +221,8 @@ int cmd_sim(int argc, char** argv) {
             written = report_run(one_stage ? run_one_stage_simulation<M, NK, NI>(s, seed, progress)
                                            : run_two_stage_simulation<M, NK, NI>(s, seed, progress),
                                  report, status, err);
-          return 0;
+          return written ? status : refuse(err, 1);
         });
-    if (!written) fail(err, 1);
-    return status;
   });
 }
 

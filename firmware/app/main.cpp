@@ -205,8 +205,8 @@ int main(int argc, char** argv) {
     } catch (const mirrorcal::files::StoreError& e) {
       // A calibration's temporary store that could not be written (a full $TMPDIR): as a
       // result file that could not be written, code 1 and the file named.
-      app::fail(e.what(), 1);
+      return app::refuse(e.what(), 1);
     }
   }
-  app::fail("unknown command '" + first + "'\n" + app::usage());
+  return app::refuse("unknown command '" + first + "'\n" + app::usage());
 }
