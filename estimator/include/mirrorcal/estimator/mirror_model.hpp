@@ -417,7 +417,8 @@ inline ImuSample imu_signal_at(const ImuSample* before, const ImuSample& s0, con
 // With it: classical Runge-Kutta (fourth order) on the parabola through the three samples
 // (imu_signal_at), so the error is the signal reconstruction's, falling as dt^3. On a rig tilting
 // at 2 Hz and 200 Hz sampling the second-order scheme's errors are large enough to make marker
-// depths over-confident at 60 Hz frames (NEES 69 with 0.2 px noise, 15 with this one).
+// depths over-confident at 60 Hz frames (docs/estimator.md, "IMU propagation"; tested by
+// ImuPropagation.ParabolaThroughThreeSamplesFallsAsDtCubed, propagation_test.cpp).
 template <class State>
 void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
                    const Vec3<typename State::Scalar>& gravity_n,
@@ -525,9 +526,9 @@ inline ImuNoise noise_across_gap(const ImuNoise& sensor, const GapMotion& m, dou
 // 1-sigma of where the rig may be after an IMU gap too long to propagate across, about where it
 // was before it, at rest: the rig's range of motion in front of the mirror. The attitude's is
 // narrower than a fast rig's tilts: from 0.5 rad the first frames after the restart could settle
-// on a wrong pose and pull the calibration along (random family seed 11: NEES 396 after 5 s of
-// silence, 35 from 0.2 rad; 16 rigs, 400 ms and 5 s gaps: none worse from 0.2 than from 0.5 by
-// more than 8).
+// on a wrong pose and pull the calibration along, and no rig did worse for the narrower width
+// (docs/estimator.md, "IMU gaps"; tested by
+// ImuGap.Of5SRestartsTheMotionStatesAndTheCalibrationStaysConsistent, imu_gap_test.cpp).
 struct MotionRange {
   double position = 0.3;  // m
   double velocity = 1.0;  // m/s

@@ -130,9 +130,9 @@ void solve_right_lower_transposed(const Lower& l, Rhs& x) {
 // weight can lose definiteness in rounding (as robot_localization found).
 // The default alpha = 1 (gamma = sqrt(n)) spreads the points widest: over the wide priors of the
 // first frames, where the measurement's higher-order terms matter, points far out see them and the
-// filter stays honest (with the paper's priors, mean NEES 30 at alpha = 1 against 35 at 0.4 over
-// 12 runs). No point crosses the mirror there: a marker's mirror image lies about twice the
-// mirror distance away, beyond any 4.6-sigma offset of a 10 cm prior.
+// filter stays honest; narrower spreads were less so (docs/estimator.md, "The update"). No point
+// crosses the mirror there: a marker's mirror image lies about twice the mirror distance away,
+// beyond any 4.6-sigma offset of a 10 cm prior.
 // beta = 2 is optimal for Gaussian priors.
 struct UnscentedParams {
   double alpha = 1.0;
@@ -146,8 +146,9 @@ struct SigmaPointParams {
   // An update is split into steps, at most max_steps, so that no step but the last sees a ratio
   // (largest predicted measurement variance of the blocks used) / (its noise variance) above
   // spread_per_step: a step shrinks the measurement's spread by at most 1 + spread_per_step.
-  // Smaller values (3, 10, 30) also split steady-state updates and were less consistent on the
-  // paper's scenario (average NEES 18.2, 17.4, 16.5 against 15.9 at 100, over 100 runs).
+  // Smaller values also split steady-state updates, each step counting the linearisation's error
+  // again, and were less consistent (docs/estimator.md, "The update"; tested by
+  // SigmaPointUpdate.ProgressiveStepsFollowAStronglyNonlinearMeasurement, sigma_point_test.cpp).
   double spread_per_step = 100.0;
   int max_steps = 20;
   // A sigma point outside the measurement's domain (a camera behind the mirror, drawn from a wide

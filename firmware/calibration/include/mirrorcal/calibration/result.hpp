@@ -112,13 +112,13 @@ inline double estimated_camera_parameter(const CalibrationResult& r, int j) {
   return r.estimated_intrinsics == 8 ? k.coeffs[static_cast<std::size_t>(j - 4)] : k.skew;
 }
 
-// A filter that calibrated consistently rejects about 0.1 % of the markers at its 99.9 % gate (9 of
-// about 8700 in the paper scenario). One that rejected more than kSuspectGatedFraction has most
-// likely locked onto a wrong solution: after two passes, 3 of 100 one-stage runs with intrinsics
-// guesses 100 px off (161, 465 and 3783 gated) and run 11 of the frames campaign (64, NEES 322)
-// did, against at most 20 in the 400 good runs of the campaigns. Such a pass is followed by another
-// (run.hpp, Passes), which brought all four back; a result that still gated too many is
-// flagged.
+// The self-check's thresholds below: docs/usage.md, "The self-check", says how each was set.
+//
+// A filter that calibrated consistently rejects about 0.1 % of the markers at its 99.9 % gate. One
+// that rejected more than kSuspectGatedFraction, five times that, has most likely locked onto a
+// wrong solution; good runs stay well below it. Such a pass is followed by another (run.hpp,
+// Passes); a result that still gated too many is flagged. Tested by
+// Cli.ARunThatDivergedIsFlaggedInTheOutputAndTheResult (tests/recording/cli_test.cpp).
 constexpr double kSuspectGatedFraction = 0.005;
 // More than kSuspectGatedFraction of the markers offered to the filter were gated or could not be
 // predicted at all (an estimate that puts them behind the camera is as lost).
@@ -126,9 +126,9 @@ bool gated_too_many(const CalibrationResult& r);
 // The markers the filter used fit worse than its covariance says: the last pass's normalised
 // innovation squared per degree of freedom above 1 + max(kSuspectNisExcess, 5 sqrt(2 / dof)) (a
 // consistent filter's is within a few hundredths of 1, a little below it as the gate cuts the
-// tail: 0.97-1.03 over the paper campaign's 100 runs). It catches runs locked onto a wrong
-// solution (over 200 rigs of the random family, before the Gauss-Newton step of run.cpp: 6 of
-// the 8 runs worse than 10 sigma), not merely over-confident ones, which fit as well as good runs.
+// tail; 5 sqrt(2 / dof) is five standard deviations of a chi-square's mean, for short runs). It
+// catches runs locked onto a wrong solution, not merely over-confident ones, which fit as well as
+// good runs. Tested by Cli.ASecondPassThatFitsBadlyIsFollowedByAnother (cli_test.cpp).
 constexpr double kSuspectNisExcess = 0.05;
 bool innovations_too_large(const CalibrationResult& r);
 // Any of the above, or a filter that refused predicts or updates as numerically broken (none does
@@ -136,41 +136,39 @@ bool innovations_too_large(const CalibrationResult& r);
 bool suspect(const CalibrationResult& r);
 // The filter's own covariance was well below the one linearised along its final estimate: its
 // path through early estimates gathered information the data do not hold, and its estimate is
-// likely off by more than its sigmas. The paper campaign's runs lie at 0.98-1.00. Since the
-// refinement's last step takes the measurement's Jacobian (run.hpp, kTangentAlphaScale), whose
-// covariance is a little wider than the regression's, good runs reach lower: over 900 rigs of the
-// random family (seeds 1, 2, 3 and 7), the 31 runs at 0.3-0.5 have an average NEES of 13.8, the
-// 24 below 0.3 of 19.6 (0.2-0.3) and 64 (below 0.2). (Before that step, 0.5 with the
-// refinement's step below flagged 33 of 592 good runs over seeds 1-3.)
+// likely off by more than its sigmas. A good run's ratio is near 1, but the refinement's last step
+// takes the measurement's Jacobian (run.hpp, kTangentAlphaScale), whose covariance is a little
+// wider than the regression's, so good runs reach well below it; the limit sits where runs stop
+// being consistent, and a higher one flags good runs. Tested by
+// Cli.ARunThatGainedFalseInformationIsFlagged (cli_test.cpp).
 constexpr double kSigmaRatioLimit = 0.3;
 bool path_gained_false_information(const CalibrationResult& r);
 // The refinement's last Gauss-Newton step (the one at the measurement's Jacobian, run.hpp) still
 // moved the calibration by more than kRefinementStepLimit sigmas: the regression's and the
 // Jacobian's linearisations disagree by more than the estimate's uncertainty, the posterior is
 // not the Gaussian the covariance describes, and neither estimate nor covariance can be trusted.
-// Over 900 rigs of the random family (seeds 1, 2, 3 and 7) the last step's median is 0.2 sigmas
-// and its 99th percentile about 2; 3 runs end with a longer one (4.3, 4.5 and 21 sigmas), one of
-// them 4.8 sigmas off (NEES 74) and flagged by nothing else.
-// Or the refinement took no step at all (refinement_refused): the free passes' estimate stands.
+// A converged iteration's last step is a fraction of a sigma; the limit leaves room for the
+// longest good ones. Or the refinement took no step at all (refinement_refused): the free passes'
+// estimate stands. Tested by Cli.ARefinementThatHasNotConvergedIsFlagged (cli_test.cpp).
 constexpr double kRefinementStepLimit = 3.0;
 bool refinement_unconverged(const CalibrationResult& r);
 // The filter used under kMinUsedFraction of the markers in the data (the loop skipped the rest:
 // frames at times the IMU data do not cover, markers outside the image): it calibrated on a
-// sliver of the recording. Good runs use over 95 %.
+// sliver of the recording; good runs use nearly all. Tested by
+// Cli.ARunThatUsedFewOfTheMarkersObservedIsFlagged (cli_test.cpp).
 constexpr double kMinUsedFraction = 0.5;
 bool used_too_few(const CalibrationResult& r);
 // The estimate lies beyond kPriorContradictedSigmas of the prior's sigmas from its guess in some
 // calibration state: the prior claimed far more than it knew, and the estimate, pulled towards
-// it, is off by more than its own sigmas say (p_b_c 2 cm off with a 1 mm sigma: 10.8 sigmas).
-// Over 100 runs of the paper scenario and 100 of the random family (priors drawn as stated), the
-// largest offset was 3.6 sigmas, and 4.7 in a run flagged for its fit anyway; none used under
-// 99.7 % of its markers.
+// it, is off by more than its own sigmas say. Guesses drawn from the priors as stated stay well
+// inside the limit. Tested by Cli.APriorContradictedByTheDataIsFlagged (cli_test.cpp: p_b_c
+// 2 cm off with a 1 mm sigma).
 constexpr double kPriorContradictedSigmas = 5.0;
 bool prior_contradicted(const CalibrationResult& r);
 // The IMU's intrinsics lie beyond kPriorContradictedSigmas of their tolerances from the ideal IMU:
-// the estimate has traded the markers' scale or the camera's pose against an IMU no part is (a
-// mems rig of 200 locked onto accelerometer scale factors of 5.7 with the markers shrunk to
-// match: NEES 1.1e5, every other check passed), or imu.yaml's tolerances are far too tight.
+// the estimate has traded the markers' scale or the camera's pose against an IMU no part is (its
+// scale factors far from 1 with the markers scaled to match, which every other check passes), or
+// imu.yaml's tolerances are far too tight (docs/scenarios.md, "The mems family").
 bool imu_contradicted(const CalibrationResult& r);
 // A calibration that assumed an ideal IMU (model calibrated) on data that say otherwise: its
 // ideal-IMU check (imu_result.hpp, IdealImuCheck) found the scale factors and axes beyond an
@@ -178,10 +176,9 @@ bool imu_contradicted(const CalibrationResult& r);
 bool imu_not_ideal(const CalibrationResult& r);
 // The markers' common scale (marker_scale_sigma) known only to worse than kLooseMarkerScale: the
 // motion hardly accelerated the rig, and the estimate is neither as good as the data nor as its
-// sigmas say. 20 rigs of the random family beyond it (seeds 9, 10 and 12; 40 runs of each with
-// new noise, montecarlo --rig): the runs nothing else flagged were 1.1-3.3 times further from the
-// truth than the data allow (median 1.22; the family's typical rig 1.0-1.1) and their marker
-// errors 0.84-2.1 of their sigmas RMS. 2.6 % of the family's rigs lie beyond it, all slow sweeps.
+// sigmas say. The NEES hides it (the error lies along one direction), so the scale's own sigma
+// is checked; only slow sweeps lie beyond the limit. Tested by
+// Report.ExcitationSaysHowWellTheMarkersScaleIsKnown (tests/firmware/report_test.cpp).
 constexpr double kLooseMarkerScale = 0.04;
 bool scale_unresolved(const CalibrationResult& r);
 // Detection in the images saw blobs but labelled few markers: fewer than kMinLabelledShare of

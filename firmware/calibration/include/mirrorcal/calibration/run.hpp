@@ -138,71 +138,69 @@ struct LoopHooks {
   firmware::LoopProfiler* profiler = nullptr;
 };
 
+// The constants below are measured in docs/estimator.md, "Passes and refinement" and "Noise levels
+// from the data", which link to the measurements that set them.
+//
 // Passes over the data that a calibration makes by default. The first pass linearises the
 // measurements about the user's guesses (markers known to 10 cm while their mirror images are
 // 60 cm away): those early linearisation errors stay in the estimate and make the filter
-// over-confident (average NEES of the calibration states about 30 where 15 is consistent). The
-// second pass starts the calibration parameters at the first pass's estimate, with the prior's
-// covariance; its estimate is consistent (NEES 15-17) and as accurate as a run started at the
+// over-confident. The second pass starts the calibration parameters at the first pass's estimate,
+// with the prior's covariance; its estimate is consistent and as accurate as a run started at the
 // truth. The data count twice only through the prior mean, whose weight against the data's is
-// (final sigma / prior sigma)^2 < 1e-4 in stage 1. A parameter whose prior still weighs more than
-// kNegligiblePriorWeight (stage 2's start from stage 1's covariance) keeps its prior mean: moving
-// it made stage 2 over-confident (average NEES 23.0 of 20 states over 40 runs, outside 18.1..22.0).
+// (final sigma / prior sigma)^2, negligible in stage 1. A parameter whose prior still weighs more
+// than kNegligiblePriorWeight (stage 2's start from stage 1's covariance) keeps its prior mean:
+// moving it counts stage 2's data twice and makes it over-confident.
 constexpr int kDefaultPasses = 2;
 constexpr double kNegligiblePriorWeight = 1e-2;
 // A first pass that starts from guesses several sigma off can diverge badly enough that the second
-// pass, started from it, still gates more than kSuspectGatedFraction of the markers (run 11 of the
-// frames campaign: 64 gated, NEES 322; a third pass from its estimate gates 12, NEES 18.9). So a
-// pass that gated too many is followed by another, up to kMaxPasses; a good run gates about 0.1 %
-// and stops at kDefaultPasses.
+// pass, started from it, still gates more than kSuspectGatedFraction of the markers, and a third
+// from its estimate comes back. So a pass the self-check finds suspect (result.hpp) is followed by
+// another, up to kMaxPasses; a good run stops at kDefaultPasses. Tested by
+// Cli.ASecondPassThatFitsBadlyIsFollowedByAnother (tests/recording/cli_test.cpp).
 constexpr int kMaxPasses = 4;
 // A run still suspect after kDefaultPasses has locked onto a wrong solution, and passes from its
-// estimate rarely leave it: one-stage, 3 of 100 runs gated 3309-5678 markers after four such passes
-// and ended at NEES 1.4e7, 4.3e10 and 1722, and a fourth used no marker at all. Which runs do is
-// chaotic (one of them converges from a time-offset guess 20 ms off and diverges from 31 ms or
-// -20 ms). So the next pass starts again from the prior's guesses with the pixel noise taken
-// kAnnealedPixelNoise times larger: each frame then pulls only as hard as its linearisation about
-// guesses far off can bear, the estimate walks to the solution instead of locking on, and the
-// pass after it, at the true noise, starts from its estimate. All four, and the stage 1 of a
-// hold-skew run that used no marker, then converge (NEES 1.2-4.6 of 16-21 states at 8x and 16x;
-// not at 3x).
+// estimate rarely leave it; which runs lock on is chaotic (a slightly different guess of the time
+// offset decides it). So the next pass starts again from the prior's guesses with the pixel noise
+// taken kAnnealedPixelNoise times larger: each frame then pulls only as hard as its linearisation
+// about guesses far off can bear, the estimate walks to the solution instead of locking on, and
+// the pass after it, at the true noise, starts from its estimate. A factor of a few still locks
+// on; this one lies inside the range that brought every such run back. Tested by
+// Cli.ARunThatDivergedIsFlaggedInTheOutputAndTheResult (tests/recording/cli_test.cpp).
 constexpr double kAnnealedPixelNoise = 10.0;
-// The stretch of data a later pass's IMU start is found from (run.cpp, imu_start_from): up to
-// the kImuStartFrames-th frame with markers, at most kImuStartMaxS seconds.
 // Gauss-Newton refinements after the passes (run.cpp): each a tracking pass along the estimate,
 // smoothed, and a pass linearised along it, repeated until a step moves the calibration by less
 // than kConvergedStepSigmas of its sigmas (Mahalanobis), at most kMaxRefinements times. A second
-// step moves the linearisation point from the free passes' estimate to the first step's solution:
-// over the 200 rigs of the random family (seed 1) median NEES 17.1 -> 16.9, runs beyond 4 sigma
-// 3 -> 1 (flagged); seed 2: 7 -> 4, all flagged. Four steps in every run changed nothing more
-// (100 rigs: median 17.6 either way); the good runs' second step has a median of 0.0 sigmas.
+// step moves the linearisation point from the free passes' estimate to the first step's solution,
+// which leaves fewer runs far off; in a good run it is already next to nothing, and forcing more
+// steps on every run changed nothing, so the cap only bounds what a run that does not converge
+// costs.
 constexpr int kMaxRefinements = 4;
 constexpr double kConvergedStepSigmas = 1.0;
 // A marker whose residual at the refinement's converged solution (its tracking pass) lies beyond
 // kOutlierSigmas of the pixel noise is an outlier (a wrong blob the frame's screen let through):
-// the refinement's passes drop it (run.cpp, find_outliers).
+// the refinement's passes drop it (run.cpp, find_outliers). Unless it lies beyond in more than
+// kOutlierMaxShare of its frames: then its own model is off, not a blob (docs/estimator.md, "The
+// update").
 constexpr double kOutlierSigmas = 6.0;
 constexpr double kOutlierMaxShare = 0.05;
 // Those steps regress each frame's measurement over the filter's spread about the trajectory
 // (SigmaPointParams::linearised_alpha_scale 1), which pulls the iteration in from estimates far
 // off. But their fixed point is where the data's error follows the Jacobian while the covariance
-// follows the regression's slopes, which the spread of the first seconds (markers known to
-// 3-10 cm, the rotation to 5 deg) bends: on noise-free data with the IMU's start and biases
-// known, an estimate kept 1.24 times the share of the prior's error (mean square, p_b_c) that its
-// covariance said, the same at a quarter of the prior's error (so not a nonlinearity of the
-// data). So one more step follows, linearised at the trajectory with alpha times
-// kTangentAlphaScale: the measurement's Jacobian, the same for estimate and covariance (the
-// Laplace approximation at the solution; that ratio 1.00). Random family, seeds 1, 2, 3 (200
-// rigs each) and 7 (300): average NEES 17.68, 16.81, 79.5, 17.04 -> 17.53, 16.27, 18.24, 16.10,
-// runs beyond 4 sigma 1, 0, 2, 3 -> 1, 0, 1, 0. Tangent slopes in every step converge worse
-// (3 of 600 runs ended 4.3-6.8 sigma off, 2 of them unflagged). That last step's length is the
-// self-check's refinement_step (result.hpp, kRefinementStepLimit).
+// follows the regression's slopes, which the wide spread of the first seconds bends: the estimate
+// keeps more of the prior's error than its covariance says, whatever the size of that error (a
+// mismatch of the two linearisations, not a nonlinearity of the data). So one more step follows,
+// linearised at the trajectory with alpha times kTangentAlphaScale: the measurement's Jacobian,
+// the same for estimate and covariance (the Laplace approximation at the solution). Jacobian
+// slopes in every step converge worse, so only the last step takes them. Its length is the
+// self-check's refinement_step (result.hpp, kRefinementStepLimit). Tested by
+// Refinement.KeepsOfTheGuessesErrorWhatItsCovarianceSays (tests/firmware/refinement_test.cpp).
 constexpr double kTangentAlphaScale = 1.0 / 64.0;
 // Noise estimation (Passes::estimate_noise): the calibrations it makes at most, and the change
 // of the pixel noise's estimate under which it stops. The first starts from kNoiseStartScale
 // times the stated pixel noise: a noise stated too small makes the gate reject the markers that
-// would show it (told half the truth, a fifth of them), and the estimate from those let through
-// reads low; from above, the gate rejects nothing and the estimate comes down in a step or two.
+// would show it, and the estimate from those let through reads low; from above, the gate rejects
+// nothing and the estimate comes down in a step or two. Tested by
+// NoiseEstimation.FourRigsToldTheWrongNoiseCalibrateConsistently (noise_estimation_test.cpp).
 constexpr int kMaxNoiseRuns = 4;
 constexpr double kNoiseConvergedFraction = 0.03;
 constexpr double kNoiseStartScale = 2.0;
@@ -213,6 +211,8 @@ constexpr double kImuCheckMinInformation = 0.1;
 constexpr double kImuCheckQuantile = 0.999;
 // The first pass number the check's passes ask hooks for (run_loop): after every other.
 constexpr int kImuCheckPass = 1000;
+// The stretch of data a later pass's IMU start is found from (run.cpp, imu_start_from): up to
+// the kImuStartFrames-th frame with markers, at most kImuStartMaxS seconds.
 constexpr int kImuStartFrames = 10;
 constexpr double kImuStartMaxS = 2.0;
 
