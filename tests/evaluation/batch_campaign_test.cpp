@@ -8,6 +8,7 @@
 
 #include "batch_runs.hpp"
 #include "mirrorcal/calibration/statistics.hpp"
+#include "mirrorcal/evaluation/campaign_statistics.hpp"
 
 namespace {
 

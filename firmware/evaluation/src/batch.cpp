@@ -678,35 +678,6 @@ TruthError truth_error(const calibration::CalibrationResult& r, const sim::Recor
   return t;
 }
 
-void BatchComparison::add(const Eigen::VectorXd& filter_error, const Eigen::VectorXd& batch_error,
-                          double batch_nees) {
-  for (int j = 0; j < layout_.size(); ++j) {
-    const std::size_t g = index(layout_.group_of(j));
-    filter_sq_[g] += filter_error(j) * filter_error(j);
-    batch_sq_[g] += batch_error(j) * batch_error(j);
-    count_[g] += 1.0;
-  }
-  batch_nees_.push_back(batch_nees);
-}
-
-double BatchComparison::filter_rms(CalibrationGroup g) const {
-  return count_[index(g)] > 0.0 ? std::sqrt(filter_sq_[index(g)] / count_[index(g)]) : 0.0;
-}
-
-double BatchComparison::batch_rms(CalibrationGroup g) const {
-  return count_[index(g)] > 0.0 ? std::sqrt(batch_sq_[index(g)] / count_[index(g)]) : 0.0;
-}
-
-double BatchComparison::ratio(CalibrationGroup g) const {
-  return batch_rms(g) > 0.0 ? filter_rms(g) / batch_rms(g) : 0.0;
-}
-
-double BatchComparison::mean_batch_nees() const {
-  double sum = 0.0;
-  for (const double n : batch_nees_) sum += n;
-  return batch_nees_.empty() ? 0.0 : sum / static_cast<double>(batch_nees_.size());
-}
-
 bool solve_batch(const BatchInput& input, const BatchOptions& options,
                  calibration::CalibrationResult& result, BatchReport& report, std::string& error) {
   BatchSolver solver(input, options);

@@ -87,28 +87,4 @@ struct TruthError {
 };
 TruthError truth_error(const calibration::CalibrationResult& r, const sim::RecordingTruth& truth);
 
-// A campaign's filter against the batch on the same runs (montecarlo --batch): each parameter
-// group's RMS error of both over the runs, and the batch's own NEES.
-class BatchComparison {
- public:
-  explicit BatchComparison(const CalibrationLayout& layout) : layout_(layout) {}
-  // One run's errors (calibration_params() order, SI) and the batch's NEES.
-  void add(const Eigen::VectorXd& filter_error, const Eigen::VectorXd& batch_error,
-           double batch_nees);
-  std::size_t runs() const { return batch_nees_.size(); }
-  // The group's RMS error of the filter and of the batch (SI), and the first over the second
-  // (0 for a group the layout does not have).
-  double filter_rms(CalibrationGroup g) const;
-  double batch_rms(CalibrationGroup g) const;
-  double ratio(CalibrationGroup g) const;
-  double mean_batch_nees() const;
-  int states() const { return layout_.size(); }
-
- private:
-  static std::size_t index(CalibrationGroup g) { return static_cast<std::size_t>(g); }
-  CalibrationLayout layout_;
-  std::array<double, kCalibrationGroups> filter_sq_{}, batch_sq_{}, count_{};
-  std::vector<double> batch_nees_;
-};
-
 }  // namespace mirrorcal::evaluation
