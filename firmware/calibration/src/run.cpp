@@ -142,10 +142,10 @@ CalibrationRun<M, NK, NI> run_pass(const CalibrationConfig& config,
   firmware::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
-  // A pass linearised along a trajectory takes a first sighting as it comes: there, withholding
-  // the first frame's markers left one random rig's pass from the prior unable to predict most of
-  // its markers, and the refinement took no step (random family, seed 1, run 115). The passes
-  // linearised at their own estimate, which a wrong first blob would carry off, confirm it.
+  // A pass linearised along a trajectory takes a first sighting as it comes: withheld there, a
+  // pass from the prior can be left unable to predict most markers, and the refinement takes no
+  // step (docs/estimator.md, "The update"). The passes linearised at their own estimate, which a
+  // wrong first blob would carry off, confirm it.
   lc.screen.confirm_while_gate_open = along == nullptr;
   firmware::CalibrationLoop<double, M, NK, NI> loop(filter, *imu, markers, lc, &sink);
   if (relabeler != nullptr) loop.set_identifier(&markers);
@@ -685,20 +685,19 @@ std::unique_ptr<CalibrationRun<M, NK, NI>> gauss_newton_step(
   // estimate after that frame's update: an estimate that holds the frame's own noise moves the
   // linearisation with that noise, and where the rig's motion leaves a direction weak (slow
   // sweeps: the markers' scale against the mirror's distance), the measurement's slope along it
-  // grows with that offset, so every frame adds information the data do not hold. From the
-  // truth, one pass on data with pixel noise alone ended with marker sigmas 0.3-0.8 of the same
-  // pass's on noise-free data on such rigs, 1.00 on others. Random family, 200 rigs, runs beyond
-  // 4 sigma and the consistent runs' marker RMS over the data's limit: linearised after each
-  // update 25 (5 of them unflagged) and 1.56; before it 5 and 1.05; smoothed 3 and 0.96 (along
-  // the true motion, a diagnostic: 3 and 0.97).
+  // grows with that offset, so every frame adds information the data do not hold
+  // (docs/estimator.md, "Passes and refinement", measures the three linearisation points).
   at.trajectory = std::make_unique<Trajectory<M, NK, NI>>();
   at.imu_residuals = std::make_shared<RecordStore<ImuResidual>>("the IMU's residuals");
   smoothed_trajectory<M, NK, NI>(*track, *at.trajectory, *at.imu_residuals);
-  // From the prior's guesses of the calibration (the data count once), and the IMU start the
-  // trajectory has.
+  // From the prior's guesses, so that the data count once: the calibration, and the IMU's start
+  // position and velocity. Where slow sweeps hardly excite the accelerometer, the start's prior
+  // holds much of what fixes the markers' scale against the mirror's distance, and a start taken
+  // from the data under the estimate's scale would hold the scale where it is. The attitude
+  // starts where the trajectory has it: the filter propagates along its own estimate, and a start
+  // a degree off the trajectory bends the linearised pass, where the prior's degree is nothing
+  // beside the camera's hold on the attitude (docs/estimator.md, "Passes and refinement").
   at.start = x0;
-  at.start.p = from.p;
-  at.start.v = from.v;
   at.start.q_n_b = from.q_n_b;
   return std::unique_ptr<CalibrationRun<M, NK, NI>>(
       new CalibrationRun<M, NK, NI>(run_pass<M, NK, NI>(
@@ -753,8 +752,8 @@ template <int M, int NK, int NI>
     if (frames_met(*refined) != frames_met(run) || frames_met(*track) != frames_met(run) ||
         refined->filter_counters.failures > 0)
       return false;
-    // A step that makes a good fit bad is not taken (as Levenberg-Marquardt rejects a step that
-    // raises the cost): seed 2385602568054367950 with EuRoC's lens lost its markers in it.
+    // A step that makes a good fit bad is not taken, as Levenberg-Marquardt rejects a step that
+    // raises the cost (a lens's rig lost its markers in one: docs/cameras.md).
     if (suspect(refined->result) && !suspect(run.result)) return false;
     refined->result.refinement_step_sigmas = step_sigmas<M, NK, NI>(*refined, run);
     refined->first_frame = run.first_frame;
@@ -878,9 +877,9 @@ bool wald_statistic(const CalibrationRun<M, 0, NI>& check,
 // The ideal-IMU check (Passes::check_imu; imu_result.hpp, IdealImuCheck) of a calibration that
 // assumed an ideal IMU: one more Gauss-Newton step from its final estimate (as the refinement's
 // last, at the measurement's Jacobian) with the scale-misalignment model's intrinsics added at the
-// ideal IMU, and the Wald statistic of those it finds. Neither a free pass (6 % of 200 ideal rigs
-// beyond a 99.9 % bound: its covariance over-confident) nor a pass along the ideal model's own
-// trajectory (1 % lost its way; on MEMS rigs the refinement took no step to linearise along) did.
+// ideal IMU, and the Wald statistic of those it finds. A free pass (its covariance
+// over-confident) and a pass along the ideal model's own trajectory (which loses its way) were
+// worse (docs/estimator.md, "The IMU's intrinsics").
 template <int M>
 [[gnu::noinline]] void check_ideal_imu(
     const CalibrationConfig& config, const typename CalibrationRun<M, 0, 0>::State& x0,
@@ -910,9 +909,8 @@ template <int M>
       with_imu_prior<NI, M, 0>(calibration_held<M, 0, 0>(p0, run), sigma), next_hooks, track, at,
       veto);
   if (wald_statistic<M, NI>(*check, at.start, p, out)) return;
-  // That step lost its way (1 % of ideal rigs; a mems rig whose ideal-IMU estimate was 3,956 NEES
-  // off): a free pass from the same start judges instead (over-confident, but as a fallback it
-  // adds 0.1 % of false alarms).
+  // That step lost its way: a free pass from the same start judges instead, over-confident but
+  // rare as a fallback (docs/estimator.md, "The IMU's intrinsics").
   const std::unique_ptr<const Run> free(new Run(run_pass<M, 0, NI>(
       config, in_imu_model<NI>(from), p, data, nullptr, {}, next_hooks(), nullptr, false, &veto)));
   wald_statistic<M, NI>(*free, in_imu_model<NI>(from), p, out);
