@@ -228,7 +228,7 @@ class CalibrationFilter {
   // noise they add accumulates on the 15 states it reaches (F Q F^T + Q a step, at the ideal
   // IMU's cost; the ideal IMU's layout), and settle applies P_dd <- F P_dd F^T + Q once.
   struct NoNoise {};
-  using MotionNoise = std::conditional_t<(NI > 0), Eigen::Matrix<S, 15, 15>, NoNoise>;
+  using MotionNoise = std::conditional_t<(NI > 0), typename Transition::MotionNoise, NoNoise>;
   mutable MotionNoise unsettled_noise_{};
   void settle() const {
     if (!has_unsettled_) return;
@@ -250,9 +250,9 @@ class CalibrationFilter {
       unsettled_.sandwich(filter_.covariance().template topLeftCorner<D, D>(), p_dd);
       // The ideal IMU's [v, b_a, b_g | p, theta] are this block's [v, b_a, b_g | (intrinsics) p,
       // theta].
-      const auto at = [](int i) { return i < 9 ? i : i + NI; };
-      for (int j = 0; j < 15; ++j)
-        for (int i = 0; i < 15; ++i) p_dd(at(i), at(j)) += unsettled_noise_(i, j);
+      const auto at = [](int i) { return i < State::kImu ? i : i + NI; };
+      for (int j = 0; j < kImuMotionDim; ++j)
+        for (int i = 0; i < kImuMotionDim; ++i) p_dd(at(i), at(j)) += unsettled_noise_(i, j);
       filter_.template reset_leading<D>(filter_.mean(), p_dd);
       unsettled_noise_.setZero();
     }
@@ -349,7 +349,7 @@ FilterStatus CalibrationFilter<S, M, NK, NI>::predict(const ImuSample& s0, const
       gap_s > 0.0 ? noise_across_gap(config_.imu, config_.gap, gap_s) : config_.imu;
   const bool moved_finite = x.v.allFinite() && x.p.allFinite() && x.q_n_b.coeffs().allFinite();
   if constexpr (NI > 0) {  // P_dd waits with P_cd (settle_imu_block); the noise accumulates
-    Eigen::Matrix<S, 15, 15> q;
+    typename Transition::MotionNoise q;
     if (has_unsettled_)
       f.motion_sandwich(unsettled_noise_, q);
     else  // the first step since a settle: no noise has accumulated to carry

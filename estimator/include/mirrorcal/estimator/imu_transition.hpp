@@ -182,14 +182,16 @@ struct ImuTransition {
     return m;
   }
 
-  // F Q F^T for a Q on the 15 states other than the intrinsics, in the ideal IMU's layout (the
-  // process noise a run of steps accumulates): the ideal IMU's products, and the g-sensitivity's.
-  void motion_sandwich(const Eigen::Matrix<S, 15, 15>& q, Eigen::Matrix<S, 15, 15>& out) const {
+  // The process noise a run of steps accumulates: on the states other than the intrinsics, in the
+  // ideal IMU's layout.
+  using MotionNoise = Eigen::Matrix<S, kImuMotionDim, kImuMotionDim>;
+  // F Q F^T for such a Q: the ideal IMU's products, and the g-sensitivity's.
+  void motion_sandwich(const MotionNoise& q, MotionNoise& out) const {
     static_assert(NI > 0, "the ideal IMU's F is its own without_intrinsics");
     using Ideal = ImuTransition<S, 0>;
-    constexpr int kBa = 3, kTheta0 = Ideal::kTheta;
+    constexpr int kBa = Ideal::Layout::kBa, kTheta0 = Ideal::kTheta;
     const Ideal m = without_intrinsics();
-    Eigen::Matrix<S, 15, 15> qf;  // Q F^T
+    MotionNoise qf;  // Q F^T
     m.right_multiply_transposed(q, qf);
     for (int r = 0; r < 3; ++r)
       for (int j = 0; j < 3; ++j) qf.col(kTheta0 + r) += imu.theta_ba(r, j) * q.col(kBa + j);

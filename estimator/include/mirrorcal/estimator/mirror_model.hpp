@@ -382,6 +382,10 @@ struct MirrorState {
   }
 };
 
+// The ideal IMU's dynamic block [v, b_a, b_g, p, theta]: the states the process noise reaches
+// whatever the IMU's model (its intrinsics, constants, take none).
+inline constexpr int kImuMotionDim = MirrorState<double, 1, 0>::kDynamicDim;
+
 // The IMU signal at time t between samples s0 and s1: the parabola through the sample before s0,
 // s0 and s1 when that sample is given (third-order accurate in the sample spacing), else the line
 // through s0 and s1. Any three samples on one parabola give the same parabola, so splitting an
@@ -474,7 +478,8 @@ void propagate_imu(State& x, const ImuSample& s0, const ImuSample& s1,
 // biases. The noise is isotropic, so rotating it into n changes nothing.
 template <typename S, int D>
 void add_imu_process_noise(const ImuNoise& n, double dt, Eigen::Matrix<S, D, D>& p) {
-  using Layout = MirrorState<S, 1, 0, D - 15>;  // the dynamic block's layout is the same for any M
+  using Layout =
+      MirrorState<S, 1, 0, D - kImuMotionDim>;  // the dynamic block's layout is the same for any M
   const double sa2 = n.accel_noise_density * n.accel_noise_density;
   const double sg2 = n.gyro_noise_density * n.gyro_noise_density;
   const auto add = [&p](int row, int col, double q) {  // q I on one 3x3 block
@@ -491,7 +496,7 @@ void add_imu_process_noise(const ImuNoise& n, double dt, Eigen::Matrix<S, D, D>&
 }
 
 // The same as a matrix.
-template <typename S, int D = 15>
+template <typename S, int D = kImuMotionDim>
 Eigen::Matrix<S, D, D> imu_process_noise(const ImuNoise& n, double dt) {
   Eigen::Matrix<S, D, D> q = Eigen::Matrix<S, D, D>::Zero();
   add_imu_process_noise<S, D>(n, dt, q);
