@@ -229,8 +229,9 @@ void write_still_bag(const std::string& dir, double seconds) {
 
 // A bag is streamed, one chunk at a time: calibrate takes the same memory on a bag of ten minutes
 // (12,001 images, 920 MB of pixels) as on one of one minute. A calibration's peak varies by some
-// hundred KiB from run to run: the short bag's is the larger of two runs. The bound, 1 MiB, is 8
-// bytes of each of the 118,800 messages the long bag has more.
+// hundred KiB from run to run, more on a loaded machine (a single run of the long bag once came out
+// beyond the bound under ctest -j2): each bag's peak is the least of three runs. The bound, 1 MiB,
+// is 8 bytes of each of the 118,800 messages the long bag has more.
 TEST(StreamedInput, ATenMinuteBagIsReadInTheMemoryOfAOneMinuteOne) {
   TempDir tmp("bag-memory");
   const double seconds[2] = {60.0, 600.0};
@@ -238,7 +239,7 @@ TEST(StreamedInput, ATenMinuteBagIsReadInTheMemoryOfAOneMinuteOne) {
   for (int i = 0; i < 2; ++i) {
     const std::string bag = tmp.path + "/bag" + std::to_string(i);
     write_still_bag(bag, seconds[i]);
-    for (int run = 0; run < 2 - i; ++run) {
+    for (int run = 0; run < 3; ++run) {
       const Measured m = run_measured({"calibrate", bag, "--out", bag + "-out"}, bag + ".log",
                                       {"PATH=/nonexistent"});
       // Read whole and calibrated from nothing: "no marker was seen", flagged (exit status 3).
