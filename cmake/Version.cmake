@@ -1,4 +1,4 @@
-# Script mode, run at every build: writes OUT, the source of mirrorcal::sim::version(), with the
+# Script mode, run at every build: writes OUT, the source of mirrorcal::io::version(), with the
 # project's VERSION and the commit SRC is at (git describe; "unknown" outside a git checkout). The
 # file is rewritten only when either changes, so that a new commit recompiles one small unit.
 execute_process(COMMAND git -C ${SRC} describe --always --dirty --abbrev=12
@@ -8,9 +8,9 @@ if(NOT status EQUAL 0 OR commit STREQUAL "")
   set(commit "unknown")
 endif()
 set(text "// Written by cmake/Version.cmake at build time.
-#include \"mirrorcal/sim_host/version.hpp\"
+#include \"mirrorcal/io/version.hpp\"
 
-namespace mirrorcal::sim {
+namespace mirrorcal::io {
 
 const char* version() {
   return \"${VERSION}\";
@@ -20,7 +20,7 @@ const char* commit() {
   return \"${commit}\";
 }
 
-}  // namespace mirrorcal::sim
+}  // namespace mirrorcal::io
 ")
 set(old "")
 if(EXISTS ${OUT})

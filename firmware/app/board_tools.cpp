@@ -1,8 +1,10 @@
-// The board's build of the program: no simulation commands, no plots (firmware/evaluation is the
-// host's; a board has neither gnuplot nor a use for Monte Carlo campaigns).
+// The board's build of the program: no simulation commands (nor record of the simulated rig), no
+// plots (firmware/evaluation is the host's; a board has neither gnuplot nor a use for Monte Carlo
+// campaigns).
 #include <cstdio>
 
 #include "build_tools.hpp"
+#include "record.hpp"
 
 namespace mirrorcal::app {
 
@@ -28,6 +30,12 @@ int cmd_montecarlo(int, char**) {
 }
 int cmd_batch(int, char**) {
   return host_only("batch");
+}
+int record_simulated(const Options&, const std::string&) {
+  std::fprintf(stderr,
+               "mirrorcal record: the board's devices are recorded with --imu DEV (the "
+               "simulated rig is the host's build's)\n");
+  return 2;
 }
 
 ReportPlots report_plots(bool draw) {

@@ -8,8 +8,7 @@
 
 #include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/estimator/marker_counts.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace mirrorcal::app {
 
@@ -69,26 +68,6 @@ bool parse(int argc, char** argv, int first, const std::vector<std::string>& wit
 bool parse_count(const Options& o, const std::string& key, std::uint64_t def, std::uint64_t min,
                  std::uint64_t& value, std::string& error, std::uint64_t max = UINT64_MAX);
 
-// The scenario named by --scenario (default "paper"); the random family's draw for seed, with
-// --markers N markers (a built count; the paper's rig has three). With --duration S (s, within
-// kMinSimulatedDurationS..kMaxSimulatedDurationS), S seconds of its motion instead of its minute
-// (sim and record take it; a campaign's runs keep their minute). With
-// --timeshift S (s, within +-kMaxSimulatedTimeshiftS), the true camera-IMU time offset is S; with
-// --distortion MODEL, the camera has that lens (sim::set_lens); with --line-delay S, a rolling
-// shutter reading each row S seconds after the one above (a whole frame within
-// kMaxSimulatedReadoutS); with --outliers P, in the share P of frames (at most
-// kMaxSimulatedMistakeShare; "0.02" or "2%") one marker's pixel is a random one, as a detector
-// that took a room light for an LED gives it; with --label-swaps P, markers 0's and 1's labels
-// are swapped in that share.
-constexpr double kMinSimulatedDurationS = 1.0;
-constexpr double kMaxSimulatedDurationS = 600.0;
-constexpr double kMaxSimulatedTimeshiftS = 0.5;
-constexpr double kMaxSimulatedReadoutS = 0.1;
-constexpr double kMaxSimulatedMistakeShare = 0.5;
-bool scenario_option(const Options& o, std::uint64_t seed, sim::Scenario& s, std::string& error);
-// ", N markers" for a rig with other than the paper's three markers, "" for three: what the
-// simulating commands add to their titles.
-std::string markers_note(const sim::Scenario& s);
 // What a count this build does not have gets told: the counts it has and how to add one.
 std::string marker_count_not_built(int m);
 
@@ -98,10 +77,6 @@ std::string marker_count_not_built(int m);
 constexpr ImuModel kDefaultImuModel =
     imu_model_built(imu_intrinsics_dim(ImuModel::kScaleMisalignment)) ? ImuModel::kScaleMisalignment
                                                                       : ImuModel::kCalibrated;
-// The model of a simulated scenario's IMU, which sim, montecarlo and record use by default: the
-// default model for a MEMS part (the mems family), the ideal IMU's for an ideal one (the paper's
-// factory-calibrated ADIS16448, the random family).
-ImuModel simulated_imu_model(const sim::Scenario& s);
 // --imu-model NAME (default: fallback), a model this build has.
 bool imu_model_option(const Options& o, ImuModel fallback, ImuModel& model, std::string& error);
 // What a model not built gets told: the models this build has and how to add one.
@@ -109,7 +84,7 @@ std::string imu_model_not_built(ImuModel model);
 // The IMU model a calibration from the sensors folder `folder` (its imu.yaml read into sensors)
 // estimates: --imu-model, else imu.yaml's imu_model, else kDefaultImuModel. Notes on stderr any
 // tolerance imu.yaml leaves to the defaults. Refused: a model not built.
-bool calibration_imu_model(const Options& o, const sim::SensorInfo& sensors,
+bool calibration_imu_model(const Options& o, const io::SensorInfo& sensors,
                            const std::string& folder, ImuModel& model, std::string& error);
 
 // Calls f(ImuIntrinsicsCount<NI>{}) for model's NI (marker_counts.hpp) and returns its exit code; a
@@ -164,7 +139,7 @@ int with_markers(int markers, F&& f) {
   return code;
 }
 
-// Creates dir and locks it against a second mirrorcal writing into it (files::lock_folder) for as
+// Creates dir and locks it against a second mirrorcal writing into it (io::lock_folder) for as
 // long as this one runs; an error if it cannot.
 bool create_out_dir(const std::string& dir, std::string& error);
 // The same for --out (or def), which goes into dir.

@@ -17,7 +17,7 @@ using namespace calibration;
 namespace {
 
 // The estimate as calibrate prints it, with the error against truth.yaml when there is one.
-void print_solution(const CalibrationResult& r, const sim::Recording& rec) {
+void print_solution(const CalibrationResult& r, const io::Recording& rec) {
   const evaluation::TruthError t =
       rec.has_truth ? evaluation::truth_error(r, rec.truth) : evaluation::TruthError{};
   const CalibrationLayout layout = r.layout();
@@ -64,15 +64,15 @@ int cmd_batch(int argc, char** argv) {
   if (o.positional.size() != 1)
     return refuse("batch needs a recording folder DIR\n" + usage("batch"));
   const std::string in = o.positional[0];
-  int markers = sim::kPaperMarkers;
-  if (!sim::recording_marker_count(in, markers, err)) return refuse(err);
-  if (!sim::has_features_csv(in))
+  int markers = kDefaultMarkerCount;
+  if (!io::recording_marker_count(in, markers, err)) return refuse(err);
+  if (!io::has_features_csv(in))
     return refuse(
         in +
         " has no mav0/cam0/features.csv: batch solves labelled markers. Calibrate the recording "
         "first (calibrate finds the markers in its images and writes them to its features.csv)");
-  sim::Recording rec;
-  if (!sim::read_recording(in, markers, rec, err)) return refuse(err, 1);
+  io::Recording rec;
+  if (!io::read_recording(in, markers, rec, err)) return refuse(err, 1);
   for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
   for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
   const bool intrinsics = o.flag("intrinsics") || rec.priors.estimate_intrinsics;
@@ -125,7 +125,7 @@ int cmd_batch(int argc, char** argv) {
                  report.final_iterations, kExitNotConsistent);
     return kExitNotConsistent;
   }
-  files::OutputSet files;
+  io::OutputSet files;
   if (!write_camchain_imucam(files, out + "/camchain-imucam.yaml", r, err) ||
       !write_result_yaml(files, out + "/mirrorcal-result.yaml", r, err) || !files.commit(err))
     return refuse(err, 1);

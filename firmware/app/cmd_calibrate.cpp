@@ -9,8 +9,8 @@
 #include "mirrorcal/calibration/recording_run.hpp"
 #include "mirrorcal/calibration/report.hpp"
 #include "mirrorcal/calibration/statistics.hpp"
-#include "mirrorcal/sim_host/bags.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/bags.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace mirrorcal::app {
 
@@ -19,10 +19,10 @@ using namespace calibration;
 namespace {
 
 // A bag as a recording, in a build that reads bags (MIRRORCAL_BAGS: the host's).
-bool open_bag(const std::string& path, const sim::BagOptions& options, int markers,
-              sim::Recording& out, std::string& error) {
+bool open_bag(const std::string& path, const io::BagOptions& options, int markers,
+              io::Recording& out, std::string& error) {
 #ifdef MIRRORCAL_BAGS
-  return sim::open_bag_recording(path, options, markers, out, error);
+  return io::open_bag_recording(path, options, markers, out, error);
 #else
   (void)options, (void)markers, (void)out;
   error = path +
@@ -33,8 +33,8 @@ bool open_bag(const std::string& path, const sim::BagOptions& options, int marke
 }
 
 template <int M, int NK, int NI = 0>
-int calibrate(const sim::Recording& rec, const std::string& in, const std::string& out,
-              const sim::CalibrationStart* from, const Passes& passes, bool plots) {
+int calibrate(const io::Recording& rec, const std::string& in, const std::string& out,
+              const io::CalibrationStart* from, const Passes& passes, bool plots) {
   if constexpr (NI > 0)
     std::printf("mirrorcal calibrate: the IMU's intrinsics estimated too (model %s)\n",
                 to_string(imu_model_of_dim(NI)));
@@ -119,7 +119,7 @@ int calibrate(const sim::Recording& rec, const std::string& in, const std::strin
         (unsigned long long)d.frames, (unsigned long long)d.markers_labelled,
         (unsigned long long)d.dropped_in_doubt, (unsigned long long)d.unlabelled_blobs,
         d.read_ms_per_frame, d.ms_per_frame);
-    if (const sim::ImageLog* log = rec.streams->image_log(); log && log->unreadable > 0) {
+    if (const io::ImageLog* log = rec.streams->image_log(); log && log->unreadable > 0) {
       std::fprintf(stderr, "mirrorcal: WARNING: %llu images could not be read and were skipped:\n",
                    (unsigned long long)log->unreadable);
       for (int k = 0; k < log->kept; ++k)
@@ -153,47 +153,47 @@ int cmd_calibrate(int argc, char** argv) {
   if (o.positional.size() != 1)
     return refuse("calibrate needs a recording folder DIR or a bag\n" + usage("calibrate"));
   const std::string in = o.positional[0];
-  const bool bag = sim::is_bag(in);
-  const sim::BagOptions bag_options{o.get("sensors", ""), o.get("imu-topic", ""),
-                                    o.get("camera-topic", "")};
+  const bool bag = io::is_bag(in);
+  const io::BagOptions bag_options{o.get("sensors", ""), o.get("imu-topic", ""),
+                                   o.get("camera-topic", "")};
   if (!bag && (o.flag("sensors") || o.flag("imu-topic") || o.flag("camera-topic")))
     return refuse(
         in + " is a recording folder: --sensors, --imu-topic and --camera-topic apply to bags");
   // The filter of the recording's number of markers (mirrorcal.yaml's features_c). Where the
   // files cannot tell, open_recording says what is wrong with them, checking them in order.
-  const std::string yaml_dir = bag ? sim::bag_sensors_dir(in, bag_options) : in;
-  int markers = sim::kPaperMarkers;
+  const std::string yaml_dir = bag ? io::bag_sensors_dir(in, bag_options) : in;
+  int markers = kDefaultMarkerCount;
   std::string unread;
-  sim::recording_marker_count(yaml_dir, markers, unread);
+  io::recording_marker_count(yaml_dir, markers, unread);
   return with_markers(markers, [&](auto m) {
     constexpr int M = decltype(m)::value;
-    sim::Recording rec;
+    io::Recording rec;
     // The markers: features.csv, or found in the images where there is none (or when asked); a
     // bag's are always found in its images.
     const bool from_images =
-        bag || o.flag("from-images") || (!sim::has_features_csv(in) && sim::has_images(in));
+        bag || o.flag("from-images") || (!io::has_features_csv(in) && io::has_images(in));
     // Streamed from its files in each pass: memory does not grow with the recording.
     if (bag) {
       if (!open_bag(in, bag_options, M, rec, err)) return refuse(err, 1);
       std::printf("mirrorcal calibrate: the markers are detected in the images of the bag %s\n",
                   in.c_str());
     } else {
-      if (!sim::open_recording(in, M, rec, err, from_images)) return refuse(err, 1);
+      if (!io::open_recording(in, M, rec, err, from_images)) return refuse(err, 1);
       if (from_images)
         std::printf(
             "mirrorcal calibrate: the markers are detected in the images of %s/mav0/cam0/data%s\n",
             in.c_str(),
-            sim::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
-                                      : " (no features.csv)");
+            io::has_features_csv(in) ? " (--from-images: features.csv beside them is not read)"
+                                     : " (no features.csv)");
     }
     for (const auto& note : rec.notes) std::fprintf(stderr, "mirrorcal: note: %s\n", note.c_str());
     for (const auto& w : rec.warnings) std::fprintf(stderr, "mirrorcal: WARNING: %s\n", w.c_str());
     // --from: the paper's stage 2 on recordings; the camera pose and markers start from an earlier
     // calibration (of another recording: the same data twice would count twice).
-    sim::CalibrationStart start;
-    const sim::CalibrationStart* from = nullptr;
+    io::CalibrationStart start;
+    const io::CalibrationStart* from = nullptr;
     if (o.flag("from")) {
-      if (!sim::read_calibration_start(o.get("from", ""), M, start, err)) return refuse(err, 1);
+      if (!io::read_calibration_start(o.get("from", ""), M, start, err)) return refuse(err, 1);
       if (start.recording_fingerprint == rec.fingerprint && !o.flag("from-same-data"))
         return refuse(
             o.get("from", "") + " was calibrated from this recording's data (" + in +

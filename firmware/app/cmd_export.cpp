@@ -4,7 +4,7 @@
 
 #include "cli.hpp"
 #include "mirrorcal/calibration/result.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace mirrorcal::app {
 
@@ -13,7 +13,7 @@ using namespace calibration;
 namespace {
 
 // What the export writers need of a result, as mirrorcal-result.yaml holds it.
-CalibrationResult result_of(const sim::CalibrationStart& file) {
+CalibrationResult result_of(const io::CalibrationStart& file) {
   CalibrationResult r;
   r.p_b_c = file.p_b_c;
   r.q_b_c = file.q_b_c;
@@ -40,8 +40,8 @@ int cmd_export(int argc, char** argv) {
                   "' is not a format (openvins, vins-fusion or ros-camera-info)");
   const std::string& in = o.positional[0];
   const std::string& out = o.positional[1];
-  sim::CalibrationStart file;
-  if (!sim::read_calibration_result(in, file, err)) return refuse(err, 1);
+  io::CalibrationStart file;
+  if (!io::read_calibration_result(in, file, err)) return refuse(err, 1);
   if (!file.has_camera)
     return refuse(in + ": holds no camera (intrinsics, resolution) to export", 1);
   // A flagged calibration handed to another tool would be used as a good one.

@@ -19,7 +19,7 @@
 #ifdef MIRRORCAL_BATCH
 #include "mirrorcal/evaluation/batch_outcome.hpp"
 #endif
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 #include "sim_options.hpp"
 
 namespace mirrorcal::app {

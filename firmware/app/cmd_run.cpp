@@ -21,8 +21,8 @@
 #include "mirrorcal/calibration/report.hpp"
 #include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
-#include "mirrorcal/firmware/loop.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
+#include "mirrorcal/loop/loop.hpp"
 #include "run_config.hpp"
 
 namespace mirrorcal::app {
@@ -58,11 +58,11 @@ struct SessionLog {
       ++left_out;
   }
   // The log as a recording with the run's sensor description and priors.
-  void to_recording(sim::Recording& r) const {
+  void to_recording(io::Recording& r) const {
     r.imu = imu;
     r.frames.clear();
     for (const MarkerFrame<M>& f : frames) {
-      sim::ObservedFrame o;
+      io::ObservedFrame o;
       o.t_ns = f.t_ns;
       for (int i = 0; i < M; ++i) {
         const auto k = static_cast<std::size_t>(i);
@@ -161,16 +161,16 @@ bool parse_run_options(int argc, char** argv, Options& o, std::string& error) {
 
 // The priors of a run's mirrorcal.yaml (--sensors); an error names the file.
 template <int M>
-bool run_prior(const RunSettings& s, const sim::Recording& sensors, Prior<M>& prior,
+bool run_prior(const RunSettings& s, const io::Recording& sensors, Prior<M>& prior,
                std::string& error) {
-  if (sim::to_prior(sensors.priors, prior, error)) return true;
+  if (io::to_prior(sensors.priors, prior, error)) return true;
   error = s.sensors + "/mirrorcal.yaml: " + error;
   return false;
 }
 
 // Runs the loop while SIGINT and SIGTERM ask it to stop (at the next IMU sample).
 template <class Loop>
-firmware::LoopEnd run_until_signal(Loop& loop) {
+loop::LoopEnd run_until_signal(Loop& loop) {
   StopOnSignal stop_on_signal;
   return loop.run();
 }
@@ -192,7 +192,7 @@ void print_run_start(const RunSettings& s, const Devices& devices, double imu_ra
   std::fflush(stdout);
 }
 
-void print_loop_counters(const firmware::LoopCounters& lcount, double seconds) {
+void print_loop_counters(const loop::LoopCounters& lcount, double seconds) {
   std::printf(
       "loop: %llu IMU samples over %.3f s, %llu gaps (%llu too long to cross: motion restarted), "
       "%llu out of order, %llu frames\n",
@@ -207,8 +207,8 @@ void print_loop_counters(const firmware::LoopCounters& lcount, double seconds) {
 // and priors, calibrated as `mirrorcal calibrate` calibrates one (from an earlier calibration with
 // from). The result and its report replace the live pass's; false with the error when it fails.
 template <int M, int NI>
-bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
-                   const sim::CalibrationStart* from, const std::string& title,
+bool calibrate_log(const SessionLog<M>& log, io::Recording& sensors,
+                   const io::CalibrationStart* from, const std::string& title,
                    CalibrationResult& result, ReportData& report, std::string& error) {
   std::printf(
       "calibrating from the run's %zu IMU samples and %zu labelled frames%s, in %d passes "
@@ -227,7 +227,7 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
     report.from_earlier = from != nullptr;
     return true;
   };
-  const sim::RecordingPriors& p = sensors.priors;
+  const io::RecordingPriors& p = sensors.priors;
   return with_camera_block(camera_block(p.estimate_intrinsics, p.hold_skew, p.estimate_distortion),
                            refine);
 }
@@ -236,7 +236,7 @@ bool calibrate_log(const SessionLog<M>& log, sim::Recording& sensors,
 bool write_run_result(const std::string& dir, const CalibrationResult& result,
                       const ReportData& report, std::string& error) {
   print_result_warnings(result);
-  files::OutputSet out;
+  io::OutputSet out;
   if (!write_camchain_imucam(out, dir + "/camchain-imucam.yaml", result, error) ||
       !write_result_yaml(out, dir + "/mirrorcal-result.yaml", result, error) ||
       !write_report(out, dir, report, report_plots(), error) || !out.commit(error))
@@ -274,17 +274,17 @@ struct LiveEstimator {
 // The live loop of M markers (and NI of the IMU's intrinsics) on the devices, then the calibration
 // of what it kept.
 template <int M, int NI>
-int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& sensors) {
+int run_on_devices(const Options& o, const RunSettings& s, io::Recording& sensors) {
   std::string error;
   Prior<M> prior;
   if (!run_prior(s, sensors, prior, error)) return refuse(error, 2);
   prior.sigma_imu_intrinsics = sensors.sensors.imu_tolerances;
   // --from: the calibration after the live pass starts the camera pose and markers from an earlier
   // one (stage 2 after stage 1, as calibrate --from).
-  sim::CalibrationStart start;
-  const sim::CalibrationStart* from = nullptr;
+  io::CalibrationStart start;
+  const io::CalibrationStart* from = nullptr;
   if (o.flag("from")) {
-    if (!sim::read_calibration_start(o.get("from", ""), M, start, error)) return refuse(error, 1);
+    if (!io::read_calibration_start(o.get("from", ""), M, start, error)) return refuse(error, 1);
     from = &start;
   }
 
@@ -303,21 +303,21 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   const std::int64_t frame_period = frame_period_ns(devices);
   LiveStreams<M> streams(devices, s.duration_s, imu_period, frame_period);
   drivers::MonotonicClock clock;
-  std::unique_ptr<firmware::LoopProfiler> profiler;
+  std::unique_ptr<loop::LoopProfiler> profiler;
   if (!make_profiler(o, clock, imu_period, frame_period, profiler, error) ||
       !apply_realtime_options(o, error))
     return refuse(error);
-  firmware::LoopConfig lc;
+  loop::LoopConfig lc;
   lc.imu_period_ns = imu_period;
   lc.profiler = profiler.get();
-  firmware::CalibrationLoop<double, M, 0, NI> loop(filter, streams.imu(), streams.markers(), lc,
-                                                   devices.camera ? &estimator->feedback : nullptr);
+  loop::CalibrationLoop<double, M, 0, NI> loop(filter, streams.imu(), streams.markers(), lc,
+                                               devices.camera ? &estimator->feedback : nullptr);
   if (devices.camera) loop.set_identifier(streams.identifier());
   print_run_start(s, devices, sensors.sensors.imu_rate_hz);
   if constexpr (NI > 0)
     std::printf("mirrorcal run: the IMU's intrinsics estimated too (model %s)\n",
                 to_string(imu_model_of_dim(NI)));
-  const firmware::LoopEnd end = run_until_signal(loop);
+  const loop::LoopEnd end = run_until_signal(loop);
   StopOnSignal::report("writing the calibration so far");
 
   print_loop_counters(loop.counters(), streams.seconds());
@@ -337,8 +337,8 @@ int run_on_devices(const Options& o, const RunSettings& s, sim::Recording& senso
   result.rostopic = sensors.sensors.rostopic;  // also when no frame was labelled
   report.result = result;
   if (!write_run_result(s.out, result, report, error)) return refuse(error, 1);
-  if (end == firmware::LoopEnd::kImuError) return refuse(streams.imu().error(), 1);
-  if (end == firmware::LoopEnd::kMarkerError) return refuse(streams.markers().error(), 1);
+  if (end == loop::LoopEnd::kImuError) return refuse(streams.imu().error(), 1);
+  if (end == loop::LoopEnd::kMarkerError) return refuse(streams.markers().error(), 1);
   return calibration_exit_status(result);
 }
 
@@ -350,7 +350,7 @@ int cmd_run(int argc, char** argv) {
   // mirrorcal.yaml says how many markers the camera's frames hold and imu.yaml which IMU model
   // the calibration estimates (or --imu-model).
   RunSettings s;
-  sim::Recording sensors;
+  io::Recording sensors;
   ImuModel imu_model = kDefaultImuModel;
   if (!device_settings(o, "run", true, s, error) || !read_sensors(s.sensors, sensors, error) ||
       !calibration_imu_model(o, sensors.sensors, s.sensors, imu_model, error))

@@ -20,7 +20,7 @@
 #include "mirrorcal/evaluation/plots.hpp"
 #include "mirrorcal/evaluation/rendered_markers.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 #include "sim_options.hpp"
 
 namespace mirrorcal::app {
@@ -73,7 +73,7 @@ struct SimReport {
   bool plots;
   std::string dir, title;
   bool two_stage;  // stage 2 reported, after stage 1
-  const firmware::LoopProfiler* profiler;
+  const loop::LoopProfiler* profiler;
   std::chrono::steady_clock::time_point t0;
 };
 
@@ -179,8 +179,8 @@ int cmd_sim(int argc, char** argv) {
     return refuse("--estimate-noise applies to stage 1 only (without --intrinsics)");
   std::string dir;
   if (!make_out_dir(o, "out/sim", dir, error)) return refuse(error, 1);
-  firmware::SteadyClock clock;  // the simulation's own clock is simulated time
-  std::unique_ptr<firmware::LoopProfiler> profiler;
+  loop::SteadyClock clock;  // the simulation's own clock is simulated time
+  std::unique_ptr<loop::LoopProfiler> profiler;
   if (!make_profiler(o, clock, static_cast<std::int64_t>(1e9 / s.imu_rate_hz),
                      static_cast<std::int64_t>(1e9 / s.camera_rate_hz), profiler, error) ||
       !apply_realtime_options(o, error))

@@ -14,7 +14,7 @@
 #include "mirrorcal/drivers/driver_error.hpp"
 #include "mirrorcal/drivers/open_imu.hpp"
 #include "mirrorcal/drivers/register_imu.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::app {
 
@@ -25,7 +25,7 @@ namespace {
 // Frame buffers the camera gets: a few frames of slack while the loop is busy with an update.
 constexpr int kCameraBuffers = 8;
 
-std::unique_ptr<Camera> open_camera(const RunSettings& s, int markers, const sim::MarkerLeds& leds,
+std::unique_ptr<Camera> open_camera(const RunSettings& s, int markers, const io::MarkerLeds& leds,
                                     int width, int height) {
   if (s.camera.empty()) return nullptr;
   const drivers::CameraSpec spec = drivers::parse_camera_spec(s.camera);
@@ -118,8 +118,7 @@ bool device_settings(const Options& o, const char* command, bool sensors_require
   if (o.flag("config")) {
     const std::string file = o.get("config", "");
     std::string text;
-    if (!files::read_file(file, text, error) || !parse_run_config(text, file, s, error))
-      return false;
+    if (!io::read_file(file, text, error) || !parse_run_config(text, file, s, error)) return false;
   }
   for (const char* key : kRunKeys)
     if (o.flag(key) && !set_run_setting(s, key, o.get(key, ""), error)) {
@@ -139,19 +138,19 @@ bool device_settings(const Options& o, const char* command, bool sensors_require
   return true;
 }
 
-bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error) {
+bool read_sensors(const std::string& dir, io::Recording& r, std::string& error) {
   std::string text;
   const std::string imu = dir + "/imu.yaml", cam = dir + "/camchain.yaml",
                     priors = dir + "/mirrorcal.yaml";
-  return files::read_file(imu, text, error) &&
-         sim::parse_imu_yaml(text, imu, r.sensors, r.notes, error) &&
-         files::read_file(cam, text, error) &&
-         sim::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) &&
-         files::read_file(priors, text, error) &&
-         sim::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error);
+  return io::read_file(imu, text, error) &&
+         io::parse_imu_yaml(text, imu, r.sensors, r.notes, error) &&
+         io::read_file(cam, text, error) &&
+         io::parse_camchain_yaml(text, cam, r.sensors, r.notes, error) &&
+         io::read_file(priors, text, error) &&
+         io::parse_priors_yaml(text, priors, r.sensors.intrinsics, r.priors, r.notes, error);
 }
 
-bool open_devices(const RunSettings& s, int markers, const sim::MarkerLeds& leds, int width,
+bool open_devices(const RunSettings& s, int markers, const io::MarkerLeds& leds, int width,
                   int height, double imu_rate_hz, Devices& d, std::string& error, int& exit_code) {
   if (!s.trigger.empty() && s.camera.empty()) {
     error = "--trigger " + s.trigger + ": a camera trigger needs a camera (--camera DEV)";
@@ -200,11 +199,11 @@ bool open_devices(const RunSettings& s, int markers, const sim::MarkerLeds& leds
     if (!d.leds.empty()) {
       std::vector<hal::OutputLine*> lines;
       for (const auto& led : d.leds) lines.push_back(led.get());
-      d.blinking = std::make_unique<firmware::BlinkingLeds>(
+      d.blinking = std::make_unique<loop::BlinkingLeds>(
           lines.data(), static_cast<int>(lines.size()), hal::BlinkCode{leds.blink_period});
     }
     d.triggering =
-        std::make_unique<firmware::TriggeringImu>(*d.imu, *d.trigger, every, d.blinking.get());
+        std::make_unique<loop::TriggeringImu>(*d.imu, *d.trigger, every, d.blinking.get());
   }
   return true;
 }

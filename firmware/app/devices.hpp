@@ -18,9 +18,9 @@
 #include "mirrorcal/drivers/gpio_lines.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
 #include "mirrorcal/drivers/v4l2.hpp"
-#include "mirrorcal/firmware/triggering_imu.hpp"
 #include "mirrorcal/hal/sources.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
+#include "mirrorcal/loop/triggering_imu.hpp"
 #include "run_config.hpp"
 
 namespace mirrorcal::app {
@@ -55,7 +55,7 @@ bool device_settings(const Options& o, const char* command, bool sensors_require
 
 // imu.yaml, camchain.yaml and mirrorcal.yaml of dir into r, as beside a recording; an error names
 // the file, line and what is wrong.
-bool read_sensors(const std::string& dir, sim::Recording& r, std::string& error);
+bool read_sensors(const std::string& dir, io::Recording& r, std::string& error);
 
 struct Devices {
   std::unique_ptr<drivers::GpioDataReady> drdy;
@@ -63,8 +63,8 @@ struct Devices {
   std::unique_ptr<Camera> camera;                          // null without one
   std::unique_ptr<drivers::GpioOutput> trigger;            // null without one
   std::vector<std::unique_ptr<drivers::GpioOutput>> leds;  // the markers' LED lines, if given
-  std::unique_ptr<firmware::BlinkingLeds> blinking;        // their code, with them
-  std::unique_ptr<firmware::TriggeringImu> triggering;     // the IMU driving the trigger, with one
+  std::unique_ptr<loop::BlinkingLeds> blinking;            // their code, with them
+  std::unique_ptr<loop::TriggeringImu> triggering;         // the IMU driving the trigger, with one
 
   // The IMU stream a command reads: the one that drives the camera's trigger when there is one.
   hal::ImuSource& imu_stream() const {
@@ -79,7 +79,7 @@ struct Devices {
 // without a camera, or LED lines without a trigger, one with exit_code 2. imu_rate_hz sets how
 // many IMU samples a camera trigger pulse takes when --trigger-every does not (one frame
 // interval's worth, 20 Hz where none is reported).
-bool open_devices(const RunSettings& s, int markers, const sim::MarkerLeds& leds, int width,
+bool open_devices(const RunSettings& s, int markers, const io::MarkerLeds& leds, int width,
                   int height, double imu_rate_hz, Devices& d, std::string& error, int& exit_code);
 
 // ", camera trigger gpiochip0:18 every 4 IMU samples (50 Hz)", or "" without a trigger.

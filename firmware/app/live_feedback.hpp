@@ -12,7 +12,7 @@
 
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
-#include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/loop/loop.hpp"
 
 namespace mirrorcal::app {
 
@@ -85,7 +85,7 @@ const char* group_name(FeedbackGroup group);
 // weak: the motion leaves it to the prior (the report marks it), which does not hold back the
 // verdict; the converged line names it and the motion that would inform it.
 template <int M, int NI = 0>
-class LiveFeedback final : public firmware::EstimateSink<CalibrationFilter<double, M, 0, NI>> {
+class LiveFeedback final : public loop::EstimateSink<CalibrationFilter<double, M, 0, NI>> {
  public:
   using Filter = CalibrationFilter<double, M, 0, NI>;
   static constexpr int kGroups = kFeedbackGroups<NI>;

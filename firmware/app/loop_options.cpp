@@ -4,8 +4,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "mirrorcal/firmware/realtime.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
+#include "mirrorcal/loop/realtime.hpp"
 
 namespace mirrorcal::app {
 
@@ -16,14 +16,14 @@ const std::vector<std::string> kLoopValueOptions = {"budget-imu-us", "budget-fra
 const std::vector<std::string> kLoopFlagOptions = {"profile", "mlock"};
 
 bool apply_realtime_options(const Options& o, std::string& error) {
-  firmware::RealtimeOptions rt;
+  loop::RealtimeOptions rt;
   std::uint64_t priority = 0, cpu = 0;
   if (!parse_count(o, "rt-priority", 0, 1, priority, error)) return false;
   rt.fifo_priority = static_cast<int>(priority);
   rt.lock_memory = o.flag("mlock");
   if (o.flag("cpu") && !parse_count(o, "cpu", 0, 0, cpu, error)) return false;
   rt.cpu = o.flag("cpu") ? static_cast<int>(cpu) : -1;
-  const firmware::RealtimeOutcome r = firmware::apply_realtime(rt);
+  const loop::RealtimeOutcome r = loop::apply_realtime(rt);
   if (!r.error.empty()) {
     error = r.error;
     return false;
@@ -33,7 +33,7 @@ bool apply_realtime_options(const Options& o, std::string& error) {
 }
 
 bool make_profiler(const Options& o, hal::Clock& clock, std::int64_t imu_period_ns,
-                   std::int64_t frame_period_ns, std::unique_ptr<firmware::LoopProfiler>& profiler,
+                   std::int64_t frame_period_ns, std::unique_ptr<loop::LoopProfiler>& profiler,
                    std::string& error) {
   std::uint64_t imu_us = 0, frame_us = 0;
   if (!parse_count(o, "budget-imu-us", 0, 1, imu_us, error) ||
@@ -47,17 +47,17 @@ bool make_profiler(const Options& o, hal::Clock& clock, std::int64_t imu_period_
     profiler = nullptr;
     return true;
   }
-  profiler = std::make_unique<firmware::LoopProfiler>(
+  profiler = std::make_unique<loop::LoopProfiler>(
       clock, imu_us != 0 ? static_cast<std::int64_t>(imu_us) * 1000 : imu_period_ns,
       frame_us != 0 ? static_cast<std::int64_t>(frame_us) * 1000 : frame_period_ns);
   return true;
 }
 
-bool report_profile(const firmware::LoopProfiler& p, const std::string& title,
-                    const std::string& dir, std::string& error) {
+bool report_profile(const loop::LoopProfiler& p, const std::string& title, const std::string& dir,
+                    std::string& error) {
   std::printf("\ntiming budget (%s):\n%s", title.c_str(), p.table().c_str());
   const std::string path = dir + "/timing-histogram.txt";
-  files::OutputSet out;
+  io::OutputSet out;
   std::FILE* f = out.add(path, error);
   if (f == nullptr) return false;
   p.write_histogram(f);

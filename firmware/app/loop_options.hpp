@@ -10,7 +10,7 @@
 
 #include "cli.hpp"
 #include "mirrorcal/calibration/run.hpp"
-#include "mirrorcal/firmware/timing.hpp"
+#include "mirrorcal/loop/timing.hpp"
 
 namespace mirrorcal::app {
 
@@ -28,7 +28,7 @@ bool apply_realtime_options(const Options& o, std::string& error);
 // The profiler --profile asks for (nullptr without it): budgets from --budget-imu-us and
 // --budget-frame-us, by default the IMU and the frame period. Call before the loop starts.
 bool make_profiler(const Options& o, hal::Clock& clock, std::int64_t imu_period_ns,
-                   std::int64_t frame_period_ns, std::unique_ptr<firmware::LoopProfiler>& profiler,
+                   std::int64_t frame_period_ns, std::unique_ptr<loop::LoopProfiler>& profiler,
                    std::string& error);
 
 // --passes N of sim and montecarlo: exactly N, 1 <= N <= kMaxRequestedPasses (each replays the
@@ -38,7 +38,7 @@ bool passes_option(const Options& o, Passes& passes, std::string& error);
 
 // Prints the timing table under a title and writes the histograms to <dir>/timing-histogram.txt;
 // an error if it cannot.
-bool report_profile(const firmware::LoopProfiler& p, const std::string& title,
-                    const std::string& dir, std::string& error);
+bool report_profile(const loop::LoopProfiler& p, const std::string& title, const std::string& dir,
+                    std::string& error);
 
 }  // namespace mirrorcal::app

@@ -5,8 +5,8 @@
 
 #include "build_tools.hpp"
 #include "cli.hpp"
-#include "mirrorcal/sim_host/files.hpp"
-#include "mirrorcal/sim_host/version.hpp"
+#include "mirrorcal/io/files.hpp"
+#include "mirrorcal/io/version.hpp"
 
 namespace mirrorcal::app {
 
@@ -186,7 +186,7 @@ int main(int argc, char** argv) {
   namespace app = mirrorcal::app;
   const std::string first = argc < 2 ? "" : argv[1];
   if (first == "--version") {
-    std::printf("%s\n", mirrorcal::sim::written_by().c_str());
+    std::printf("%s\n", mirrorcal::io::written_by().c_str());
     return 0;
   }
   if (argc < 2 || first == "--help" || first == "-h") {
@@ -202,7 +202,7 @@ int main(int argc, char** argv) {
     }
     try {
       return c.run(argc, argv);
-    } catch (const mirrorcal::files::StoreError& e) {
+    } catch (const mirrorcal::io::StoreError& e) {
       // A calibration's temporary store that could not be written (a full $TMPDIR): as a
       // result file that could not be written, code 1 and the file named.
       return app::refuse(e.what(), 1);

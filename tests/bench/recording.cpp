@@ -2,7 +2,7 @@
 
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
-#include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/loop/loop.hpp"
 
 namespace mirrorcal::bench {
 
@@ -22,14 +22,14 @@ std::uint64_t calibrate(const Recording& r) {
   Filter::Covariance p0;
   initialise(prior, x0, p0);
   filter.reset(x0, p0);
-  sim::VectorImuSource imu(r.data.imu);
-  sim::VectorMarkerSource<3> markers(r.data.frames);
-  struct DropSink final : firmware::EstimateSink<Filter> {
+  io::VectorImuSource imu(r.data.imu);
+  io::VectorMarkerSource<3> markers(r.data.frames);
+  struct DropSink final : loop::EstimateSink<Filter> {
     void publish(std::int64_t, const Filter&) override {}
   } sink;
-  firmware::LoopConfig lc;
+  loop::LoopConfig lc;
   lc.imu_period_ns = static_cast<std::int64_t>(1e9 / r.scenario.imu_rate_hz);
-  firmware::CalibrationLoop<double, 3, 0> loop(filter, imu, markers, lc, &sink);
+  loop::CalibrationLoop<double, 3, 0> loop(filter, imu, markers, lc, &sink);
   loop.run();
   return filter.counters().markers_used;
 }

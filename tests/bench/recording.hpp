@@ -3,8 +3,8 @@
 // are simulated beforehand and the estimate is published to a sink that drops it.
 #pragma once
 
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mirrorcal::bench {
 

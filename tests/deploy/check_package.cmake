@@ -10,7 +10,7 @@ if(NOT rc EQUAL 0)
 endif()
 foreach(f lib/cmake/mirrorcal/mirrorcalConfig.cmake lib/pkgconfig/mirrorcal.pc
           include/mirrorcal/estimator/calibration_filter.hpp include/mirrorcal/hal/sources.hpp
-          include/mirrorcal/firmware/loop.hpp include/mirrorcal/detection/blob_detector.hpp
+          include/mirrorcal/loop/loop.hpp include/mirrorcal/detection/blob_detector.hpp
           lib/libmirrorcal_estimator.a)
   if(NOT EXISTS ${prefix}/${f})
     message(FATAL_ERROR "not installed: ${f}")

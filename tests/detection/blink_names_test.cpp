@@ -7,8 +7,8 @@
 
 #include "mirrorcal/detection/blink_names.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
-#include "mirrorcal/sim_host/frame_renderer.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim/frame_renderer.hpp"
+#include "mirrorcal/sim/scenario.hpp"
 
 namespace mc = mirrorcal;
 using mc::detection::Blob;

@@ -8,9 +8,9 @@
 #include "alloc_counter.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/estimator/prior.hpp"
-#include "mirrorcal/firmware/marker_prediction.hpp"
-#include "mirrorcal/sim_host/frame_renderer.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/loop/marker_prediction.hpp"
+#include "mirrorcal/sim/frame_renderer.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mc = mirrorcal;
 
@@ -86,7 +86,7 @@ TEST(DetectionNoHeap, PollPredictAndRelabelDoNotAllocate) {
     mc::test::AllocCounter armed;
     int frames_done = 0, predicted = 0;
     while (source.poll(frame) == mc::hal::SourceStatus::kOk) {
-      if (mc::firmware::predict_marker_pixels(filter, frame, prediction)) {
+      if (mc::loop::predict_marker_pixels(filter, frame, prediction)) {
         ++predicted;
         source.relabel(prediction, frame);
       }

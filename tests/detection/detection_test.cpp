@@ -14,9 +14,9 @@
 
 #include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/estimator/marker_counts.hpp"
-#include "mirrorcal/sim_host/frame_renderer.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/frame_renderer.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mc = mirrorcal;
 using mc::detection::Blob;
@@ -360,7 +360,7 @@ TEST(MarkerIdentifier, TheMirrorsCueNamesIdenticalLedsWithoutAPrediction) {
   int frames = 0, labelled = 0, wrong = 0, blind_labelled = 0;
   for (std::size_t k = 0; k < data.frames.size(); k += 100) {
     const auto& markers = data.frames[k].markers;
-    const auto inside = [](const mc::sim::ObservedMarker& m) {
+    const auto inside = [](const mc::io::ObservedMarker& m) {
       return m.u > 10 && m.u < 630 && m.v > 10 && m.v < 470;
     };
     if (markers.size() != std::size_t(M) || !std::all_of(markers.begin(), markers.end(), inside))

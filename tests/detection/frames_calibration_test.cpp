@@ -7,7 +7,7 @@
 
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim/scenario.hpp"
 
 namespace mc = mirrorcal;
 

@@ -8,8 +8,8 @@
 #include <random>
 
 #include "mirrorcal/detection/mirror_fit.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mc = mirrorcal;
 

@@ -14,9 +14,9 @@
 
 #include "mirrorcal/detection/blob_detector.hpp"
 #include "mirrorcal/detection/marker_identifier.hpp"
-#include "mirrorcal/sim_host/frame_renderer.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/frame_renderer.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mc = mirrorcal;
 

@@ -13,8 +13,8 @@
 
 #include "mirrorcal/detection/marker_identifier.hpp"
 #include "mirrorcal/detection/rig_shape.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mc = mirrorcal;
 

@@ -39,8 +39,8 @@ inline Solved solve_simulated(const mc::sim::Scenario& s, const mc::sim::SimData
     prior.t_d = s.truth.t_d;
     prior.intrinsics = s.truth.intrinsics;
   }
-  const mc::sim::RecordingPriors priors =
-      mc::sim::from_prior(prior, s.gravity_n, s.pixel_sigma, camera_parameters > 0);
+  const mc::io::RecordingPriors priors =
+      mc::io::from_prior(prior, s.gravity_n, s.pixel_sigma, camera_parameters > 0);
   ev::BatchInput in = ev::simulated_batch_input(s, data, priors, camera_parameters, imu_model);
   if (guess_truth) in.imu_guess = s.imu_intrinsics;
   Solved out;

@@ -310,7 +310,7 @@ TEST(Batch, ReplaysAreBitIdentical) {
 TEST(Batch, RefusesDataWithoutMarkersWithinTheImu) {
   const mc::sim::Scenario s = short_random(4, 5.0);
   mc::sim::SimData data = mc::sim::simulate(s, 4);
-  const mc::sim::RecordingPriors priors = mc::sim::from_prior(
+  const mc::io::RecordingPriors priors = mc::io::from_prior(
       mc::sim::simulation_prior<3>(s, data, 4), s.gravity_n, s.pixel_sigma, false);
   mc::calibration::CalibrationResult r;
   ev::BatchReport report;

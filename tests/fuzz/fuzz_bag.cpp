@@ -16,7 +16,7 @@
 
 namespace {
 
-namespace bag = mirrorcal::sim::bag;
+namespace bag = mirrorcal::io::bag;
 
 constexpr std::uint32_t kMaxPixels = 64 * 48;
 

@@ -7,7 +7,7 @@
 #include <string>
 #include <string_view>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);
@@ -16,14 +16,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string_view features_csv =
       cut == std::string_view::npos ? std::string_view() : text.substr(cut + 5);
   constexpr int kMarkers = 3;
-  std::vector<mirrorcal::sim::ObservedFrame> frames;
+  std::vector<mirrorcal::io::ObservedFrame> frames;
   std::string error;
-  if (!mirrorcal::sim::parse_frames_csv(frames_csv, "data.csv", frames, error)) {
+  if (!mirrorcal::io::parse_frames_csv(frames_csv, "data.csv", frames, error)) {
     if (error.empty()) std::abort();
     return 0;
   }
   const bool ok =
-      mirrorcal::sim::parse_features_csv(features_csv, "features.csv", kMarkers, frames, error);
+      mirrorcal::io::parse_features_csv(features_csv, "features.csv", kMarkers, frames, error);
   if (ok != error.empty()) std::abort();
   if (ok)
     for (std::size_t k = 0; k < frames.size(); ++k) {

@@ -10,15 +10,15 @@
 
 #include <zlib.h>
 
-#include "mirrorcal/sim_host/images.hpp"
+#include "mirrorcal/io/images.hpp"
 
 namespace {
 
 constexpr int kWidth = 64, kHeight = 48;
 
 void check(const std::uint8_t* data, std::size_t size) {
-  static mirrorcal::sim::ImageReader reader(kWidth, kHeight);  // as a pass: made once
-  mirrorcal::sim::GrayImage image;
+  static mirrorcal::io::ImageReader reader(kWidth, kHeight);  // as a pass: made once
+  mirrorcal::io::GrayImage image;
   if (!reader.decode(data, size, "cam0/data/1.png", image)) {
     if (std::strncmp(reader.error(), "cam0/data/1.png: ", 17) != 0) std::abort();
     return;

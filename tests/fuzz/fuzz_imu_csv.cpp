@@ -6,13 +6,13 @@
 #include <string>
 #include <string_view>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   std::vector<mirrorcal::ImuSample> imu;
   std::string error;
-  const bool ok = mirrorcal::sim::parse_imu_csv(text, "data.csv", imu, error);
+  const bool ok = mirrorcal::io::parse_imu_csv(text, "data.csv", imu, error);
   // What the parser promises: a message on failure, and on success finite samples in
   // strictly increasing time.
   if (ok != error.empty()) std::abort();

@@ -7,7 +7,7 @@
 #include <string>
 #include <string_view>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace {
 
@@ -18,13 +18,13 @@ bool positive(const Eigen::Vector3d& sigma) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  namespace sim = mirrorcal::sim;
+  namespace io = mirrorcal::io;
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   std::string error;
   std::vector<std::string> notes;
-  sim::RecordingPriors p;
+  io::RecordingPriors p;
   const bool ok =
-      sim::parse_priors_yaml(text, "mirrorcal.yaml", {800, 800, 320, 240, 0}, p, notes, error);
+      io::parse_priors_yaml(text, "mirrorcal.yaml", {800, 800, 320, 240, 0}, p, notes, error);
   if (ok != error.empty()) std::abort();
   if (!ok) {
     if (error.rfind("mirrorcal.yaml", 0) != 0) std::abort();  // the message names the file
@@ -42,6 +42,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (!p.features_c[i].allFinite() || !positive(p.sigma_features_c[i])) std::abort();
   // The filter's prior follows for exactly M = 3 markers.
   mirrorcal::Prior<3> prior;
-  if (sim::to_prior(p, prior, error) != (p.features_c.size() == 3)) std::abort();
+  if (io::to_prior(p, prior, error) != (p.features_c.size() == 3)) std::abort();
   return 0;
 }

@@ -10,14 +10,14 @@
 
 #include <Eigen/Cholesky>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  namespace sim = mirrorcal::sim;
+  namespace io = mirrorcal::io;
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   std::string error;
-  sim::CalibrationStart start;
-  const bool ok = sim::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
+  io::CalibrationStart start;
+  const bool ok = io::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
   if (ok != error.empty()) std::abort();
   if (!ok) {
     if (error.rfind("mirrorcal-result.yaml", 0) != 0) std::abort();

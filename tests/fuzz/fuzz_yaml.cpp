@@ -8,16 +8,16 @@
 #include <string>
 #include <string_view>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  namespace sim = mirrorcal::sim;
+  namespace io = mirrorcal::io;
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   std::string error;
   std::vector<std::string> notes;
-  sim::RecordingPriors priors;
+  io::RecordingPriors priors;
   bool ok =
-      sim::parse_priors_yaml(text, "mirrorcal.yaml", {800, 800, 320, 240, 0}, priors, notes, error);
+      io::parse_priors_yaml(text, "mirrorcal.yaml", {800, 800, 320, 240, 0}, priors, notes, error);
   if (ok != error.empty()) std::abort();
   if (ok) {
     // Whatever was accepted has positive sigmas and as many sigmas as markers.
@@ -25,24 +25,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         !(priors.pixel_sigma > 0) || priors.features_c.size() != priors.sigma_features_c.size())
       std::abort();
     mirrorcal::Prior<3> p;
-    if (sim::to_prior(priors, p, error) == (priors.features_c.size() != 3)) std::abort();
+    if (io::to_prior(priors, p, error) == (priors.features_c.size() != 3)) std::abort();
   }
-  sim::SensorInfo sensors;
+  io::SensorInfo sensors;
   error.clear();
-  ok = sim::parse_imu_yaml(text, "imu.yaml", sensors, notes, error);
+  ok = io::parse_imu_yaml(text, "imu.yaml", sensors, notes, error);
   if (ok != error.empty()) std::abort();
   error.clear();
-  ok = sim::parse_camchain_yaml(text, "camchain.yaml", sensors, notes, error);
+  ok = io::parse_camchain_yaml(text, "camchain.yaml", sensors, notes, error);
   if (ok != error.empty()) std::abort();
   if (ok && (sensors.width < 1 || sensors.height < 1)) std::abort();
-  sim::RecordingTruth truth;
+  io::RecordingTruth truth;
   error.clear();
-  ok = sim::parse_truth_yaml(text, "truth.yaml", truth, error);
+  ok = io::parse_truth_yaml(text, "truth.yaml", truth, error);
   if (ok != error.empty()) std::abort();
   // A start accepted for calibrate --from is a square block of the markers' size.
-  sim::CalibrationStart start;
+  io::CalibrationStart start;
   error.clear();
-  ok = sim::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
+  ok = io::parse_calibration_start(text, "mirrorcal-result.yaml", start, error);
   if (ok != error.empty()) std::abort();
   const long n = start.layout().size();
   if (ok && (start.covariance.rows() != n || start.covariance.cols() != n)) std::abort();

@@ -17,8 +17,8 @@
 #include "guest_check.hpp"
 #include "mirrorcal/drivers/can_imu.hpp"
 #include "mirrorcal/drivers/monotonic_clock.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 #include "vcan_sender.hpp"
 
 namespace {

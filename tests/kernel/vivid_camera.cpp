@@ -29,8 +29,8 @@
 #include "mirrorcal/drivers/v4l2.hpp"
 #include "mirrorcal/evaluation/rendered_markers.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
-#include "mirrorcal/sim_host/frame_renderer.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/frame_renderer.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 #include "vivid_setup.hpp"
 
 namespace mc = mirrorcal;

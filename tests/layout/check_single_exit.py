@@ -5,7 +5,7 @@ unflushed and temporary folders behind (issue 38).
 
     check_single_exit.py SOURCE_DIR
 
-Scans the C++ sources under firmware/, estimator/ and sim_host/ for calls of exit, std::exit,
+Scans the C++ sources under firmware/, estimator/, hal/, io/, sim/ and drivers/ for calls of exit, std::exit,
 quick_exit and std::quick_exit, comments and string literals left out. _exit (a forked child's) and
 abort are not counted. Lists each call found outside main.cpp and exits with 1 if there is one.
 """
@@ -13,7 +13,7 @@ import os
 import re
 import sys
 
-FOLDERS = ("firmware", "estimator", "sim_host")
+FOLDERS = ("firmware", "estimator", "hal", "io", "sim", "drivers")
 ALLOWED = {"firmware/app/main.cpp"}
 EXTENSIONS = (".cpp", ".hpp", ".cc", ".h", ".ipp")
 # exit( or quick_exit(, alone or qualified (std::exit); not _exit, atexit or a member's a.exit().

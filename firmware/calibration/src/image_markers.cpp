@@ -8,7 +8,7 @@ namespace {
 
 // The detection of LEDs named by their tracks' names (none yet: the look that finds them).
 template <int M>
-detection::DetectionConfig<M> named_detection_config(const sim::MarkerLeds& leds,
+detection::DetectionConfig<M> named_detection_config(const io::MarkerLeds& leds,
                                                      const LedNaming* naming) {
   detection::DetectionConfig<M> c = marker_detection_config<M>(leds);
   if (naming == nullptr) return c;
@@ -27,7 +27,7 @@ detection::DetectionConfig<M> named_detection_config(const sim::MarkerLeds& leds
 }  // namespace
 
 template <int M>
-LedNaming name_leds_by_shape(hal::FrameSource& frames, const sim::MarkerLeds& leds,
+LedNaming name_leds_by_shape(hal::FrameSource& frames, const io::MarkerLeds& leds,
                              const detection::RigGeometry<M>& geometry, int width, int height) {
   LedNaming naming;
   naming.markers_c.assign(geometry.markers_c.begin(), geometry.markers_c.end());
@@ -49,7 +49,7 @@ LedNaming name_leds_by_shape(hal::FrameSource& frames, const sim::MarkerLeds& le
 
 template <int M>
 ImageMarkers<M>::ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
-                              DetectionReport* report, const sim::MarkerLeds& leds,
+                              DetectionReport* report, const io::MarkerLeds& leds,
                               ImageBlobs* blobs, const LedNaming* naming)
     : frames_(std::move(frames)),
       detect_(*frames_, named_detection_config<M>(leds, naming), width, height),
@@ -101,9 +101,9 @@ void ImageMarkers<M>::relabel(const hal::MarkerPrediction<M>& prediction, Marker
   for (const bool seen : frame.seen) labelled_ += seen ? 1 : 0;
 }
 
-#define MIRRORCAL_IMAGE_MARKERS_(M)                                                   \
-  template class ImageMarkers<M>;                                                     \
-  template LedNaming name_leds_by_shape<M>(hal::FrameSource&, const sim::MarkerLeds&, \
+#define MIRRORCAL_IMAGE_MARKERS_(M)                                                  \
+  template class ImageMarkers<M>;                                                    \
+  template LedNaming name_leds_by_shape<M>(hal::FrameSource&, const io::MarkerLeds&, \
                                            const detection::RigGeometry<M>&, int, int);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_IMAGE_MARKERS_)
 #undef MIRRORCAL_IMAGE_MARKERS_

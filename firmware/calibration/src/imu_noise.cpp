@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <limits>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 #include "text_format.hpp"
 
 namespace mirrorcal::calibration {
@@ -299,11 +299,11 @@ bool check_timestamps(const std::vector<ImuSample>& s, const std::string& file, 
   for (std::size_t i = 1; i < s.size(); ++i) steps[i - 1] = double(s[i].t_ns - s[i - 1].t_ns);
   step_ns = median(steps);
   const double rate = 1e9 / step_ns;
-  if (!(rate >= sim::kMinImuRateHz && rate <= sim::kMaxImuRateHz)) {
+  if (!(rate >= io::kMinImuRateHz && rate <= io::kMaxImuRateHz)) {
     error = file + format(
                        ": the timestamps step by %.4g ns (median), %.4g Hz, which no IMU samples "
                        "at (%.0f..%.0f Hz): timestamps in another unit than nanoseconds?",
-                       step_ns, rate, sim::kMinImuRateHz, sim::kMaxImuRateHz);
+                       step_ns, rate, io::kMinImuRateHz, io::kMaxImuRateHz);
     return false;
   }
   std::size_t irregular = 0, first = 0;

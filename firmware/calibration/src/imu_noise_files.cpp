@@ -5,14 +5,14 @@
 #include <cmath>
 #include <cstdio>
 
-#include "mirrorcal/sim_host/files.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/files.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace mirrorcal::calibration {
 
 namespace {
 
-bool add_bytes(files::OutputSet& out, const std::string& path, const std::string& bytes,
+bool add_bytes(io::OutputSet& out, const std::string& path, const std::string& bytes,
                std::string& error) {
   std::FILE* f = out.add(path, error);
   if (f == nullptr) return false;
@@ -43,15 +43,15 @@ bool read_imu_samples(const std::string& path, std::vector<ImuSample>& out, std:
   file =
       ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode) ? path + "/mav0/imu0/data.csv" : path;
   std::string text;
-  return files::read_file(file, text, error) && sim::parse_imu_csv(text, file, out, error);
+  return io::read_file(file, text, error) && io::parse_imu_csv(text, file, out, error);
 }
 
 std::string imu_noise_yaml(const ImuNoiseAnalysis& a) {
-  sim::SensorInfo sensors;
+  io::SensorInfo sensors;
   sensors.imu = a.noise();
   // The rate to a hundredth of a hertz: a board's timestamp jitter moves the median step by less.
   sensors.imu_rate_hz = std::round(a.rate_hz * 100.0) / 100.0;
-  std::string y = sim::imu_yaml_text(sensors);
+  std::string y = io::imu_yaml_text(sensors);
   // The file's name goes into a comment: a line break in it would end the comment.
   std::string file = a.file;
   for (char& c : file)
@@ -67,7 +67,7 @@ std::string imu_noise_yaml(const ImuNoiseAnalysis& a) {
 
 bool write_imu_noise(const std::string& dir, const ImuNoiseAnalysis& a, AllanPlotter plotter,
                      std::string& plot_note, std::string& error) {
-  files::OutputSet out;
+  io::OutputSet out;
   if (!add_bytes(out, dir + "/imu.yaml", imu_noise_yaml(a), error) ||
       !add_bytes(out, dir + "/allan.csv", allan_csv(a), error))
     return false;

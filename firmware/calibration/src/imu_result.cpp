@@ -159,7 +159,7 @@ void write_imu_result_yaml(std::FILE* o, const ImuResult& r) {
   write_matrix_rows(o, r.covariance, "    ", true);
 }
 
-bool write_openvins_imu_chain(files::OutputSet& out, const std::string& path, const ImuResult& r,
+bool write_openvins_imu_chain(io::OutputSet& out, const std::string& path, const ImuResult& r,
                               std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;

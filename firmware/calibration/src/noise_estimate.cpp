@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <vector>
 
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -111,13 +111,13 @@ bool pixel_noise_estimate(double quadratic, double redundancy, double told_pixel
 }
 
 std::string estimated_imu_yaml(const NoiseEstimate& n) {
-  sim::SensorInfo sensors;
+  io::SensorInfo sensors;
   sensors.imu = n.imu;
   sensors.imu_rate_hz = n.imu_rate_hz;
   sensors.imu_model = n.imu_model;  // the one it was estimated with, the ideal IMU's included
   sensors.imu_tolerances = n.imu_tolerances;
   sensors.imu_tolerances_defaulted = false;  // written out, the defaults included
-  std::string y = sim::imu_yaml_text(sensors);
+  std::string y = io::imu_yaml_text(sensors);
   char note[512];
   std::snprintf(note, sizeof note,
                 "# The noise densities estimated by mirrorcal's calibration from its own data "
@@ -128,7 +128,7 @@ std::string estimated_imu_yaml(const NoiseEstimate& n) {
   return y + note;
 }
 
-bool add_estimated_imu_yaml(files::OutputSet& out, const std::string& path, const NoiseEstimate& n,
+bool add_estimated_imu_yaml(io::OutputSet& out, const std::string& path, const NoiseEstimate& n,
                             std::string& error) {
   std::FILE* f = out.add(path, error);
   if (f == nullptr) return false;

@@ -12,7 +12,7 @@
 
 namespace mirrorcal::calibration {
 
-CalibrationConfig recording_config(const sim::Recording& r) {
+CalibrationConfig recording_config(const io::Recording& r) {
   CalibrationConfig c;
   c.gravity_n = r.priors.gravity_n;
   c.imu = r.sensors.imu;
@@ -43,7 +43,7 @@ std::vector<std::size_t> truth_order_of_names(const std::vector<Eigen::Vector3d>
 
 }  // namespace
 
-LoopData recording_loop_data(const sim::Recording& r) {
+LoopData recording_loop_data(const io::Recording& r) {
   LoopData d;
   d.imu = r.imu;
   d.frames = r.frames;
@@ -61,11 +61,11 @@ LoopData recording_loop_data(const sim::Recording& r) {
 }
 
 template <int M, int NK, int NI>
-bool calibrate_recording(const sim::Recording& r, CalibrationRun<M, NK, NI>& run,
-                         std::string& error, const std::function<void(double)>& progress,
-                         const sim::CalibrationStart* from, Passes passes) {
+bool calibrate_recording(const io::Recording& r, CalibrationRun<M, NK, NI>& run, std::string& error,
+                         const std::function<void(double)>& progress,
+                         const io::CalibrationStart* from, Passes passes) {
   Prior<M> prior;
-  if (!sim::to_prior(r.priors, prior, error)) return false;
+  if (!io::to_prior(r.priors, prior, error)) return false;
   prior.sigma_imu_intrinsics = r.sensors.imu_tolerances;
   typename CalibrationRun<M, NK, NI>::State x0;
   // On the heap: beside the run the pipeline returns, the largest filters' covariance (M = 6 with

@@ -9,7 +9,7 @@
 
 #include "mirrorcal/calibration/statistics.hpp"
 #include "mirrorcal/estimator/so3.hpp"
-#include "mirrorcal/sim_host/version.hpp"
+#include "mirrorcal/io/version.hpp"
 #include "text_format.hpp"
 
 namespace mirrorcal::calibration {
@@ -599,7 +599,7 @@ void add_excitation(std::string& t, const ReportData& d) {
               frames > 0 ? double(markers) / frames : 0.0);
   for (std::size_t n = 0; n < per_count.size(); ++n)
     t += format(" %zu: %d%s", n, per_count[n], n + 1 < per_count.size() ? "," : ")\n");
-  const firmware::LoopCounters& l = d.loop;
+  const loop::LoopCounters& l = d.loop;
   t += format(
       "IMU: %llu samples, %llu gaps (%llu too long to cross: the motion restarted, the calibration "
       "kept), %llu frames behind the filter skipped\n",
@@ -654,7 +654,7 @@ void add_excitation(std::string& t, const ReportData& d) {
 std::string report_text(const ReportData& d) {
   // The verdict stays the third line (after the title and a blank): what a reader looks for first.
   std::string t =
-      "mirrorcal calibration report: " + d.title + "; written by " + sim::written_by() + "\n\n";
+      "mirrorcal calibration report: " + d.title + "; written by " + io::written_by() + "\n\n";
   add_verdict(t, d);
   add_noise(t, d);
   add_calibration(t, d);
@@ -739,7 +739,7 @@ std::string report_html(const ReportData& d, const std::string& text, const Repo
   for (const ReportFigure& figure : drawn) h += figure_html(figure.caption, figure.png);
   for (const std::string& path : plots.extra_pngs) {
     std::string png, error;
-    if (files::read_file(path, png, error))
+    if (io::read_file(path, png, error))
       h += figure_html("Error against the truth with +-3 sigma: " +
                            std::filesystem::path(path).filename().string(),
                        png);
@@ -747,7 +747,7 @@ std::string report_html(const ReportData& d, const std::string& text, const Repo
   return h + "</body>\n</html>\n";
 }
 
-bool write_residuals_csv(files::OutputSet& out, const std::string& path, const ReportData& d,
+bool write_residuals_csv(io::OutputSet& out, const std::string& path, const ReportData& d,
                          std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
@@ -757,7 +757,7 @@ bool write_residuals_csv(files::OutputSet& out, const std::string& path, const R
   return true;
 }
 
-bool write_imu_residuals_csv(files::OutputSet& out, const std::string& path, const ReportData& d,
+bool write_imu_residuals_csv(io::OutputSet& out, const std::string& path, const ReportData& d,
                              std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
@@ -772,7 +772,7 @@ bool write_imu_residuals_csv(files::OutputSet& out, const std::string& path, con
   return true;
 }
 
-bool write_text(files::OutputSet& out, const std::string& path, const std::string& text,
+bool write_text(io::OutputSet& out, const std::string& path, const std::string& text,
                 std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
@@ -782,7 +782,7 @@ bool write_text(files::OutputSet& out, const std::string& path, const std::strin
 
 }  // namespace
 
-bool write_report(files::OutputSet& out, const std::string& dir, const ReportData& d,
+bool write_report(io::OutputSet& out, const std::string& dir, const ReportData& d,
                   const ReportPlots& plots, std::string& error) {
   const std::string text = report_text(d);
   return write_residuals_csv(out, dir + "/residuals.csv", d, error) &&

@@ -8,8 +8,8 @@
 #include <filesystem>
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
-#include "mirrorcal/sim_host/version.hpp"
+#include "mirrorcal/io/recording.hpp"
+#include "mirrorcal/io/version.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -66,7 +66,7 @@ void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* inden
 // First lines every parser takes: OpenCV's FileStorage needs a %YAML directive first, and PyYAML
 // refuses OpenCV's own "%YAML:1.0"; this form PyYAML, OpenCV and yaml-cpp all read.
 void write_yaml_header(std::FILE* o, const char* what) {
-  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n# written by %s\n", what, sim::written_by().c_str());
+  std::fprintf(o, "%%YAML 1.0\n---\n# %s\n# written by %s\n", what, io::written_by().c_str());
 }
 
 namespace {
@@ -104,7 +104,7 @@ void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_
   std::fprintf(o, "  # (intrinsics_skew: mirrorcal's own key, which it reads back)\n");
   std::fprintf(o, "  intrinsics_skew: %.6f\n", k.skew);
   std::fprintf(o, "  distortion_model: %s\n  distortion_coeffs: [%.12g, %.12g, %.12g, %.12g]\n",
-               sim::kalibr_lens_name(k.distortion), k.coeffs[0], k.coeffs[1], k.coeffs[2],
+               io::kalibr_lens_name(k.distortion), k.coeffs[0], k.coeffs[1], k.coeffs[2],
                k.coeffs[3]);
   std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
   std::fprintf(o, "  # s per row (a rolling shutter; 0: a global shutter)\n  line_delay: %.9g\n",
@@ -142,8 +142,8 @@ void write_distrust_comment(std::FILE* o, const std::string& why) {
 
 }  // namespace
 
-bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
-                           const CalibrationResult& r, std::string& error) {
+bool write_camchain_imucam(io::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                           std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
   write_yaml_header(o, "mirrorcal calibration, Kalibr camchain-imucam format");
@@ -577,7 +577,7 @@ static void write_noise_estimate(std::FILE* o, const NoiseEstimate& n) {
                n.refinements, n.converged ? "true" : "false");
 }
 
-bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+bool write_result_yaml(io::OutputSet& out, const std::string& path, const CalibrationResult& r,
                        std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
@@ -585,7 +585,7 @@ bool write_result_yaml(files::OutputSet& out, const std::string& path, const Cal
                "# mirrorcal result: SI units (m, rad, px); sigma is 1-sigma, rotations as the\n"
                "# components of the error vector log(R_b_c,true^T R_b_c,estimated)\n"
                "# written by %s\n",
-               sim::written_by().c_str());
+               io::written_by().c_str());
   std::fprintf(o, "T_cam_imu:\n");
   write_matrix_rows(o, t_cam_imu(r), "  ");
   std::fprintf(o, "p_b_c: [%.17g, %.17g, %.17g]\n", r.p_b_c.x(), r.p_b_c.y(), r.p_b_c.z());
@@ -741,7 +741,7 @@ void write_ros_matrix(std::FILE* o, const char* key, int rows, int cols, const d
 void write_ros_camera_info(std::FILE* o, const CalibrationResult& r) {
   const Pinhole<double>& k = r.intrinsics;
   std::fprintf(o, "# mirrorcal calibration: ROS camera_info (camera_calibration_parsers)\n");
-  std::fprintf(o, "# written by %s\n", sim::written_by().c_str());
+  std::fprintf(o, "# written by %s\n", io::written_by().c_str());
   std::fprintf(o, "image_width: %d\nimage_height: %d\ncamera_name: cam0\n", r.width, r.height);
   const double kk[9] = {k.fu, k.skew, k.cu, 0.0, k.fv, k.cv, 0.0, 0.0, 1.0};
   write_ros_matrix(o, "camera_matrix", 3, 3, kk);
@@ -777,7 +777,7 @@ std::string vins_camera_file(const std::string& config_path) {
 
 bool write_export(ExportFormat format, const std::string& path, const CalibrationResult& r,
                   std::string& error, bool untrusted) {
-  files::OutputSet out;
+  io::OutputSet out;
   if (format == ExportFormat::kVinsFusion) {
     std::FILE* camera = out.add(vins_camera_file(path), error);
     if (camera == nullptr) return false;
@@ -806,7 +806,7 @@ bool write_export(ExportFormat format, const std::string& path, const Calibratio
 }
 
 template <class Filter>
-bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+bool write_estimates_csv(io::OutputSet& out, const std::string& path,
                          const RecordStore<HistoryRow<Filter>>& rows, Distortion lens,
                          std::string& error) {
   using State = typename Filter::State;
@@ -845,11 +845,11 @@ bool write_estimates_csv(files::OutputSet& out, const std::string& path,
 }
 
 template <class Filter>
-bool write_features_csv(files::OutputSet& out, const std::string& path,
+bool write_features_csv(io::OutputSet& out, const std::string& path,
                         const RecordStore<HistoryRow<Filter>>& rows, std::string& error) {
   std::FILE* o = out.add(path, error);
   if (o == nullptr) return false;
-  std::fprintf(o, "%s\n", sim::kFeaturesHeader);
+  std::fprintf(o, "%s\n", io::kFeaturesHeader);
   for (const auto& r : rows)
     for (std::size_t i = 0; i < r.seen.size(); ++i) {
       if (!r.seen[i]) continue;
@@ -872,10 +872,10 @@ bool write_features_csv(files::OutputSet& out, const std::string& path,
 // For every filter the product instantiates (run.hpp).
 #define MIRRORCAL_RESULT_CSV_(M, NK, NI)                                                   \
   template bool write_features_csv(                                                        \
-      files::OutputSet&, const std::string&,                                               \
+      io::OutputSet&, const std::string&,                                                  \
       const RecordStore<HistoryRow<CalibrationFilter<double, M, NK, NI>>>&, std::string&); \
   template bool write_estimates_csv(                                                       \
-      files::OutputSet&, const std::string&,                                               \
+      io::OutputSet&, const std::string&,                                                  \
       const RecordStore<HistoryRow<CalibrationFilter<double, M, NK, NI>>>&, Distortion,    \
       std::string&);
 MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_RESULT_CSV_)

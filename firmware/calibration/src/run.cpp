@@ -18,7 +18,7 @@ namespace mirrorcal::calibration {
 
 std::unique_ptr<hal::ImuSource> LoopData::open_imu() const {
   if (streams) return streams->open_imu();
-  return std::make_unique<sim::VectorImuSource>(imu);
+  return std::make_unique<io::VectorImuSource>(imu);
 }
 
 template <int M>
@@ -27,8 +27,8 @@ std::unique_ptr<hal::MarkerSource<M>> LoopData::open_markers() const {
     return std::make_unique<ImageMarkers<M>>(streams->open_images(), width, height,
                                              image_detection.get(), leds, image_blobs.get(),
                                              led_naming.get());
-  if (streams) return std::make_unique<sim::StreamedMarkerSource<M>>(streams->open_frames());
-  return std::make_unique<sim::VectorMarkerSource<M>>(frames);
+  if (streams) return std::make_unique<io::StreamedMarkerSource<M>>(streams->open_frames());
+  return std::make_unique<io::VectorMarkerSource<M>>(frames);
 }
 #define MIRRORCAL_OPEN_MARKERS_(M) \
   template std::unique_ptr<hal::MarkerSource<M>> LoopData::open_markers<M>() const;
@@ -97,7 +97,7 @@ class Trajectory final : public CalibrationRun<M, NK, NI>::Filter::Linearisation
 // Every frame a pass's loop met, used or not: the same in every replay of the same data.
 template <int M, int NK, int NI>
 std::uint64_t frames_met(const CalibrationRun<M, NK, NI>& run) {
-  const firmware::LoopCounters& c = run.loop_counters;
+  const loop::LoopCounters& c = run.loop_counters;
   return c.frames + c.frames_before_filter + c.frames_after_imu;
 }
 
@@ -139,7 +139,7 @@ CalibrationRun<M, NK, NI> run_pass(const CalibrationConfig& config,
     filter.keep_motion_steps(true);
     sink.keep_motion();
   }
-  firmware::LoopConfig lc;
+  loop::LoopConfig lc;
   lc.imu_period_ns = data.imu_period_ns;
   lc.profiler = input.profiler;
   // A pass linearised along a trajectory takes a first sighting as it comes: withheld there, a
@@ -147,7 +147,7 @@ CalibrationRun<M, NK, NI> run_pass(const CalibrationConfig& config,
   // step (docs/estimator.md, "The update"). The passes linearised at their own estimate, which a
   // wrong first blob would carry off, confirm it.
   lc.screen.confirm_while_gate_open = along == nullptr;
-  firmware::CalibrationLoop<double, M, NK, NI> loop(filter, *imu, markers, lc, &sink);
+  loop::CalibrationLoop<double, M, NK, NI> loop(filter, *imu, markers, lc, &sink);
   if (relabeler != nullptr) loop.set_identifier(&markers);
   markers.watch(&loop.screen());
 
@@ -285,7 +285,7 @@ LoopData first_stretch(const LoopData& data) {
   MarkerFrame<M> f;
   while (markers->poll(f) == hal::SourceStatus::kOk) {
     if (f.t_ns > latest) break;
-    sim::ObservedFrame& kept = out.frames.emplace_back(sim::ObservedFrame{f.t_ns, {}});
+    io::ObservedFrame& kept = out.frames.emplace_back(io::ObservedFrame{f.t_ns, {}});
     for (int i = 0; i < M; ++i)
       if (f.seen[std::size_t(i)])
         kept.markers.push_back({i, f.uv[std::size_t(i)].x(), f.uv[std::size_t(i)].y()});
@@ -1023,8 +1023,8 @@ MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_INSTANTIATE_RUN_LOOP_)
 MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_INSTANTIATE_RUN_SINGLE_PASS_)
 #undef MIRRORCAL_INSTANTIATE_RUN_SINGLE_PASS_
 
-sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
-  sim::CalibrationStart s;
+io::CalibrationStart calibration_start(const CalibrationResult& earlier) {
+  io::CalibrationStart s;
   s.p_b_c = earlier.p_b_c;
   s.q_b_c = earlier.q_b_c;
   s.features_c = earlier.markers;
@@ -1043,7 +1043,7 @@ sim::CalibrationStart calibration_start(const CalibrationResult& earlier) {
   return s;
 }
 
-void note_start(const sim::CalibrationStart& earlier, CalibrationResult& r) {
+void note_start(const io::CalibrationStart& earlier, CalibrationResult& r) {
   r.from_untrusted = !earlier.trusted;
   r.from_imu_model = earlier.imu_model;
 }

@@ -5,7 +5,7 @@
 
 #include "mirrorcal/evaluation/plots.hpp"
 #include "mirrorcal/evaluation/process.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::evaluation {
 
@@ -87,12 +87,12 @@ bool draw_allan_plot(const ImuNoiseAnalysis& a, std::string& png, std::string& w
       run_program({"gnuplot", "allan.gp"}, folder.path, folder.path + "/gnuplot.log");
   if (gnuplot.status != 0) {
     std::string log, ignored;
-    files::read_file(folder.path + "/gnuplot.log", log, ignored);
+    io::read_file(folder.path + "/gnuplot.log", log, ignored);
     why = gnuplot.error + (gnuplot.status < 0 ? " (Debian: apt-get install gnuplot-nox)"
                                               : ": " + log.substr(0, 500));
     return false;
   }
-  return files::read_file(folder.path + "/allan.png", png, why);
+  return io::read_file(folder.path + "/allan.png", png, why);
 }
 
 }  // namespace mirrorcal::evaluation

@@ -10,7 +10,7 @@
 #include "mirrorcal/estimator/imu_transition.hpp"
 #include "mirrorcal/evaluation/batch_factors.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
-#include "mirrorcal/firmware/loop.hpp"
+#include "mirrorcal/loop/loop.hpp"
 
 namespace mirrorcal::evaluation {
 
@@ -50,8 +50,8 @@ class ImuStream {
     std::nth_element(steps.begin(), steps.begin() + static_cast<long>(steps.size() / 2),
                      steps.end());
     period_ns_ = steps.empty() ? 1 : std::max<std::int64_t>(1, steps[steps.size() / 2]);
-    gap_ns_ = static_cast<std::int64_t>(firmware::LoopConfig{}.gap_periods *
-                                        static_cast<double>(period_ns_));
+    gap_ns_ =
+        static_cast<std::int64_t>(loop::LoopConfig{}.gap_periods * static_cast<double>(period_ns_));
   }
   std::int64_t first_ns() const { return imu_.front().t_ns; }
   std::int64_t last_ns() const { return imu_.back().t_ns; }
@@ -114,7 +114,7 @@ class ImuStream {
 // One state's frame: its markers.
 struct StateFrame {
   std::int64_t t_cam_ns = 0;
-  std::vector<sim::ObservedMarker> markers;
+  std::vector<io::ObservedMarker> markers;
   double anchor_row = 0.0;  // the mean row of its markers, which its state's time is taken at
 };
 
@@ -228,10 +228,10 @@ Attitude attitude_of(const Eigen::Quaterniond& q) {
 }
 
 bool BatchSolver::select_frames(std::string& error) {
-  for (const sim::ObservedFrame& f : *in_.frames) {
+  for (const io::ObservedFrame& f : *in_.frames) {
     StateFrame s;
     s.t_cam_ns = f.t_ns;
-    for (const sim::ObservedMarker& mk : f.markers) {
+    for (const io::ObservedMarker& mk : f.markers) {
       if (mk.id < 0 || static_cast<std::size_t>(mk.id) >= m_) continue;
       s.markers.push_back(mk);
       s.anchor_row += mk.v;
@@ -248,7 +248,7 @@ bool BatchSolver::select_frames(std::string& error) {
 }
 
 void BatchSolver::start_parameters() {
-  const sim::RecordingPriors& pr = in_.priors;
+  const io::RecordingPriors& pr = in_.priors;
   nk_ = in_.camera_parameters;
   camera_model_ = nk_ > 0 ? pr.intrinsics_guess : in_.config.intrinsics;
   camera_model_.distortion = in_.config.intrinsics.distortion;
@@ -375,7 +375,7 @@ void BatchSolver::make_factors(std::size_t k, std::vector<ImuPiece> pieces,
   FrameExposure e = imu_.exposure_at(times_[k]);
   e.stamp_minus_state_s = static_cast<double>(frame.t_cam_ns - times_[k]) * kNsToS;
   reprojections_[k].clear();
-  for (const sim::ObservedMarker& mk : frame.markers) {
+  for (const io::ObservedMarker& mk : frame.markers) {
     const double readout_s = camera_model_.line_delay_s * mk.v;
     reprojections_[k].emplace_back(
         ReprojectionFactor::create(e, Eigen::Vector2d(mk.u, mk.v), readout_s, camera_model_,
@@ -639,7 +639,7 @@ bool BatchSolver::solve(calibration::CalibrationResult& result, BatchReport& rep
 }  // namespace
 
 BatchInput simulated_batch_input(const sim::Scenario& s, const sim::SimData& data,
-                                 const sim::RecordingPriors& priors, int camera_parameters,
+                                 const io::RecordingPriors& priors, int camera_parameters,
                                  ImuModel imu_model) {
   BatchInput in;
   in.imu = &data.imu;
@@ -654,7 +654,7 @@ BatchInput simulated_batch_input(const sim::Scenario& s, const sim::SimData& dat
   return in;
 }
 
-TruthError truth_error(const calibration::CalibrationResult& r, const sim::RecordingTruth& truth) {
+TruthError truth_error(const calibration::CalibrationResult& r, const io::RecordingTruth& truth) {
   const CalibrationLayout layout = r.layout();
   TruthError t;
   t.error = Eigen::VectorXd::Zero(layout.size());

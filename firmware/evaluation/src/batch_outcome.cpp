@@ -11,8 +11,8 @@ template <int M>
 BatchOutcome solve(const sim::Scenario& rig, std::uint64_t seed, ImuModel imu_model) {
   BatchOutcome out;
   const sim::SimData data = sim::simulate(rig, seed);
-  const sim::RecordingPriors priors = sim::from_prior(sim::simulation_prior<M>(rig, data, seed),
-                                                      rig.gravity_n, rig.pixel_sigma, false);
+  const io::RecordingPriors priors = io::from_prior(sim::simulation_prior<M>(rig, data, seed),
+                                                    rig.gravity_n, rig.pixel_sigma, false);
   calibration::CalibrationResult r;
   BatchReport report;
   if (!solve_batch(simulated_batch_input(rig, data, priors, 0, imu_model), {}, r, report,

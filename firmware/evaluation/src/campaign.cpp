@@ -4,7 +4,7 @@
 #include <mutex>
 #include <thread>
 
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::evaluation {
 
@@ -18,7 +18,7 @@ bool run_campaign(std::vector<RunOutcome>& out, std::uint64_t jobs,
     for (std::uint64_t i; (i = next++) < runs;) {
       try {
         run(i, out[i]);
-      } catch (const files::StoreError& e) {  // a full $TMPDIR: no more runs, the caller says why
+      } catch (const io::StoreError& e) {  // a full $TMPDIR: no more runs, the caller says why
         std::lock_guard<std::mutex> lock(mu);
         if (store_error.empty()) store_error = e.what();
         next = runs;

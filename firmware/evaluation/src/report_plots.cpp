@@ -311,14 +311,14 @@ std::vector<ReportFigure> draw_report_figures(const ReportData& d, std::string& 
       run_program({"gnuplot", "report.gp"}, folder.path, folder.path + "/gnuplot.log");
   if (gnuplot.status != 0) {
     std::string log, ignored;
-    files::read_file(folder.path + "/gnuplot.log", log, ignored);
+    io::read_file(folder.path + "/gnuplot.log", log, ignored);
     why = gnuplot.error + (gnuplot.status < 0 ? " (Debian: apt-get install gnuplot-nox)"
                                               : ": " + log.substr(0, 500));
     return drawn;
   }
   for (const Figure& f : figures) {
     std::string png, error;
-    if (files::read_file(folder.path + "/" + f.file, png, error)) drawn.push_back({f.caption, png});
+    if (io::read_file(folder.path + "/" + f.file, png, error)) drawn.push_back({f.caption, png});
   }
   return drawn;
 }

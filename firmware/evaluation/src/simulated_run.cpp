@@ -62,7 +62,7 @@ sim::Scenario named_as_detected(const sim::Scenario& s, const FrameMode& frames,
 template <int M, int NI>
 CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                                         const std::function<void(double)>& progress,
-                                        const FrameMode& frames, firmware::LoopProfiler* profiler,
+                                        const FrameMode& frames, loop::LoopProfiler* profiler,
                                         Passes passes) {
   using Run = CalibrationRun<M, 0, NI>;
   const sim::SimData data = sim::simulate(s, seed);
@@ -160,7 +160,7 @@ CalibrationRun<M, NK, NI> run_two_stage_simulation(const sim::Scenario& s, std::
   typename Run::Filter::Covariance p0;
   initialise(prior, x0, p0);
   // Stage 1's calibration parameters, estimate and covariance, in place of the prior's guesses.
-  const sim::CalibrationStart start = calibration_start(stage1.result);
+  const io::CalibrationStart start = calibration_start(stage1.result);
   start_from(start, x0, p0);
   const State truth = truth_state<State>(s);
   Run run = run_loop<M, NK, NI>(scenario_config(s), x0, p0, loop_data(s, data), &truth, half(0.5));

@@ -1,6 +1,6 @@
-#include "mirrorcal/firmware/loop_impl.hpp"
+#include "mirrorcal/loop/loop_impl.hpp"
 
-namespace mirrorcal::firmware {
+namespace mirrorcal::loop {
 
 ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns) {
   if (b.t_ns == a.t_ns) return b;
@@ -17,4 +17,4 @@ ImuSample interpolate(const ImuSample& a, const ImuSample& b, std::int64_t t_ns)
 MIRRORCAL_FOR_EACH_FILTER(MIRRORCAL_LOOP_)
 #undef MIRRORCAL_LOOP_
 
-}  // namespace mirrorcal::firmware
+}  // namespace mirrorcal::loop

@@ -1,4 +1,4 @@
-#include "mirrorcal/firmware/realtime.hpp"
+#include "mirrorcal/loop/realtime.hpp"
 
 #include <sched.h>
 #include <sys/mman.h>
@@ -7,7 +7,7 @@
 #include <cerrno>
 #include <cstring>
 
-namespace mirrorcal::firmware {
+namespace mirrorcal::loop {
 
 namespace {
 
@@ -74,4 +74,4 @@ RealtimeOutcome apply_realtime(const RealtimeOptions& o) {
   return out;
 }
 
-}  // namespace mirrorcal::firmware
+}  // namespace mirrorcal::loop

@@ -1,11 +1,11 @@
-#include "mirrorcal/firmware/timing.hpp"
+#include "mirrorcal/loop/timing.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 
-namespace mirrorcal::firmware {
+namespace mirrorcal::loop {
 
 const char* stage_name(Stage s) {
   switch (s) {
@@ -181,4 +181,4 @@ std::int64_t SteadyClock::now_ns() {
       .count();
 }
 
-}  // namespace mirrorcal::firmware
+}  // namespace mirrorcal::loop

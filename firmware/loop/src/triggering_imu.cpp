@@ -1,6 +1,6 @@
-#include "mirrorcal/firmware/triggering_imu.hpp"
+#include "mirrorcal/loop/triggering_imu.hpp"
 
-namespace mirrorcal::firmware {
+namespace mirrorcal::loop {
 
 BlinkingLeds::BlinkingLeds(hal::OutputLine* const* lines, int count, const hal::BlinkCode& code)
     : count_(count < 0          ? 0
@@ -50,4 +50,4 @@ hal::SourceStatus TriggeringImu::next(ImuSample& s) {
   return st;
 }
 
-}  // namespace mirrorcal::firmware
+}  // namespace mirrorcal::loop

@@ -4,7 +4,7 @@
 
 #include "mirrorcal/estimator/calibration_filter.hpp"
 #include "mirrorcal/estimator/prior.hpp"
-#include "mirrorcal/firmware/timing.hpp"
+#include "mirrorcal/loop/timing.hpp"
 
 int main() {
   using Filter = mirrorcal::CalibrationFilter<double, 3, 0>;

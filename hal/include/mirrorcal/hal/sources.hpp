@@ -1,6 +1,6 @@
 // What the loop sees of the hardware: a clock, a stream of IMU samples, and a stream of marker
 // observations (detected in frames by a driver, or synthesised by the simulator). Implemented by
-// drivers/ on the board and sim_host/ on the host; no Linux headers here.
+// drivers/ on the board, io/ and sim/ on the host; no Linux headers here.
 #pragma once
 
 #include <cstdint>

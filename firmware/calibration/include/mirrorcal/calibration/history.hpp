@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "mirrorcal/calibration/record_store.hpp"
-#include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/hal/frames.hpp"
+#include "mirrorcal/loop/loop.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -51,7 +51,7 @@ struct HistoryRow {
   // The frame's markers as the loop took them (detected and labelled, from images), px.
   std::array<bool, State::kMarkers> seen{};
   std::array<Eigen::Vector2d, State::kMarkers> measured{};
-  // Of those, the ones the loop withheld from the update (firmware::MarkerScreen).
+  // Of those, the ones the loop withheld from the update (loop::MarkerScreen).
   std::array<bool, State::kMarkers> withheld{};
   int markers_seen = 0;
   // This update's markers rejected by the gate, and their normalised innovation squared with its
@@ -116,7 +116,7 @@ class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<
   const char* error() const override { return source_.error(); }
   std::int64_t detection_ns() const override { return source_.detection_ns(); }
   // The loop's screen, which withholds some of a frame's markers after the tap saw them.
-  void watch(const firmware::MarkerScreen<M>* screen) { screen_ = screen; }
+  void watch(const loop::MarkerScreen<M>* screen) { screen_ = screen; }
   // The frame stamped t_ns the loop took last, once; nullptr if it was taken already or the
   // estimate published at t_ns followed no frame (the final one). withheld: its markers the
   // screen withheld.
@@ -142,7 +142,7 @@ class FrameTap final : public hal::MarkerSource<M>, public hal::MarkerRelabeler<
   }
   MarkerFrame<M> last_{};
   bool fresh_ = false;
-  const firmware::MarkerScreen<M>* screen_ = nullptr;
+  const loop::MarkerScreen<M>* screen_ = nullptr;
   const OutlierVeto<M>* veto_ = nullptr;
   std::size_t next_veto_ = 0;
   std::array<std::uint64_t, M> vetoed_{};
@@ -179,11 +179,11 @@ struct MotionRow {
 };
 
 template <class Filter>
-class HistorySink final : public firmware::EstimateSink<Filter> {
+class HistorySink final : public loop::EstimateSink<Filter> {
  public:
   // At most capacity rows; with tap (the loop's marker source, wrapped), each row has its frame's
   // residuals. The rows go to a file created now: publishing allocates nothing, and throws
-  // files::StoreError if the file cannot be written (a full disk).
+  // io::StoreError if the file cannot be written (a full disk).
   HistorySink(std::size_t capacity, const typename Filter::State* truth,
               FrameTap<Filter::State::kMarkers>* tap = nullptr)
       : truth_(truth), tap_(tap), capacity_(capacity) {}

@@ -8,7 +8,7 @@
 
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -16,7 +16,7 @@ namespace mirrorcal::calibration {
 // brightness code (the default 1 : 1.5 : 2.25 ..., or led_brightness), and by their blink code
 // where they blink their names (blink_period). `calibrate` from images, `run` and `record` use it.
 template <int M>
-detection::DetectionConfig<M> marker_detection_config(const sim::MarkerLeds& leds) {
+detection::DetectionConfig<M> marker_detection_config(const io::MarkerLeds& leds) {
   detection::DetectionConfig<M> c;
   if (leds.brightness.size() == static_cast<std::size_t>(M))
     for (int i = 0; i < M; ++i)
@@ -47,7 +47,7 @@ struct LedNaming {
 // priors', or an earlier calibration's) and their sigma. The names found, none if the shape never
 // fitted.
 template <int M>
-LedNaming name_leds_by_shape(hal::FrameSource& frames, const sim::MarkerLeds& leds,
+LedNaming name_leds_by_shape(hal::FrameSource& frames, const io::MarkerLeds& leds,
                              const detection::RigGeometry<M>& geometry, int width, int height);
 
 // The marker source of a calibration from a recording's images: the board's detection on each
@@ -72,7 +72,7 @@ class ImageBlobs final : public detection::BlobReplay {
   double read_seconds = 0.0, detect_seconds = 0.0;
 
  private:
-  files::RecordFile frames_{sizeof(detection::DetectedFrame), "the images' blobs"};
+  io::RecordFile frames_{sizeof(detection::DetectedFrame), "the images' blobs"};
   std::size_t complete_ = 0;
 };
 
@@ -82,7 +82,7 @@ class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabe
   // blobs: where the passes keep and replay the detected frames (nullptr: every pass detects).
   // naming: the LEDs' names from a look at the same images (none: by the other cues).
   ImageMarkers(std::unique_ptr<hal::FrameSource> frames, int width, int height,
-               DetectionReport* report, const sim::MarkerLeds& leds = {},
+               DetectionReport* report, const io::MarkerLeds& leds = {},
                ImageBlobs* blobs = nullptr, const LedNaming* naming = nullptr);
   ~ImageMarkers() override;
   hal::SourceStatus poll(MarkerFrame<M>& frame) override;
@@ -100,9 +100,9 @@ class ImageMarkers final : public hal::MarkerSource<M>, public hal::MarkerRelabe
   double read_seconds_ = 0.0;
 };
 // Compiled in image_markers.cpp for every built M.
-#define MIRRORCAL_EXTERN_IMAGE_MARKERS_(M)                                                   \
-  extern template class ImageMarkers<M>;                                                     \
-  extern template LedNaming name_leds_by_shape<M>(hal::FrameSource&, const sim::MarkerLeds&, \
+#define MIRRORCAL_EXTERN_IMAGE_MARKERS_(M)                                                  \
+  extern template class ImageMarkers<M>;                                                    \
+  extern template LedNaming name_leds_by_shape<M>(hal::FrameSource&, const io::MarkerLeds&, \
                                                   const detection::RigGeometry<M>&, int, int);
 MIRRORCAL_FOR_EACH_MARKER_COUNT(MIRRORCAL_EXTERN_IMAGE_MARKERS_)
 #undef MIRRORCAL_EXTERN_IMAGE_MARKERS_

@@ -9,7 +9,7 @@
 
 #include "mirrorcal/estimator/imu_intrinsics.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -83,7 +83,7 @@ KalibrImuMatrices kalibr_imu_matrices(const ImuIntrinsics<double>& k);
 // The result's `imu:` section (mirrorcal-result.yaml).
 void write_imu_result_yaml(std::FILE* o, const ImuResult& r);
 // OpenVINS's kalibr_imu_chain.yaml (read with OpenCV's FileStorage), added to out.
-bool write_openvins_imu_chain(files::OutputSet& out, const std::string& path, const ImuResult& r,
+bool write_openvins_imu_chain(io::OutputSet& out, const std::string& path, const ImuResult& r,
                               std::string& error);
 
 }  // namespace mirrorcal::calibration

@@ -38,7 +38,7 @@
 
 #include "mirrorcal/estimator/mirror_model.hpp"
 #include "mirrorcal/hal/sources.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -91,11 +91,11 @@ bool pixel_noise_estimate(double quadratic, double redundancy, double told_pixel
                           double& estimate, double& sigma);
 
 // Kalibr's imu.yaml with the estimated densities (and the random walks stated), the IMU model
-// and tolerances used, as the shared writer writes it (sim::imu_yaml_text), with a comment saying
+// and tolerances used, as the shared writer writes it (io::imu_yaml_text), with a comment saying
 // where they come from.
 std::string estimated_imu_yaml(const NoiseEstimate& n);
 // The same as imu.yaml at path, added to out (written with the run's other outputs, or none).
-bool add_estimated_imu_yaml(files::OutputSet& out, const std::string& path, const NoiseEstimate& n,
+bool add_estimated_imu_yaml(io::OutputSet& out, const std::string& path, const NoiseEstimate& n,
                             std::string& error);
 
 }  // namespace mirrorcal::calibration

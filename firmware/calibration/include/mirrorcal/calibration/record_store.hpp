@@ -1,6 +1,6 @@
 // What a calibration keeps per frame (its history rows, the tracking pass's motion steps, the
 // smoothed trajectory), held in a temporary file rather than in memory: memory stays bounded
-// whatever the recording's length (files::RecordFile, a page of records in memory). Read like a
+// whatever the recording's length (io::RecordFile, a page of records in memory). Read like a
 // std::vector, but each element by value.
 #pragma once
 
@@ -10,7 +10,7 @@
 #include <type_traits>
 #include <utility>
 
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -61,7 +61,7 @@ class RecordStore {
   const_iterator end() const { return {this, size()}; }
 
  private:
-  files::RecordFile file_;
+  io::RecordFile file_;
 };
 
 }  // namespace mirrorcal::calibration

@@ -17,7 +17,7 @@
 #include "mirrorcal/calibration/record_store.hpp"
 #include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/calibration/run.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -76,8 +76,8 @@ struct ReportData {
   // The IMU's residuals along the refinement's smoothed motion (CalibrationRun's); none without it.
   std::shared_ptr<const RecordStore<ImuResidual>> imu_residuals;
   RecordStore<ReportRow> rows{"the report's series"};
-  double settled_from_s = 0.0;    // the first frame after those the estimate needed to settle
-  firmware::LoopCounters loop{};  // what the last pass met on its streams: IMU gaps, restarts
+  double settled_from_s = 0.0;  // the first frame after those the estimate needed to settle
+  loop::LoopCounters loop{};    // what the last pass met on its streams: IMU gaps, restarts
   // What the checks of the input found doubtful but not wrong (calibrate: a noise density unlike
   // the data's, ...), said beside the verdict: the self-check cannot see them.
   std::vector<std::string> input_warnings;
@@ -140,7 +140,7 @@ std::string report_text(const ReportData& d);
 // report.txt, report.html, residuals.csv and imu_residuals.csv in dir, added to out (written when
 // it commits). The plots are drawn in a temporary folder; without gnuplot the page says so and the
 // text is whole.
-bool write_report(files::OutputSet& out, const std::string& dir, const ReportData& d,
+bool write_report(io::OutputSet& out, const std::string& dir, const ReportData& d,
                   const ReportPlots& plots, std::string& error);
 // For a run without data (`run` without frames): the verdict and the calibration only.
 ReportData report_data_without_history(const CalibrationResult& r, const std::string& title);
@@ -155,7 +155,7 @@ bool write_run_outputs_and_report(const std::string& dir, const CalibrationRun<M
   ReportData report = report_data(run, title);
   report.from_earlier = from_earlier;
   report.input_warnings = input_warnings;
-  files::OutputSet out;
+  io::OutputSet out;
   return add_run_outputs(out, dir, run, error) && write_report(out, dir, report, plots, error) &&
          out.commit(error);
 }

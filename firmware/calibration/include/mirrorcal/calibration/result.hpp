@@ -14,8 +14,8 @@
 #include "mirrorcal/calibration/imu_result.hpp"
 #include "mirrorcal/calibration/noise_estimate.hpp"
 #include "mirrorcal/estimator/mirror_model.hpp"
-#include "mirrorcal/sim_host/files.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
+#include "mirrorcal/io/files.hpp"
+#include "mirrorcal/io/recording.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -29,7 +29,7 @@ struct CalibrationResult {
   // 0, 4 (fu fv cu cv; skew held), 5 (with skew) or 8 (fu fv cu cv and the lens's coefficients)
   int estimated_intrinsics = 0;
   int width = 0, height = 0;
-  std::string rostopic = sim::kDefaultCameraTopic;  // camchain.yaml's, for Kalibr and OpenVINS
+  std::string rostopic = io::kDefaultCameraTopic;  // camchain.yaml's, for Kalibr and OpenVINS
   std::string recording_fingerprint;  // of the recording calibrated (none for a simulation)
   std::vector<double> sigma;          // calibration block, in calibration_params() order (SI)
   Eigen::MatrixXd covariance;         // of the calibration block, same order
@@ -38,7 +38,7 @@ struct CalibrationResult {
   // estimate (their mirror image not in front of the camera).
   std::uint64_t markers_used = 0, markers_gated = 0, markers_invalid = 0;
   // Each marker's frames in the last pass whose reflection was withheld before the filter: its
-  // step disagreed with the other markers' (a wrong blob or label; firmware::MarkerScreen), or
+  // step disagreed with the other markers' (a wrong blob or label; loop::MarkerScreen), or
   // the refinement found it an outlier at its converged solution (run.cpp, find_outliers).
   std::vector<std::uint64_t> markers_screened;
   std::uint64_t filter_failures = 0;  // predicts or updates the filter refused (numerically)
@@ -118,7 +118,7 @@ inline double estimated_camera_parameter(const CalibrationResult& r, int j) {
 // that rejected more than kSuspectGatedFraction, five times that, has most likely locked onto a
 // wrong solution; good runs stay well below it. Such a pass is followed by another (run.hpp,
 // Passes); a result that still gated too many is flagged. Tested by
-// Cli.ARunThatDivergedIsFlaggedInTheOutputAndTheResult (tests/recording/cli_test.cpp).
+// Cli.ARunThatDivergedIsFlaggedInTheOutputAndTheResult (tests/app/cli_test.cpp).
 constexpr double kSuspectGatedFraction = 0.005;
 // More than kSuspectGatedFraction of the markers offered to the filter were gated or could not be
 // predicted at all (an estimate that puts them behind the camera is as lost).
@@ -178,7 +178,7 @@ bool imu_not_ideal(const CalibrationResult& r);
 // motion hardly accelerated the rig, and the estimate is neither as good as the data nor as its
 // sigmas say. The NEES hides it (the error lies along one direction), so the scale's own sigma
 // is checked; only slow sweeps lie beyond the limit. Tested by
-// Report.ExcitationSaysHowWellTheMarkersScaleIsKnown (tests/firmware/report_test.cpp).
+// Report.ExcitationSaysHowWellTheMarkersScaleIsKnown (tests/calibration/report_test.cpp).
 constexpr double kLooseMarkerScale = 0.04;
 bool scale_unresolved(const CalibrationResult& r);
 // Detection in the images saw blobs but labelled few markers: fewer than kMinLabelledShare of
@@ -283,8 +283,8 @@ void write_matrix_rows(std::FILE* f, const Eigen::MatrixXd& m, const char* inden
 // consistent: false says so in comments at its top, with why.
 // The writers add their file to out, which writes it when committed (files.hpp); false,
 // with a message naming the file, if it cannot be created.
-bool write_camchain_imucam(files::OutputSet& out, const std::string& path,
-                           const CalibrationResult& r, std::string& error);
+bool write_camchain_imucam(io::OutputSet& out, const std::string& path, const CalibrationResult& r,
+                           std::string& error);
 
 // What `mirrorcal export` writes for other tools to read directly.
 enum class ExportFormat {
@@ -301,14 +301,14 @@ bool write_export(ExportFormat format, const std::string& path, const Calibratio
                   std::string& error, bool untrusted = false);
 // Everything estimated with its 1-sigma and the covariance of the calibration block; the estimate
 // and covariance in full precision, so that `calibrate --from` starts exactly where this ended.
-bool write_result_yaml(files::OutputSet& out, const std::string& path, const CalibrationResult& r,
+bool write_result_yaml(io::OutputSet& out, const std::string& path, const CalibrationResult& r,
                        std::string& error);
 
 // estimates.csv: time and every calibration state with its 1-sigma (SI units, rotation as the
 // quaternion q_b_c with the 1-sigma of its error vector's components); lens names the distortion
 // coefficients a stage 2 with estimate_distortion estimates.
 template <class Filter>
-bool write_estimates_csv(files::OutputSet& out, const std::string& path,
+bool write_estimates_csv(io::OutputSet& out, const std::string& path,
                          const RecordStore<HistoryRow<Filter>>& rows, Distortion lens,
                          std::string& error);
 
@@ -316,7 +316,7 @@ bool write_estimates_csv(files::OutputSet& out, const std::string& path,
 // frame's timestamp, numbers that read back as the same doubles): what calibrate found in a
 // recording's images, to check or to calibrate from again.
 template <class Filter>
-bool write_features_csv(files::OutputSet& out, const std::string& path,
+bool write_features_csv(io::OutputSet& out, const std::string& path,
                         const RecordStore<HistoryRow<Filter>>& rows, std::string& error);
 
 }  // namespace mirrorcal::calibration

@@ -12,11 +12,10 @@
 
 #include "mirrorcal/calibration/history.hpp"
 #include "mirrorcal/calibration/result.hpp"
-#include "mirrorcal/firmware/loop.hpp"
 #include "mirrorcal/hal/frames.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/io/recording.hpp"
+#include "mirrorcal/io/replay.hpp"
+#include "mirrorcal/loop/loop.hpp"
 
 namespace mirrorcal::calibration {
 
@@ -73,7 +72,7 @@ struct CalibrationRun {
   typename Filter::Covariance covariance;  // the final one (stage 2 starts from stage 1's)
   CalibrationResult result;
   FilterCounters filter_counters;
-  firmware::LoopCounters loop_counters;
+  loop::LoopCounters loop_counters;
   std::uint64_t markers_out_of_image = 0;
   std::size_t imu_samples = 0, frames = 0;
   DetectionReport detection;    // --frames, and calibrate from images
@@ -98,18 +97,18 @@ struct CalibrationRun {
 // held in memory, or read from a recording's files again in each pass (calibrate), so that memory
 // does not grow with the recording.
 struct LoopData {
-  std::vector<ImuSample> imu;              // timestamp order
-  std::vector<sim::ObservedFrame> frames;  // timestamp order; any subset of markers each
-  std::shared_ptr<const sim::RecordingStreams> streams;  // instead of imu and frames
-  sim::RecordingStats stats;                             // of the streams
-  std::int64_t imu_period_ns = 5'000'000;                // nominal IMU period
-  int width = 640, height = 480;                         // image size, for the result files
+  std::vector<ImuSample> imu;             // timestamp order
+  std::vector<io::ObservedFrame> frames;  // timestamp order; any subset of markers each
+  std::shared_ptr<const io::RecordingStreams> streams;  // instead of imu and frames
+  io::RecordingStats stats;                             // of the streams
+  std::int64_t imu_period_ns = 5'000'000;               // nominal IMU period
+  int width = 640, height = 480;                        // image size, for the result files
   // Set: the markers are found in the streams' images (RecordingStreams::open_images) by the
   // board's detection, labelled with the filter's prediction, in every pass; it gets how that went
   // in the last pass over all the data.
   std::shared_ptr<DetectionReport> image_detection;
   std::shared_ptr<ImageBlobs> image_blobs;  // with image_detection: the images detected once
-  sim::MarkerLeds leds;  // the markers' LEDs, as the detection in images needs them
+  io::MarkerLeds leds;  // the markers' LEDs, as the detection in images needs them
   // LEDs in images that do not blink their names: the names a look at the first frames gave the
   // reflections' tracks by the rig's shape (name_leds_by_shape), which every pass labels them by
   // from the first frame.
@@ -135,7 +134,7 @@ template <int M>
 struct LoopHooks {
   hal::MarkerSource<M>* source = nullptr;
   hal::MarkerRelabeler<M>* relabeler = nullptr;
-  firmware::LoopProfiler* profiler = nullptr;
+  loop::LoopProfiler* profiler = nullptr;
 };
 
 // The constants below are measured in docs/estimator.md, "Passes and refinement" and "Noise levels
@@ -156,7 +155,7 @@ constexpr double kNegligiblePriorWeight = 1e-2;
 // pass, started from it, still gates more than kSuspectGatedFraction of the markers, and a third
 // from its estimate comes back. So a pass the self-check finds suspect (result.hpp) is followed by
 // another, up to kMaxPasses; a good run stops at kDefaultPasses. Tested by
-// Cli.ASecondPassThatFitsBadlyIsFollowedByAnother (tests/recording/cli_test.cpp).
+// Cli.ASecondPassThatFitsBadlyIsFollowedByAnother (tests/app/cli_test.cpp).
 constexpr int kMaxPasses = 4;
 // A run still suspect after kDefaultPasses has locked onto a wrong solution, and passes from its
 // estimate rarely leave it; which runs lock on is chaotic (a slightly different guess of the time
@@ -165,7 +164,7 @@ constexpr int kMaxPasses = 4;
 // about guesses far off can bear, the estimate walks to the solution instead of locking on, and
 // the pass after it, at the true noise, starts from its estimate. A factor of a few still locks
 // on; this one lies inside the range that brought every such run back. Tested by
-// Cli.ARunThatDivergedIsFlaggedInTheOutputAndTheResult (tests/recording/cli_test.cpp).
+// Cli.ARunThatDivergedIsFlaggedInTheOutputAndTheResult (tests/app/cli_test.cpp).
 constexpr double kAnnealedPixelNoise = 10.0;
 // Gauss-Newton refinements after the passes (run.cpp): each a tracking pass along the estimate,
 // smoothed, and a pass linearised along it, repeated until a step moves the calibration by less
@@ -193,7 +192,7 @@ constexpr double kOutlierMaxShare = 0.05;
 // the same for estimate and covariance (the Laplace approximation at the solution). Jacobian
 // slopes in every step converge worse, so only the last step takes them. Its length is the
 // self-check's refinement_step (result.hpp, kRefinementStepLimit). Tested by
-// Refinement.KeepsOfTheGuessesErrorWhatItsCovarianceSays (tests/firmware/refinement_test.cpp).
+// Refinement.KeepsOfTheGuessesErrorWhatItsCovarianceSays (tests/calibration/refinement_test.cpp).
 constexpr double kTangentAlphaScale = 1.0 / 64.0;
 // Noise estimation (Passes::estimate_noise): the calibrations it makes at most, and the change
 // of the pixel noise's estimate under which it stops. The first starts from kNoiseStartScale
@@ -283,10 +282,10 @@ MIRRORCAL_FOR_EACH_STAGE1_FILTER(MIRRORCAL_EXTERN_RUN_SINGLE_PASS_)
 
 // An earlier calibration's camera pose and markers with their covariance, as a later one starts
 // from them (stage 2 from stage 1; `calibrate --from`).
-sim::CalibrationStart calibration_start(const CalibrationResult& earlier);
+io::CalibrationStart calibration_start(const CalibrationResult& earlier);
 // What a result started from an earlier calibration owes to it, for its self-check: whether that
 // one said consistent, and the IMU model it estimated.
-void note_start(const sim::CalibrationStart& earlier, CalibrationResult& r);
+void note_start(const io::CalibrationStart& earlier, CalibrationResult& r);
 
 // Starts the camera pose, markers and time offset at an earlier calibration's estimate and
 // covariance in place of the prior's guesses, and the IMU's intrinsics too where it estimated the
@@ -294,7 +293,7 @@ void note_start(const sim::CalibrationStart& earlier, CalibrationResult& r);
 // The IMU's motion state and the camera's intrinsics keep the prior's, and so does the time offset
 // if the earlier result has none. The markers must be as many as the state's.
 template <class State, class Covariance>
-void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0) {
+void start_from(const io::CalibrationStart& earlier, State& x0, Covariance& p0) {
   // The earlier block is the state's calibration block up to the intrinsics.
   constexpr int B = State::kCalibrationBegin, K = State::kImu, NI = State::kImuIntrinsics;
   const int l = calibration_layout(State::kMarkers, 0, earlier.has_t_d).size();
@@ -322,7 +321,7 @@ void start_from(const sim::CalibrationStart& earlier, State& x0, Covariance& p0)
 // camchain-imucam.yaml, mirrorcal-result.yaml and estimates.csv of a run, in dir, and imu.yaml when
 // it estimated the noise: added to out, or written.
 template <int M, int NK, int NI>
-bool add_run_outputs(files::OutputSet& out, const std::string& dir,
+bool add_run_outputs(io::OutputSet& out, const std::string& dir,
                      const CalibrationRun<M, NK, NI>& run, std::string& error) {
   return write_camchain_imucam(out, dir + "/camchain-imucam.yaml", run.result, error) &&
          (!run.result.noise.estimated ||
@@ -338,7 +337,7 @@ bool add_run_outputs(files::OutputSet& out, const std::string& dir,
 template <int M, int NK, int NI>
 bool write_run_outputs(const std::string& dir, const CalibrationRun<M, NK, NI>& run,
                        std::string& error) {
-  files::OutputSet out;
+  io::OutputSet out;
   return add_run_outputs(out, dir, run, error) && out.commit(error);
 }
 

@@ -19,8 +19,8 @@
 
 #include "mirrorcal/calibration/result.hpp"
 #include "mirrorcal/estimator/calibration_filter.hpp"
-#include "mirrorcal/sim_host/recording.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/io/recording.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mirrorcal::evaluation {
 
@@ -30,9 +30,9 @@ namespace mirrorcal::evaluation {
 // the camera's guess is priors.intrinsics_guess.
 struct BatchInput {
   const std::vector<ImuSample>* imu = nullptr;
-  const std::vector<sim::ObservedFrame>* frames = nullptr;
+  const std::vector<io::ObservedFrame>* frames = nullptr;
   CalibrationConfig config;
-  sim::RecordingPriors priors;
+  io::RecordingPriors priors;
   int camera_parameters = 0;
   // The IMU's intrinsics estimated (the filter's NI): the model, its guess and the datasheet's
   // tolerances as their 1-sigma (imu.yaml's; calibrate's start).
@@ -73,10 +73,10 @@ bool solve_batch(const BatchInput& input, const BatchOptions& options,
                  calibration::CalibrationResult& result, BatchReport& report, std::string& error);
 
 // The batch's input for a simulated run of s on data, from the priors of the prior drawn for it
-// (sim::simulation_prior, sim::from_prior): the configuration the filter is given
+// (sim::simulation_prior, io::from_prior): the configuration the filter is given
 // (scenario_config).
 BatchInput simulated_batch_input(const sim::Scenario& s, const sim::SimData& data,
-                                 const sim::RecordingPriors& priors, int camera_parameters = 0,
+                                 const io::RecordingPriors& priors, int camera_parameters = 0,
                                  ImuModel imu_model = ImuModel::kCalibrated);
 
 // A result's calibration block against the truth, as the filter's history judges its estimate
@@ -85,6 +85,6 @@ struct TruthError {
   Eigen::VectorXd error;  // calibration_params() order, SI
   double nees = 0.0;
 };
-TruthError truth_error(const calibration::CalibrationResult& r, const sim::RecordingTruth& truth);
+TruthError truth_error(const calibration::CalibrationResult& r, const io::RecordingTruth& truth);
 
 }  // namespace mirrorcal::evaluation

@@ -13,7 +13,7 @@
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/evaluation/plots.hpp"
 #include "mirrorcal/evaluation/simulated_run.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim/scenario.hpp"
 
 namespace mirrorcal::evaluation {
 
@@ -93,7 +93,7 @@ RunOutcome run_outcome(const CalibrationRun<M, NK, NI>& r, const sim::Scenario& 
 
 // The campaign's runs, one per element of out, on `jobs` threads: run(i, out[i]) makes run i, then
 // progress(the fraction done) is called, one thread at a time. False, with the message, when a
-// run's temporary store could not be written (files::StoreError: a full $TMPDIR): no more runs
+// run's temporary store could not be written (io::StoreError: a full $TMPDIR): no more runs
 // start.
 bool run_campaign(std::vector<RunOutcome>& out, std::uint64_t jobs,
                   const std::function<void(std::uint64_t, RunOutcome&)>& run,

@@ -10,12 +10,12 @@
 #include <vector>
 
 #include "mirrorcal/evaluation/campaign_statistics.hpp"
-#include "mirrorcal/sim_host/files.hpp"
+#include "mirrorcal/io/files.hpp"
 
 namespace mirrorcal::evaluation {
 
 // A campaign's files in its folder: summary.csv, runs.csv and with the batch batch.csv, written
-// together (files::OutputSet) when all are complete.
+// together (io::OutputSet) when all are complete.
 class CampaignFiles {
  public:
   // Creates them; false, with a message naming the file, if one cannot be.
@@ -26,7 +26,7 @@ class CampaignFiles {
   std::FILE* batch() const { return batch_; }  // nullptr without the batch
 
  private:
-  files::OutputSet set_;
+  io::OutputSet set_;
   std::FILE *summary_ = nullptr, *runs_ = nullptr, *batch_ = nullptr;
 };
 

@@ -6,7 +6,7 @@
 
 #include <Eigen/Core>
 
-#include "mirrorcal/sim_host/scenario.hpp"
+#include "mirrorcal/sim/scenario.hpp"
 
 namespace mirrorcal::evaluation {
 

@@ -9,7 +9,7 @@
 
 #include "mirrorcal/calibration/run.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
-#include "mirrorcal/sim_host/frame_renderer.hpp"
+#include "mirrorcal/sim/frame_renderer.hpp"
 
 namespace mirrorcal::evaluation {
 

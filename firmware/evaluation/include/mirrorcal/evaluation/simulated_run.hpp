@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "mirrorcal/calibration/run.hpp"
-#include "mirrorcal/sim_host/scenario.hpp"
-#include "mirrorcal/sim_host/simulator.hpp"
+#include "mirrorcal/sim/scenario.hpp"
+#include "mirrorcal/sim/simulator.hpp"
 
 namespace mirrorcal::evaluation {
 
@@ -52,8 +52,7 @@ template <int M, int NI = 0>
 CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t seed,
                                         const std::function<void(double)>& progress = {},
                                         const FrameMode& frames = {},
-                                        firmware::LoopProfiler* profiler = nullptr,
-                                        Passes passes = {});
+                                        loop::LoopProfiler* profiler = nullptr, Passes passes = {});
 
 // What the data of a simulated run can hold: the 1-sigma of each calibration state (SI, in
 // calibration_params() order) that a filter linearised at the truth ends with, on the same rig,
@@ -82,10 +81,10 @@ CalibrationRun<M, NK, NI> run_one_stage_simulation(
     const sim::Scenario& s, std::uint64_t seed, const std::function<void(double)>& progress = {});
 
 // Compiled in simulated_run.cpp for every filter the product uses (marker_counts.hpp).
-#define MIRRORCAL_RUN_SIMULATION(M, NI)                                                          \
-  CalibrationRun<M, 0, NI> run_simulation<M, NI>(                                                \
-      const sim::Scenario&, std::uint64_t, const std::function<void(double)>&, const FrameMode&, \
-      firmware::LoopProfiler*, Passes)
+#define MIRRORCAL_RUN_SIMULATION(M, NI)                                               \
+  CalibrationRun<M, 0, NI> run_simulation<M, NI>(const sim::Scenario&, std::uint64_t, \
+                                                 const std::function<void(double)>&,  \
+                                                 const FrameMode&, loop::LoopProfiler*, Passes)
 #define MIRRORCAL_STAGED_SIMULATION(name, M, NK, NI)                             \
   CalibrationRun<M, NK, NI> name<M, NK, NI>(const sim::Scenario&, std::uint64_t, \
                                             const std::function<void(double)>&)
