@@ -564,7 +564,11 @@ template <int M, int NK, int NI>
   int restarted = 0;
   for (int pass = 0; pass < passes.max; ++pass) {
     const bool after_restart = restarted > 0 && restarted == pass;  // wants the true noise next
-    if (pass >= passes.min && !after_restart && !suspect(run.result)) break;
+    // A pass whose detection labelled few of the markers it saw rests on a handful of them, perhaps
+    // mislabelled while the prediction was vague: as suspect as one that gated too many.
+    if (pass >= passes.min && !after_restart && !suspect(run.result) &&
+        !identification_failed(run.result))
+      break;
     const int planned = std::max(passes.min, pass + 1);
     const auto pass_progress = [&](double f) {
       if (progress) progress((pass + f) / planned);
@@ -577,8 +581,12 @@ template <int M, int NK, int NI>
       pass_config.pixel_sigma *= kAnnealedPixelNoise;
       restarted = pass + 1;
     }
-    run = run_pass<M, NK, NI>(pass_config, start, p0, data, truth, pass_progress,
-                              hooks ? hooks(pass) : LoopHooks<M>{});
+    const LoopHooks<M> pass_hooks = hooks ? hooks(pass) : LoopHooks<M>{};
+    run = run_pass<M, NK, NI>(pass_config, start, p0, data, truth, pass_progress, pass_hooks);
+    if (pass_hooks.detection)
+      run.result.detection = detection_counts(pass_hooks.detection());
+    else if (data.image_detection)  // written by the pass's image source as it closed
+      run.result.detection = detection_counts(*data.image_detection);
     run.result.passes = pass + 1;
     run.result.restarted_pass = restarted;
     if (pass == 0 && !run.history.empty()) first_frame = run.history.front();

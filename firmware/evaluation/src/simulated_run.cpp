@@ -97,6 +97,7 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
       rendered.emplace(s, render, geometry, render_seed, names, &naming);
       h.source = &*rendered;
       h.relabeler = &*rendered;
+      h.detection = [&] { return rendered->report(); };
     }
     return h;
   };

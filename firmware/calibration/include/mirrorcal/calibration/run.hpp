@@ -135,6 +135,9 @@ struct LoopHooks {
   hal::MarkerSource<M>* source = nullptr;
   hal::MarkerRelabeler<M>* relabeler = nullptr;
   loop::LoopProfiler* profiler = nullptr;
+  // With source: how its detection did over the pass (frames rendered and detected), which the
+  // passes judge as they judge a recording's images (identification_failed).
+  std::function<DetectionReport()> detection;
 };
 
 // The constants below are measured in docs/estimator.md, "Passes and refinement" and "Noise levels
