@@ -194,8 +194,8 @@ void print_notable_runs(std::FILE* text, const std::vector<RunOutcome>& runs) {
   if (!extra.empty())
     std::fprintf(text,
                  "runs given more passes because a pass looked suspect (more than 0.5 %% of the "
-                 "markers gated, or a normalised innovation squared well above 1; passes made): "
-                 "%s\n",
+                 "markers gated, a normalised innovation squared well above 1, or few markers "
+                 "labelled in the frames; passes made): %s\n",
                  extra.c_str());
   if (!suspects.empty())
     std::fprintf(text,
