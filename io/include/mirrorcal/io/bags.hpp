@@ -22,7 +22,7 @@ struct BagOptions {
 
 // Whether path names a bag by its form: a file ending in .bag, .mcap or .db3, or a folder holding
 // metadata.yaml. (This and bag_sensors_dir are in every build; open_bag_recording only in the
-// host's, with the libraries of the containers: mirrorcal_bags.)
+// host's, with the libraries of the containers: mirrorcal_io_bags.)
 bool is_bag(const std::string& path);
 
 // The folder the yaml files of the bag at path are read from: options.sensors_dir, else the bag
