@@ -53,7 +53,7 @@ const std::vector<Command>& commands() {
        "              dark in frame i + 1 of every PERIOD, as run's LED lines drive them)\n"
        "              [--room]  (with --frames: a real room: two lights and each LED's ghost\n"
        "              in the mirror, an exposure that clips the brightest LEDs, motion blur)\n"
-       "              [--passes N]  (exactly N passes over the data; default 2, up to 4 while the\n"
+       "              [--passes N]  (exactly N passes over the data; default 2, up to 6 while the\n"
        "              last gates over 0.5 % of the markers; the last pass is reported)\n"
        "              [--estimate-noise]  (the IMU's noise densities and the pixel noise from\n"
        "              the data, not imu.yaml's; writes imu.yaml with them)\n"

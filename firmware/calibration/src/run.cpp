@@ -326,29 +326,41 @@ typename CalibrationRun<M, NK, NI>::Filter::Covariance calibration_held(
   return p;
 }
 
-// Where the next pass starts the IMU: the first stretch of the data calibrated from this pass's
-// calibration (estimate and covariance) and the prior's IMU guess, which pins the rig's distance
-// from the mirror, its tilt and their rates within a fraction of a second, then integrated back to
-// the first IMU sample. False (x unchanged) if the stretch has too few frames or the run fails.
+// The prior's covariance with the calibration block shrunk to kFrozenCalibration of it: a pass
+// from it holds the calibration at its guesses and fits the motion alone. On the heap: the
+// largest filters' covariance is 29 KB.
 template <int M, int NK, int NI>
-bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK, NI>& pass,
-                    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+std::unique_ptr<typename CalibrationRun<M, NK, NI>::Filter::Covariance> calibration_frozen(
+    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0) {
+  using State = typename CalibrationRun<M, NK, NI>::State;
+  constexpr int B = State::kCalibrationBegin, L = State::kCalibrationDim;
+  auto p = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>(p0);
+  p->template block<L, State::kDim>(B, 0) *= std::sqrt(kFrozenCalibration);
+  p->template block<State::kDim, L>(0, B) *= std::sqrt(kFrozenCalibration);
+  return p;
+}
+
+// Where a pass starts the IMU: the first stretch of the data calibrated from the calibration
+// `calibration` holds, under `held` (the prior's motion block, the calibration's block of the
+// pass it comes from), and x's IMU guess, which pins the rig's distance from the mirror, its tilt
+// and their rates within a fraction of a second, then integrated back to the first IMU sample.
+// False (x unchanged) if the stretch has too few frames or the run fails.
+template <int M, int NK, int NI>
+bool imu_start_from(const CalibrationConfig& config,
+                    const typename CalibrationRun<M, NK, NI>::State& calibration,
+                    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& held,
                     const LoopData& data, typename CalibrationRun<M, NK, NI>::State& x) {
   using State = typename CalibrationRun<M, NK, NI>::State;
   const LoopData stretch = first_stretch<M>(data);
   if (stretch.imu.size() < 2) return false;
-  State start = pass.history.back().state;
+  State start = calibration;
   start.p = x.p;
   start.v = x.v;
   start.q_n_b = x.q_n_b;
   start.b_a = x.b_a;
   start.b_g = x.b_g;
-  // The held covariance on the heap: beside the stretch's run, the largest filters' (M = 6 with the
-  // lens and the IMU's intrinsics) outgrew the 64 KiB a stack frame is held to.
-  const auto held = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>();
-  hold_calibration<M, NK, NI>(p0, pass, *held);
   const CalibrationRun<M, NK, NI> fit =
-      run_pass<M, NK, NI>(config, start, *held, stretch, nullptr, {}, LoopHooks<M>{});
+      run_pass<M, NK, NI>(config, start, held, stretch, nullptr, {}, LoopHooks<M>{});
   if (fit.history.empty() || fit.filter_counters.failures > 0) return false;
   State back = fit.history.back().state;
   for (std::size_t k = stretch.imu.size() - 1; k > 0; --k)  // the samples in reverse
@@ -358,6 +370,18 @@ bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK,
   x.v = back.v;
   x.q_n_b = back.q_n_b;
   return true;
+}
+
+// The IMU's start from pass's calibration, held near its estimate by its own covariance.
+template <int M, int NK, int NI>
+bool imu_start_from(const CalibrationConfig& config, const CalibrationRun<M, NK, NI>& pass,
+                    const typename CalibrationRun<M, NK, NI>::Filter::Covariance& p0,
+                    const LoopData& data, typename CalibrationRun<M, NK, NI>::State& x) {
+  // The held covariance on the heap: beside the stretch's run, the largest filters' (M = 6 with the
+  // lens and the IMU's intrinsics) outgrew the 64 KiB a stack frame is held to.
+  const auto held = std::make_unique<typename CalibrationRun<M, NK, NI>::Filter::Covariance>();
+  hold_calibration<M, NK, NI>(p0, pass, *held);
+  return imu_start_from<M, NK, NI>(config, pass.history.back().state, *held, data, x);
 }
 
 std::uint64_t markers_in(const LoopData& data) {
@@ -562,6 +586,10 @@ template <int M, int NK, int NI>
   CalibrationRun<M, NK, NI> run;
   HistoryRow<typename CalibrationRun<M, NK, NI>::Filter> first_frame;
   int restarted = 0;
+  // Where the first restart led, kept while the second tries (on the heap: a run holds a
+  // covariance of up to 29 KB): a second that is still suspect leaves the first's standing.
+  std::unique_ptr<CalibrationRun<M, NK, NI>> first_restart;
+  typename CalibrationRun<M, NK, NI>::State first_restart_start;
   for (int pass = 0; pass < passes.max; ++pass) {
     const bool after_restart = restarted > 0 && restarted == pass;  // wants the true noise next
     // A pass whose detection labelled few of the markers it saw rests on a handful of them, perhaps
@@ -574,12 +602,22 @@ template <int M, int NK, int NI>
       if (progress) progress((pass + f) / planned);
     };
     // Still suspect after the default passes, with a pass left to follow: locked on (run.hpp).
-    const bool restart = pass == passes.min && pass + 1 < passes.max;
+    // Still suspect after that restart and the pass that followed it: the guessed motion locked it
+    // on, and the second restart starts the IMU from the first frames instead.
+    const bool second_restart = pass == passes.min + 2;
+    const bool restart = (pass == passes.min || second_restart) && pass + 1 < passes.max;
     CalibrationConfig pass_config = config;
+    if (second_restart && restart) {
+      first_restart = std::make_unique<CalibrationRun<M, NK, NI>>(std::move(run));
+      first_restart_start = start;
+    }
     if (restart) {
       start = guess;
       pass_config.pixel_sigma *= kAnnealedPixelNoise;
       restarted = pass + 1;
+      if (second_restart)
+        imu_start_from<M, NK, NI>(pass_config, guess, *calibration_frozen<M, NK, NI>(p0), data,
+                                  start);
     }
     const LoopHooks<M> pass_hooks = hooks ? hooks(pass) : LoopHooks<M>{};
     run = run_pass<M, NK, NI>(pass_config, start, p0, data, truth, pass_progress, pass_hooks);
@@ -593,6 +631,13 @@ template <int M, int NK, int NI>
     run.first_frame = first_frame;
     if (run.history.empty()) break;
     carry_estimate<M, NK, NI>(config, run, p0, data, start, restart ? kAnnealedPixelNoise : 1.0);
+  }
+  if (first_restart &&
+      (run.history.empty() || suspect(run.result) || identification_failed(run.result))) {
+    const int made = run.result.passes;
+    run = std::move(*first_restart);
+    start = first_restart_start;
+    run.result.passes = made;  // the refinement's passes number on from every pass made
   }
   return run;
 }
