@@ -114,12 +114,13 @@ class ShapeBootstrap {
     std::array<Eigen::Vector2d, kMaxTracks> uv{};
   };
 
-  // The tracks seen in this frame, into the ring of snapshots.
+  // The tracks measured in this frame (a clean spot, not one crowded by a lamp), into the ring of
+  // snapshots.
   void take_snapshot(std::int64_t t_ns) {
     Snapshot& s = ring_[std::size_t(head_)];
     s.n = 0;
     for (const BlobTrack& tr : tracker_.tracks())
-      if (tr.id >= 0 && tr.missed == 0) {
+      if (tr.id >= 0 && tr.missed == 0 && tr.measured) {
         s.id[std::size_t(s.n)] = tr.id;
         s.uv[std::size_t(s.n)] = tr.uv;
         ++s.n;
