@@ -1,15 +1,15 @@
-// Blobs followed from frame to frame: greedy nearest-neighbour association on each track's
-// constant-velocity prediction, the closest pairs first, within a gate that widens with the
-// track's speed. Only a single spot starts a track, but one that is not (crowded by a lamp's tail,
-// cut by the image's edge, merged with a neighbour) carries it on unmeasured. A track unseen
-// (a dark, hidden or lost reflection) coasts with the others: the rig's reflections, and the
-// room's lights, move together as the rig turns, so the tracks seen in both frames move it by
-// their mean step, and it is taken up again near there, after those tracks have taken their
-// blobs. It coasts up to kMaxCoastNs while other tracks carry it, three frames alone, then ends.
-// A reflection passing a lamp thus keeps its track, and its name, where it would otherwise start
-// a new one, unnamed. Each track carries a name (a marker, or -1) that its owner gives it: the
-// rig's shape fitted over frames (shape_bootstrap.hpp) or the LEDs' blink code
-// (blink_names.hpp). Header-only; nothing allocates.
+// Blobs followed from frame to frame: nearest-neighbour association on each track's
+// constant-velocity prediction (the closest pairs first, then any two pairs exchanged where that
+// fits better), within a gate that widens with the track's speed. Only a single spot starts a
+// track, but one that is not (crowded by a lamp's tail, cut by the image's edge, merged with a
+// neighbour) carries it on unmeasured. A track unseen (a dark, hidden or lost reflection) coasts
+// with the others: the rig's reflections, and the room's lights, move together as the rig turns, so
+// the tracks seen in both frames move it by their mean step, and it is taken up again near there,
+// after those tracks have taken their blobs. It coasts up to kMaxCoastNs while other tracks carry
+// it, three frames alone, then ends. A reflection passing a lamp thus keeps its track, and its
+// name, where it would otherwise start a new one, unnamed. Each track carries a name (a marker, or
+// -1) that its owner gives it: the rig's shape fitted over frames (shape_bootstrap.hpp) or the
+// LEDs' blink code (blink_names.hpp). Header-only; nothing allocates.
 #pragma once
 
 #include <algorithm>
