@@ -62,11 +62,12 @@ class BlobTracker {
     // The tracks seen in the last frame first; their mean step carries the others.
     Eigen::Vector2d step_sum = Eigen::Vector2d::Zero();
     int steps = 0;
-    associate(t_ns, blobs, n, true, Eigen::Vector2d(), step_sum, steps);
-    const Eigen::Vector2d step = steps > 0 ? Eigen::Vector2d(step_sum / steps) : Eigen::Vector2d();
+    associate(t_ns, blobs, n, true, Eigen::Vector2d::Zero(), step_sum, steps);
+    const Eigen::Vector2d step =
+        steps > 0 ? Eigen::Vector2d(step_sum / steps) : Eigen::Vector2d::Zero();
     const double frame_s = 1e-9 * static_cast<double>(t_ns - last_t_ns_);
     const Eigen::Vector2d common_velocity =
-        steps > 0 && frame_s > 0.0 ? Eigen::Vector2d(step / frame_s) : Eigen::Vector2d();
+        steps > 0 && frame_s > 0.0 ? Eigen::Vector2d(step / frame_s) : Eigen::Vector2d::Zero();
     for (int t = 0; t < kMaxTracks; ++t) {
       BlobTrack& tr = tracks_[std::size_t(t)];
       if (tr.id < 0 || matched_[std::size_t(t)]) continue;
