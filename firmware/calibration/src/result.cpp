@@ -631,7 +631,7 @@ bool write_result_yaml(io::OutputSet& out, const std::string& path, const Calibr
                  r.restarted_pass);
   std::fprintf(o,
                "\nmarkers_used: %llu\nmarkers_gated: %llu  # in the last pass\n"
-               "markers_invalid: %llu  # not predictable at the estimate (behind the camera)\n",
+               "markers_invalid: %llu  # once the gate is on: behind the camera\n",
                static_cast<unsigned long long>(r.markers_used),
                static_cast<unsigned long long>(r.markers_gated),
                static_cast<unsigned long long>(r.markers_invalid));

@@ -38,8 +38,8 @@ struct FilterCounters {
   std::uint64_t updates = 0;
   std::uint64_t markers_used = 0;
   std::uint64_t markers_gated = 0;
-  std::uint64_t markers_invalid = 0;
-  std::uint64_t failures = 0;  // predicts or updates refused with a numerical status
+  std::uint64_t markers_invalid = 0;  // once the gate is on, as markers_gated
+  std::uint64_t failures = 0;         // predicts or updates refused with a numerical status
   // The normalised innovation squared of the markers used once the gate is on, and its degrees of
   // freedom (2 per marker): a filter whose model and covariance are right sees nis_sum / nis_dof
   // near 1 (a little below: the gate cuts the tail).
@@ -468,7 +468,10 @@ UpdateResult CalibrationFilter<S, M, NK, NI>::update(const MarkerFrame<M>& frame
   ++counters_.updates;
   counters_.markers_used += static_cast<std::uint64_t>(res.used);
   counters_.markers_gated += static_cast<std::uint64_t>(res.gated);
-  counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);
+  // As the gate rejects nothing before it is on, neither does a prediction that fails then: from
+  // loose priors, a pass's first second can place a reflection behind the camera that the
+  // settled estimate predicts.
+  if (gate_on) counters_.markers_invalid += static_cast<std::uint64_t>(res.invalid);
   if (res.status != FilterStatus::kOk && res.status != FilterStatus::kNoMeasurement)
     ++counters_.failures;
   return res;
