@@ -1,7 +1,9 @@
 // The blob tracker on blobs placed by hand: reflections moving together as a rig turns, one hidden
 // for a quarter of a second behind a lamp, two passing close by while the turn changes pace, and
 // one seen first mid-sweep. Each case is one the tracker met in rendered rooms, where losing a
-// track lost its name (sim --frames --room --identical-leds).
+// track lost its name (sim --frames --room --identical-leds). Then the names tracks carry: a
+// room light's track that took a marker's name as the two passed gives it back to a sharp
+// prediction.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,6 +13,8 @@
 #include <vector>
 
 #include "mirrorcal/detection/blob_tracker.hpp"
+#include "mirrorcal/detection/marker_identifier.hpp"
+#include "mirrorcal/detection/shape_bootstrap.hpp"
 
 namespace mc = mirrorcal;
 using mc::detection::Blob;
@@ -66,6 +70,26 @@ double ramp(int k) {
   double x = 0.0;
   for (int i = 1; i <= k; ++i) x += std::min(20.0, 4.0 * i);
   return x;
+}
+
+constexpr int M = 3;
+
+// Every marker predicted at uv with sigma_px.
+mc::hal::MarkerPrediction<M> prediction_at(const std::array<Eigen::Vector2d, M>& uv,
+                                           double sigma_px) {
+  mc::hal::MarkerPrediction<M> p;
+  for (int i = 0; i < M; ++i) {
+    p.valid[std::size_t(i)] = true;
+    p.uv[std::size_t(i)] = uv[std::size_t(i)];
+    p.covariance[std::size_t(i)] = sigma_px * sigma_px * Eigen::Matrix2d::Identity();
+  }
+  return p;
+}
+
+mc::detection::IdentifierConfig<M> identical_leds() {
+  mc::detection::IdentifierConfig<M> c;
+  c.brightness = {1.0, 1.0, 1.0};
+  return c;
 }
 
 }  // namespace
@@ -134,4 +158,51 @@ TEST(BlobTracker, AReflectionSeenFirstMidSweepIsFollowedFromItsSecondFrame) {
     if (first < 0) first = now;
     EXPECT_EQ(now, first) << "frame " << k;
   }
+}
+
+TEST(TrackNames, ASharpPredictionOverrulesTheNameOfALightsTrack) {
+  // Marker 0's reflection sits on its prediction, but its track is named 2 (the names of two
+  // tracks swapped where they passed), and a room light 9 px away carries name 0. Marker 2's
+  // reflection, unnamed, is far off.
+  const std::array<Eigen::Vector2d, M> truth = {
+      Eigen::Vector2d(300, 200), Eigen::Vector2d(100, 400), Eigen::Vector2d(500, 100)};
+  const std::vector<Blob> blobs{spot(truth[0]), spot(truth[0] + Eigen::Vector2d(9, 0)),
+                                spot(truth[1]), spot(truth[2])};
+  const std::array<int, 4> track_labels{2, 0, 1, -1};
+  mc::detection::MarkerIdentifier<M> identifier(identical_leds());
+  mc::MarkerFrame<M> frame;
+  // A vague prediction (4 px) leaves the names to the tracks: the light is labelled 0.
+  auto vague = prediction_at(truth, 4.0);
+  identifier.identify(blobs.data(), 4, &vague, frame, track_labels.data());
+  EXPECT_EQ(identifier.blob_of(0), 1);
+  // A sharp one (1 px, a settled filter's) labels by itself: marker 0's own reflection.
+  auto sharp = prediction_at(truth, 1.0);
+  identifier.identify(blobs.data(), 4, &sharp, frame, track_labels.data());
+  EXPECT_EQ(identifier.blob_of(0), 0);
+  ASSERT_TRUE(frame.seen[0]);
+  EXPECT_LT((frame.uv[0] - truth[0]).norm(), 1e-9);
+  EXPECT_EQ(identifier.blob_of(2), 3);
+}
+
+TEST(TrackNames, ASharpPredictionTakesANameBackFromTheTrackThatHeldIt) {
+  // The tracks started in the blobs' order: a light (track 0) holds name 0; marker 0's reflection
+  // (track 1) is unnamed, and no prediction alone renames it while the light's track lives.
+  const mc::detection::RigGeometry<M> prior{};
+  const std::vector<Blob> blobs{spot(Eigen::Vector2d(320, 200)), spot(Eigen::Vector2d(300, 200)),
+                                spot(Eigen::Vector2d(100, 400)), spot(Eigen::Vector2d(500, 100))};
+  const auto labels_after = [&](bool sharp) {
+    mc::detection::ShapeBootstrap<M> boot(prior, identical_leds());
+    boot.name_ahead({0, 2, 3});
+    std::int64_t t_ns = 0;
+    boot.feed(t_ns, blobs.data(), 4);
+    for (int k = 0; k < 3; ++k) {
+      // The identifier, with the prediction, labelled marker 0 on blob 1 (its own reflection).
+      boot.confirm({1, 2, 3}, {sharp, sharp, sharp});
+      t_ns += kFrameNs;
+      boot.feed(t_ns, blobs.data(), 4);
+    }
+    return std::vector<int>(boot.blob_labels(), boot.blob_labels() + 4);
+  };
+  EXPECT_EQ(labels_after(false), (std::vector<int>{0, -1, 1, 2}));
+  EXPECT_EQ(labels_after(true), (std::vector<int>{-1, 0, 1, 2}));
 }

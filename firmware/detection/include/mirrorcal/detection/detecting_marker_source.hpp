@@ -117,8 +117,12 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
                                  dark_marker());
     if (bootstrap_shape_) {
       std::array<int, M> blob_of_marker;
-      for (int i = 0; i < M; ++i) blob_of_marker[std::size_t(i)] = identifier_.blob_of(i);
-      bootstrap_.confirm(blob_of_marker);
+      std::array<bool, M> sharp;
+      for (int i = 0; i < M; ++i) {
+        blob_of_marker[std::size_t(i)] = identifier_.blob_of(i);
+        sharp[std::size_t(i)] = identifier_.sharp(&prediction, i);
+      }
+      bootstrap_.confirm(blob_of_marker, sharp);
     }
     counters_.detect_seconds += seconds_since(t0);
     ++counters_.relabelled;

@@ -78,6 +78,10 @@ struct IdentifierConfig {
   // this much. More than the ambiguity margin, so that a track's name decides where nothing else
   // does; less than a sharp prediction's disagreement, which overrules it.
   double track_cost = 12.0;
+  // A prediction this sharp (its larger sigma, px) needs no track cue: the filter has the marker,
+  // and a track that swapped with a room light's as the two passed (whose names the cue would
+  // then swap) is outvoted however close the two lights are.
+  double sharp_sigma_px = 2.0;
 
   static constexpr std::array<double, M> default_brightness() {
     std::array<double, M> b{};
@@ -156,12 +160,11 @@ class MarkerIdentifier {
             config_.extra_sigma_px * config_.extra_sigma_px * Eigen::Matrix2d::Identity();
         info = c.inverse();
       }
+      const bool track_cue = track_labels != nullptr && !sharp(prediction, i);
       for (int j = 0; j < n; ++j) {
         if (!single_spot(blobs[j])) continue;
         const double against_track =
-            track_labels != nullptr && track_labels[j] >= 0 && track_labels[j] != i
-                ? config_.track_cost
-                : 0.0;
+            track_cue && track_labels[j] >= 0 && track_labels[j] != i ? config_.track_cost : 0.0;
         if (prediction == nullptr) {
           // Without a prediction every blob is as near as any other: the brightest are the
           // candidates (markers are the scene's bright spots), whatever their order in the image.
@@ -213,6 +216,14 @@ class MarkerIdentifier {
   }
 
   const IdentifierConfig<M>& config() const { return config_; }
+
+  // Whether prediction (null: none) places marker i within sharp_sigma_px.
+  bool sharp(const hal::MarkerPrediction<M>* prediction, int i) const {
+    if (prediction == nullptr || !prediction->valid[static_cast<std::size_t>(i)]) return false;
+    const Eigen::Matrix2d& c = prediction->covariance[static_cast<std::size_t>(i)];
+    const double larger = 0.5 * (c.trace() + std::hypot(c(0, 0) - c(1, 1), 2.0 * c(0, 1)));
+    return larger < config_.sharp_sigma_px * config_.sharp_sigma_px;
+  }
 
   // The blob the last identify() labelled marker i with, or -1.
   int blob_of(int i) const { return labelled_[static_cast<std::size_t>(i)]; }

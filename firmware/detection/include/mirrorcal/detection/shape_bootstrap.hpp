@@ -7,7 +7,8 @@
 // snapshot tries again. The fit names its tracks, and a track keeps its name while it lives: the
 // identifier's track cue (marker_identifier.hpp) labels each frame's blobs by their tracks' names
 // until the filter's prediction is sharp. A new track takes the name the identifier gives its
-// blob with the prediction (confirm), if no live track holds it. Header-only; nothing allocates.
+// blob with the prediction (confirm), if no live track holds it; a sharp prediction renames a
+// track outright. Header-only; nothing allocates.
 #pragma once
 
 #include <algorithm>
@@ -90,15 +91,25 @@ class ShapeBootstrap {
   }
 
   // The identifier's labels of the last frame fed (blob_of_marker[i]: marker i's blob, or -1):
-  // an unnamed track takes its blob's label if no live track holds that name.
-  void confirm(const std::array<int, M>& blob_of_marker) {
+  // an unnamed track takes its blob's label if no live track holds that name. Where the
+  // prediction was sharp (sharp[i]), the blob's track takes the name whatever it had, and a track
+  // that held it loses it: the two had swapped as their lights passed.
+  void confirm(const std::array<int, M>& blob_of_marker, const std::array<bool, M>& sharp) {
     if (!named()) return;
     for (int i = 0; i < M; ++i) {
       const int b = blob_of_marker[std::size_t(i)];
       if (b < 0 || b >= kMaxBlobs) continue;
       const int t = tracker_.track_of_blob(b);
-      if (t < 0 || tracker_.tracks()[std::size_t(t)].label >= 0 || tracker_.named(i)) continue;
-      tracker_.tracks()[std::size_t(t)].label = i;
+      if (t < 0) continue;
+      BlobTrack& track = tracker_.tracks()[std::size_t(t)];
+      if (track.label == i) continue;
+      if (sharp[std::size_t(i)]) {
+        for (BlobTrack& other : tracker_.tracks())
+          if (other.label == i) other.label = -1;
+        track.label = i;
+      } else if (track.label < 0 && !tracker_.named(i)) {
+        track.label = i;
+      }
     }
   }
 
