@@ -30,6 +30,22 @@ LoopData loop_data(const sim::Scenario& s, const sim::SimData& data) {
   return d;
 }
 
+// The simulator's markers by the names the detection gave their LEDs (naming[i]: the truth's
+// index of the LED named i). The passes take theirs from the rendered frames, but a pass's IMU
+// start is fitted to the first frames of these (imu_start_from): under the truth's names, where
+// identical LEDs were named otherwise, that fit put every reflection behind the camera, and the
+// pass after the first used no marker at all.
+template <int M>
+LoopData loop_data_as_named(const sim::Scenario& s, const sim::SimData& data,
+                            const std::array<int, M>& naming) {
+  LoopData d = loop_data(s, data);
+  std::array<int, M> name_of_led{};
+  for (int i = 0; i < M; ++i) name_of_led[static_cast<std::size_t>(naming[std::size_t(i)])] = i;
+  for (io::ObservedFrame& f : d.frames)
+    for (io::ObservedMarker& m : f.markers) m.id = name_of_led[static_cast<std::size_t>(m.id)];
+  return d;
+}
+
 // The scenario with its markers in the order the detection names them. The LEDs are named by the
 // rig's shape fitted to their tracks, the priors' guesses and their brightness code, which cannot
 // always tell identical LEDs apart: the name i may be given to another LED than the truth's i,
@@ -102,7 +118,8 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
     return h;
   };
   passes.imu_tolerances = s.priors.imu_intrinsics;  // the ideal-IMU check's prior
-  Run run = run_loop<M, 0, NI>(config, x0, p0, loop_data(s, data), &truth, progress, hooks, passes);
+  Run run = run_loop<M, 0, NI>(config, x0, p0, loop_data_as_named<M>(s, data, naming), &truth,
+                               progress, hooks, passes);
   run.markers_out_of_image = data.markers_out_of_image;
   if (rendered) {
     run.detection = rendered->report();
