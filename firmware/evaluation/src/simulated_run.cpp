@@ -1,5 +1,6 @@
 #include "mirrorcal/evaluation/simulated_run.hpp"
 
+#include <algorithm>
 #include <array>
 #include <numeric>
 #include <optional>
@@ -39,10 +40,16 @@ template <int M>
 LoopData loop_data_as_named(const sim::Scenario& s, const sim::SimData& data,
                             const std::array<int, M>& naming) {
   LoopData d = loop_data(s, data);
-  std::array<int, M> name_of_led{};
+  std::array<int, M> name_of_led;
+  name_of_led.fill(-1);
   for (int i = 0; i < M; ++i) name_of_led[static_cast<std::size_t>(naming[std::size_t(i)])] = i;
-  for (io::ObservedFrame& f : d.frames)
+  for (io::ObservedFrame& f : d.frames) {
     for (io::ObservedMarker& m : f.markers) m.id = name_of_led[static_cast<std::size_t>(m.id)];
+    // An LED no name went to (two names went to one: a track that was a room light's) is none.
+    f.markers.erase(std::remove_if(f.markers.begin(), f.markers.end(),
+                                   [](const io::ObservedMarker& m) { return m.id < 0; }),
+                    f.markers.end());
+  }
   return d;
 }
 
