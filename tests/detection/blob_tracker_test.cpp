@@ -12,11 +12,13 @@
 #include <cstdint>
 #include <vector>
 
+#include "marker_prediction.hpp"
 #include "mirrorcal/detection/blob_tracker.hpp"
 #include "mirrorcal/detection/marker_identifier.hpp"
 #include "mirrorcal/detection/shape_bootstrap.hpp"
 
 namespace mc = mirrorcal;
+using marker_prediction::prediction_at;
 using mc::detection::Blob;
 using mc::detection::BlobTracker;
 
@@ -73,18 +75,6 @@ double ramp(int k) {
 }
 
 constexpr int M = 3;
-
-// Every marker predicted at uv with sigma_px.
-mc::hal::MarkerPrediction<M> prediction_at(const std::array<Eigen::Vector2d, M>& uv,
-                                           double sigma_px) {
-  mc::hal::MarkerPrediction<M> p;
-  for (int i = 0; i < M; ++i) {
-    p.valid[std::size_t(i)] = true;
-    p.uv[std::size_t(i)] = uv[std::size_t(i)];
-    p.covariance[std::size_t(i)] = sigma_px * sigma_px * Eigen::Matrix2d::Identity();
-  }
-  return p;
-}
 
 mc::detection::IdentifierConfig<M> identical_leds() {
   mc::detection::IdentifierConfig<M> c;

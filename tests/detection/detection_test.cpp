@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <vector>
 
+#include "marker_prediction.hpp"
 #include "mirrorcal/detection/detecting_marker_source.hpp"
 #include "mirrorcal/estimator/marker_counts.hpp"
 #include "mirrorcal/sim/frame_renderer.hpp"
@@ -19,6 +20,7 @@
 #include "mirrorcal/sim/simulator.hpp"
 
 namespace mc = mirrorcal;
+using marker_prediction::prediction_at;
 using mc::detection::Blob;
 using mc::detection::BlobDetector;
 
@@ -59,18 +61,6 @@ mc::detection::IdentifierConfig<M> identifier_config() {
   const mc::sim::RenderConfig rc;
   for (int i = 0; i < M; ++i) c.brightness[i] = rc.brightness[i];
   return c;
-}
-
-// A confident prediction at the given pixels (what a converged filter gives).
-mc::hal::MarkerPrediction<M> prediction_at(const std::array<Eigen::Vector2d, M>& uv,
-                                           double sigma_px) {
-  mc::hal::MarkerPrediction<M> p;
-  for (int i = 0; i < M; ++i) {
-    p.valid[i] = true;
-    p.uv[i] = uv[i];
-    p.covariance[i] = sigma_px * sigma_px * Eigen::Matrix2d::Identity();
-  }
-  return p;
 }
 
 }  // namespace
