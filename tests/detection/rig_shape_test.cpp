@@ -203,3 +203,40 @@ TEST(RigShape, TheBrightnessCodeNamesWhatThePriorsCannot) {
   EXPECT_GE(right_with_code, right_alone + 2);
   EXPECT_GE(4 * right_with_code, 3 * made);
 }
+
+// Where the brightness code alone is decisive (no LED clipped, fluxes within 5 % of the code's),
+// the names are the code's in every window fitted: the tracks' places do not depend on their
+// names, so no naming may lose for a valley of the shape its own starts missed.
+TEST(RigShape, ADecisiveCodeNamesEveryWindowRight) {
+  int made = 0, right = 0;
+  for (std::uint64_t seed = 1; seed <= 20; ++seed)
+    for (const double start : {1.0, 20.0}) {
+      const mc::sim::Scenario s = mc::sim::random_scenario(seed);
+      const mc::sim::SimData data = mc::sim::simulate(s, seed);
+      const mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
+      const mc::detection::RigGeometry<3> g = priors_geometry<3>(s, prior);
+      std::array<int, 3> perm{0, 1, 2};
+      std::mt19937_64 rng(seed);
+      std::shuffle(perm.begin(), perm.end(), rng);
+      mc::detection::TrackWindow<3, kWindow> w;
+      if (!window_of<3>(data, start, perm, w)) continue;
+      const std::array<double, 3> code{1.0, 1.5, 2.25};
+      std::array<double, 3> flux{}, log_code{};
+      const std::array<bool, 3> clipped{};
+      std::uniform_real_distribution<double> off(0.95, 1.05);
+      for (std::size_t j = 0; j < 3; ++j) flux[j] = 1000.0 * code[std::size_t(perm[j])] * off(rng);
+      const auto misfit = [&](const std::array<int, 3>& names) {
+        for (std::size_t j = 0; j < 3; ++j) log_code[j] = std::log(code[std::size_t(names[j])]);
+        return mc::detection::brightness_misfit(flux.data(), clipped.data(), log_code.data(), 3,
+                                                0.15);
+      };
+      const mc::detection::RigShape<3> shape =
+          mc::detection::fit_rig_shape<3, kWindow>(g, w, misfit);
+      if (!shape.made) continue;
+      ++made;
+      right += shape.label_of_track == perm ? 1 : 0;
+      EXPECT_EQ(shape.label_of_track, perm) << "seed " << seed << " from " << start << " s";
+    }
+  std::printf("a decisive code: %d of %d windows named right\n", right, made);
+  ASSERT_GE(made, 35);
+}

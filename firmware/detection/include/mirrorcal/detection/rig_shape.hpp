@@ -270,6 +270,42 @@ Fit<M, K> adjust_from_offsets(const Problem<M, K>& pb, Fit<M, K> fit) {
   return fit;
 }
 
+// The two likeliest hypotheses so far, by their fit's cost and naming cost, with their fits.
+template <int M, int K>
+struct Likeliest {
+  std::array<int, 2> h{-1, -1};
+  std::array<Fit<M, K>, 2> fit{};
+  std::array<double, 2> total{std::numeric_limits<double>::infinity(),
+                              std::numeric_limits<double>::infinity()};
+
+  // Hypothesis hyp's fit, at that total, takes its place among the two; its own earlier one
+  // leaves.
+  void offer(int hyp, const Fit<M, K>& f, double t) {
+    if (h[0] == hyp) {
+      h[0] = h[1];
+      fit[0] = fit[1];
+      total[0] = total[1];
+      drop_second();
+    }
+    if (h[1] == hyp) drop_second();
+    const int at = t < total[0] ? 0 : t < total[1] ? 1 : 2;
+    if (at == 0) {
+      h[1] = h[0];
+      fit[1] = fit[0];
+      total[1] = total[0];
+    }
+    if (at < 2) {
+      h[std::size_t(at)] = hyp;
+      fit[std::size_t(at)] = f;
+      total[std::size_t(at)] = t;
+    }
+  }
+  void drop_second() {
+    h[1] = -1;
+    total[1] = std::numeric_limits<double>::infinity();
+  }
+};
+
 }  // namespace rig_shape_detail
 
 // What names cost beyond the shape's fit: nothing.
@@ -323,52 +359,46 @@ RigShape<M> fit_rig_shape(const RigGeometry<M>& prior, const TrackWindow<M, K>& 
           prior.markers_c[std::size_t(names[std::size_t(h)][std::size_t(j)])];
     return pb;
   };
-  // cost: each hypothesis' fit and naming cost (fit[].cost: the fit's alone).
+  // cost: each hypothesis' fit and naming cost (a fit's own cost is the fit's alone).
   std::array<double, kHypotheses> cost{};
   cost.fill(std::numeric_limits<double>::infinity());
-  std::array<int, 2> likeliest{-1, -1};
-  std::array<d::Fit<M, K>, 2> fit;
-  std::array<double, 2> total{std::numeric_limits<double>::infinity(),
-                              std::numeric_limits<double>::infinity()};
-  for (int h = 0; h < kHypotheses; ++h) {
-    if (!std::isfinite(first_cost[std::size_t(h)])) continue;
-    const d::Problem<M, K> pb = problem(h);
-    const d::Fit<M, K> f = d::adjust_from<M, K>(pb, pb.guess);
+  d::Likeliest<M, K> top;
+  const auto offer = [&](int h, const d::Fit<M, K>& f) {
     const double c = f.cost + naming_cost(names[std::size_t(h)]);
+    if (!(c < cost[std::size_t(h)])) return;
     cost[std::size_t(h)] = c;
-    const int at = c < total[0] ? 0 : c < total[1] ? 1 : 2;
-    if (at == 0) {
-      fit[1] = fit[0];
-      total[1] = total[0];
-      likeliest[1] = likeliest[0];
-    }
-    if (at < 2) {
-      fit[std::size_t(at)] = f;
-      total[std::size_t(at)] = c;
-      likeliest[std::size_t(at)] = h;
-    }
+    top.offer(h, f, c);
+  };
+  for (int h = 0; h < kHypotheses; ++h)
+    if (std::isfinite(first_cost[std::size_t(h)]))
+      offer(h, d::adjust_from<M, K>(problem(h), problem(h).guess));
+  const d::Likeliest<M, K> first = top;
+  for (int r = 0; r < 2; ++r)
+    if (first.h[std::size_t(r)] >= 0)
+      offer(first.h[std::size_t(r)], d::adjust_from_offsets<M, K>(problem(first.h[std::size_t(r)]),
+                                                                  first.fit[std::size_t(r)]));
+  // The tracks' places do not depend on their names: every hypothesis is adjusted again from the
+  // markers of the best fit so far, a valley its own starts may have missed. The priors' term and
+  // the naming cost then tell the names apart.
+  if (top.h[0] >= 0) {
+    const d::Markers<M> valley = (top.fit[1].cost < top.fit[0].cost ? top.fit[1] : top.fit[0]).p;
+    for (int h = 0; h < kHypotheses; ++h)
+      if (std::isfinite(first_cost[std::size_t(h)]))
+        offer(h, d::adjust_from<M, K>(problem(h), valley));
   }
-  for (int r = 0; r < 2; ++r) {
-    const int h = likeliest[std::size_t(r)];
-    if (h < 0) continue;
-    fit[std::size_t(r)] = d::adjust_from_offsets<M, K>(problem(h), fit[std::size_t(r)]);
-    total[std::size_t(r)] = cost[std::size_t(h)] =
-        fit[std::size_t(r)].cost + naming_cost(names[std::size_t(h)]);
-  }
-  const int won = total[1] < total[0] ? 1 : 0;
-  const int h_best = likeliest[std::size_t(won)];
+  const int h_best = top.h[0];
 
   RigShape<M> best;
   // 2 M K residuals and 3 M priors, less 3 M markers and 3 K mirrors.
   best.dof = 2 * M * K - 3 * K;
   if (h_best < 0) return best;
-  const d::Fit<M, K>& chosen = fit[std::size_t(won)];
+  const d::Fit<M, K>& chosen = top.fit[0];
   best.cost = chosen.cost;
   best.label_of_track = names[std::size_t(h_best)];
   double runner_up = std::numeric_limits<double>::infinity();
   for (int h = 0; h < kHypotheses; ++h)
     if (h != h_best) runner_up = std::min(runner_up, cost[std::size_t(h)]);
-  best.naming_margin = runner_up - total[std::size_t(won)];
+  best.naming_margin = runner_up - top.total[0];
   // One rig's reflections fit to their chi-square; a track that is no marker's (a room light
   // drifting across the image) does not (mean plus four standard deviations).
   if (!(best.cost < best.dof + 4.0 * std::sqrt(2.0 * best.dof))) return best;
