@@ -1,9 +1,9 @@
 // The blob tracker on blobs placed by hand: reflections moving together as a rig turns, one hidden
 // for a quarter of a second behind a lamp, two passing close by while the turn changes pace, and
 // one seen first mid-sweep. Each case is one the tracker met in rendered rooms, where losing a
-// track lost its name (sim --frames --room --identical-leds). Then the names tracks carry: a
-// room light's track that took a marker's name as the two passed gives it back to a sharp
-// prediction.
+// track lost its name (sim --frames --room --identical-leds). Then the shape's snapshots of the
+// tracks, which wait for a reflection a lamp crowds, and the names tracks carry: a room light's
+// track that took a marker's name as the two passed gives it back to a sharp prediction.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -195,4 +195,23 @@ TEST(TrackNames, ASharpPredictionTakesANameBackFromTheTrackThatHeldIt) {
   };
   EXPECT_EQ(labels_after(false), (std::vector<int>{0, -1, 1, 2}));
   EXPECT_EQ(labels_after(true), (std::vector<int>{-1, 0, 1, 2}));
+}
+
+TEST(ShapeBootstrap, ASnapshotWaitsForAReflectionALampCrowds) {
+  // Three reflections sweep together; a lamp's tail crowds the second for the first three frames
+  // of every half second (the snapshots' spacing), where a snapshot taken on time would leave it
+  // out, and no window would hold three tracks throughout.
+  const mc::detection::RigGeometry<M> prior{};
+  mc::detection::ShapeBootstrap<M> boot(prior, identical_leds(), 0.5);
+  const std::int64_t half_second = 500'000'000;
+  for (int k = 0; k * kFrameNs < 12 * 1'000'000'000LL; ++k) {
+    const std::int64_t t_ns = k * kFrameNs;
+    const Eigen::Vector2d at = Eigen::Vector2d(200, 150) + 0.5 * sweep(k);
+    std::vector<Blob> blobs{spot(at), spot(at + Eigen::Vector2d(40, 10)),
+                            spot(at + Eigen::Vector2d(10, 60))};
+    blobs[1].crowded = t_ns % half_second < 3 * kFrameNs;
+    boot.feed(t_ns, blobs.data(), 3);
+  }
+  // Windows of the three tracks were tried (these places fit no rig: only that they were tried).
+  EXPECT_GT(boot.counters().windows_tried, 0u);
 }

@@ -31,8 +31,9 @@ struct BlobTrack {
   // The last blob was a single spot (single_spot()): its place is a measurement, not just a way
   // to keep the track.
   bool measured = false;
-  std::int64_t t_ns = 0;  // when last seen
-  int label = -1;         // the marker it is, once named
+  std::int64_t t_ns = 0;          // when last seen
+  std::int64_t measured_ns = -1;  // when last measured
+  int label = -1;                 // the marker it is, once named
   // Where it would be now, while unseen: its last place moved by the other tracks' steps since.
   Eigen::Vector2d coasted = Eigen::Vector2d::Zero();
 };
@@ -95,7 +96,7 @@ class BlobTracker {
       tr.flux = blobs[b].flux;
       tr.peak = blobs[b].peak;
       tr.measured = true;
-      tr.t_ns = t_ns;
+      tr.t_ns = tr.measured_ns = t_ns;
       tr.label = name_new(tr.id);
       blob_track_[std::size_t(b)] = t;
     }
@@ -217,6 +218,7 @@ class BlobTracker {
     const Eigen::Vector2d uv(b.u, b.v);
     const double dt = 1e-9 * static_cast<double>(t_ns - tr.t_ns);
     tr.measured = single_spot(b, max_spread_px2_);
+    if (tr.measured) tr.measured_ns = t_ns;
     if (seen) {
       step_sum += uv - tr.uv;
       ++steps;

@@ -83,7 +83,7 @@ class ShapeBootstrap {
   // at each snapshot. Then blob_labels() names this frame's blobs by their tracks.
   void feed(std::int64_t t_ns, const Blob* blobs, int n) {
     tracker_.track(t_ns, blobs, n, [this](int id) { return named_ahead_ ? label_ahead(id) : -1; });
-    if (!named() && t_ns - last_snapshot_ns_ >= spacing_ns_) {
+    if (!named() && snapshot_due(t_ns)) {
       take_snapshot(t_ns);
       if (snapshots_ >= kWindow) try_window(t_ns);
     }
@@ -139,6 +139,19 @@ class ShapeBootstrap {
     head_ = (head_ + 1) % kWindow;
     snapshots_ = std::min(snapshots_ + 1, kWindow);
     last_snapshot_ns_ = t_ns;
+  }
+
+  // A snapshot is due every spacing, but waits, up to half a spacing, while a track measured since
+  // the last snapshot is not in this frame (crowded by a lamp's tail, merged with a neighbour):
+  // taken then, it would leave that track out of every window it is in.
+  bool snapshot_due(std::int64_t t_ns) const {
+    const std::int64_t since = t_ns - last_snapshot_ns_;
+    if (since < spacing_ns_) return false;
+    if (since >= spacing_ns_ + spacing_ns_ / 2) return true;
+    for (const BlobTrack& tr : tracker_.tracks())
+      if (tr.id >= 0 && tr.measured_ns >= last_snapshot_ns_ && (tr.missed > 0 || !tr.measured))
+        return false;
+    return true;
   }
 
   // The places of track id in snapshot s, if it was seen there.
