@@ -182,7 +182,7 @@ TEST(TrackNames, ASharpPredictionTakesANameBackFromTheTrackThatHeldIt) {
                                 spot(Eigen::Vector2d(100, 400)), spot(Eigen::Vector2d(500, 100))};
   const auto labels_after = [&](bool sharp) {
     mc::detection::ShapeBootstrap<M> boot(prior, identical_leds());
-    boot.name_ahead({0, 2, 3});
+    boot.name_ahead(mc::detection::names_throughout<M>({0, 2, 3}));
     std::int64_t t_ns = 0;
     boot.feed(t_ns, blobs.data(), 4);
     for (int k = 0; k < 3; ++k) {

@@ -16,8 +16,10 @@ detection::DetectionConfig<M> named_detection_config(const io::MarkerLeds& leds,
   for (int i = 0; i < M; ++i) {
     c.prior.markers_c[std::size_t(i)] = naming->markers_c[std::size_t(i)];
     if (naming->track_of_label.size() == std::size_t(M))
-      c.names_ahead[std::size_t(i)] = naming->track_of_label[std::size_t(i)];
+      c.names_ahead.track_of_label[std::size_t(i)] = naming->track_of_label[std::size_t(i)];
   }
+  for (std::size_t k = 0; k < naming->name_spans.size() && k < c.names_ahead.spans.size(); ++k)
+    c.names_ahead.spans[k] = naming->name_spans[k];
   c.prior.marker_sigma_m = naming->marker_sigma_m;
   c.prior.camera = naming->camera;
   c.prior.pixel_sigma = naming->pixel_sigma;
@@ -39,8 +41,9 @@ LedNaming name_leds_by_shape(hal::FrameSource& frames, const io::MarkerLeds& led
   MarkerFrame<M> frame;
   while (!look.bootstrap().named() && look.poll(frame) == hal::SourceStatus::kOk) {
   }
-  const detection::TrackNames<M>& names = look.bootstrap().track_of_label();
-  naming.track_of_label.assign(names.begin(), names.end());
+  const detection::TrackNames<M>& names = look.bootstrap().names();
+  naming.track_of_label.assign(names.track_of_label.begin(), names.track_of_label.end());
+  naming.name_spans.assign(names.spans.begin(), names.spans.end());
   const detection::RigShape<M>& shape = look.bootstrap().shape();
   if (shape.made)
     naming.shape_c.assign(shape.geometry.markers_c.begin(), shape.geometry.markers_c.end());

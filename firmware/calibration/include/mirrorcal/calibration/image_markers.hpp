@@ -29,7 +29,8 @@ detection::DetectionConfig<M> marker_detection_config(const io::MarkerLeds& leds
 // The LEDs' names by the rig's shape (detection/shape_bootstrap.hpp), for LEDs that do not blink
 // theirs: what the shape is fitted with (the priors' guesses of the markers, their sigma, the
 // camera, the pixel noise), the track each name went to in a look at the first frames
-// (track_of_label[i]: the track named i; -1: none named) and the shape fitted, by name. The
+// (track_of_label[i]: the track named i; -1: none named), the spans of frames the names hold
+// over (ShapeBootstrap's TrackNames::spans) and the shape fitted, by name. The
 // brightness code names the LEDs with the shape where it has one; the priors' guesses cannot
 // always tell identical LEDs apart: the LED named i is then another than the one the guess of
 // marker i was for, and marker i's estimate is that LED's.
@@ -39,6 +40,7 @@ struct LedNaming {
   Pinhole<double> camera{};
   double pixel_sigma = 1.0;
   std::vector<int> track_of_label;
+  std::vector<detection::NamedSpan> name_spans;
   std::vector<Eigen::Vector3d> shape_c;
 };
 

@@ -31,7 +31,8 @@ struct DetectionConfig {
   bool bootstrap_shape = false;
   RigGeometry<M> prior{};
   // With bootstrap_shape: the names an earlier look at the same frames gave its tracks
-  // (ShapeBootstrap::track_of_label; all -1: none), so that they label from the first frame.
+  // (ShapeBootstrap::names; none named: no_track_names), so that they label from the first frame
+  // the names hold from.
   TrackNames<M> names_ahead = no_track_names<M>();
   // LEDs that blink their names (hal/blink_code.hpp), on the frames' sequence numbers: each
   // track is named by the frames it goes dark in (blink_names.hpp), in place of the bootstrap.

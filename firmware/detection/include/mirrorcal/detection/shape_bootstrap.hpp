@@ -4,7 +4,9 @@
 // once kWindow such snapshots hold M tracks throughout, the rig's shape is fitted to them
 // (rig_shape.hpp). A set of tracks that is not one rig's reflections (a room light drifting
 // across the image, two tracks swapped where reflections crossed) does not fit, and the next
-// snapshot tries again. The fit names its tracks, and a track keeps its name while it lives: the
+// snapshot tries again. The fit names its tracks; back from the window, the names hold as far as
+// the older snapshots show the named tracks where the shape has them (another track may have
+// held a name there: checked_back). A track keeps its name while it lives: the
 // identifier's track cue (marker_identifier.hpp) labels each frame's blobs by their tracks' names
 // until the filter's prediction is sharp. A new track takes the name the identifier gives its
 // blob with the prediction (confirm), if no live track holds it; a sharp prediction renames a
@@ -15,6 +17,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "mirrorcal/detection/blob_detector.hpp"
 #include "mirrorcal/detection/blob_tracker.hpp"
@@ -23,14 +26,57 @@
 
 namespace mirrorcal::detection {
 
+// A name a track holds over a span of frames: named checked back from the window (the track
+// that held a name before the window may be another than the one that holds it there: the
+// reflection was tracked by a track that had followed a light, or two tracks swapped).
+struct NamedSpan {
+  int track = -1;  // -1: no span
+  int label = -1;
+  std::int64_t from_ns = std::numeric_limits<std::int64_t>::min();
+  std::int64_t until_ns = std::numeric_limits<std::int64_t>::max();
+};
+
 // Which track each name went to (track_of_label[i]: the track named i, by the order tracks are
-// started in), -1 for a name not given.
+// started in; -1 for a name not given) and the spans of frames each name is held over, back from
+// the window as far as the snapshots show the named tracks as the shape (ShapeBootstrap's
+// checked_back). A frame outside every span is labelled by the other cues alone.
 template <int M>
-using TrackNames = std::array<int, M>;
+struct TrackNames {
+  static constexpr int kMaxSpans = 4 * M;
+  std::array<int, M> track_of_label{};
+  std::array<NamedSpan, kMaxSpans> spans{};
+  bool any() const {
+    return std::any_of(track_of_label.begin(), track_of_label.end(),
+                       [](int id) { return id >= 0; });
+  }
+  // The name track id holds at t_ns, or -1.
+  int label_at(int id, std::int64_t t_ns) const {
+    for (const NamedSpan& s : spans)
+      if (s.track == id && s.from_ns <= t_ns && t_ns <= s.until_ns) return s.label;
+    return -1;
+  }
+  // From then on every name is held by its track at the window.
+  std::int64_t settled_ns() const {
+    std::int64_t t = std::numeric_limits<std::int64_t>::min();
+    for (const NamedSpan& s : spans)
+      if (s.track >= 0 && s.until_ns == std::numeric_limits<std::int64_t>::max())
+        t = std::max(t, s.from_ns);
+    return t;
+  }
+};
 template <int M>
 TrackNames<M> no_track_names() {
   TrackNames<M> t{};
-  t.fill(-1);
+  t.track_of_label.fill(-1);
+  return t;
+}
+// Each name held by its track from the first frame on.
+template <int M>
+TrackNames<M> names_throughout(const std::array<int, M>& track_of_label) {
+  TrackNames<M> t = no_track_names<M>();
+  t.track_of_label = track_of_label;
+  for (int i = 0; i < M; ++i)
+    t.spans[std::size_t(i)] = NamedSpan{track_of_label[std::size_t(i)], i};
   return t;
 }
 
@@ -43,6 +89,8 @@ template <int M>
 class ShapeBootstrap {
  public:
   static constexpr int kWindow = 16;
+  // Snapshots kept: the window's, and those before it that the names are checked back through.
+  static constexpr int kHistory = 48;
   static constexpr int kMaxTracks = BlobTracker::kMaxTracks;
   static constexpr int kMaxBlobs = BlobTracker::kMaxBlobs;
   // Combinations of M among the snapshots' common tracks tried per window, brightest first.
@@ -68,21 +116,29 @@ class ShapeBootstrap {
   }
 
   // The names an earlier look at the same frames gave (none: no_track_names()). Tracking the same
-  // frames starts the same tracks, so each is named from its first frame, where the look had to
-  // wait for its window to fill.
-  void name_ahead(const TrackNames<M>& track_of_label) {
-    track_of_label_ = track_of_label;
-    named_ahead_ =
-        std::any_of(track_of_label.begin(), track_of_label.end(), [](int id) { return id >= 0; });
+  // frames starts the same tracks, so each is named over its spans, where the look had to wait
+  // for its window to fill.
+  void name_ahead(const TrackNames<M>& names) {
+    names_ = names;
+    named_ahead_ = names.any();
+    settled_ns_ = names.settled_ns();
   }
   // The names given, as name_ahead() takes them.
-  const TrackNames<M>& track_of_label() const { return track_of_label_; }
+  const TrackNames<M>& names() const { return names_; }
   bool named() const { return shape_.made || named_ahead_; }
 
   // One frame's blobs (single spots only are tracked); until the shape is fitted, a window tried
   // at each snapshot. Then blob_labels() names this frame's blobs by their tracks.
   void feed(std::int64_t t_ns, const Blob* blobs, int n) {
-    tracker_.track(t_ns, blobs, n, [this](int id) { return named_ahead_ ? label_ahead(id) : -1; });
+    tracker_.track(t_ns, blobs, n,
+                   [&](int id) { return named_ahead_ ? names_.label_at(id, t_ns) : -1; });
+    // Until every name is settled on its track at the window, the spans say which track holds
+    // which name in each frame; from then on the tracks keep them (and confirm() renames).
+    if (named_ahead_ && !named_ahead_settled_) {
+      for (BlobTrack& tr : tracker_.tracks())
+        if (tr.id >= 0) tr.label = names_.label_at(tr.id, t_ns);
+      named_ahead_settled_ = t_ns >= settled_ns_;
+    }
     if (!named() && snapshot_due(t_ns)) {
       take_snapshot(t_ns);
       if (snapshots_ >= kWindow) try_window(t_ns);
@@ -120,6 +176,7 @@ class ShapeBootstrap {
 
  private:
   struct Snapshot {
+    std::int64_t t_ns = 0;
     int n = 0;
     std::array<int, kMaxTracks> id{};
     std::array<Eigen::Vector2d, kMaxTracks> uv{};
@@ -129,6 +186,7 @@ class ShapeBootstrap {
   // snapshots.
   void take_snapshot(std::int64_t t_ns) {
     Snapshot& s = ring_[std::size_t(head_)];
+    s.t_ns = t_ns;
     s.n = 0;
     for (const BlobTrack& tr : tracker_.tracks())
       if (tr.id >= 0 && tr.missed == 0 && tr.measured) {
@@ -136,9 +194,15 @@ class ShapeBootstrap {
         s.uv[std::size_t(s.n)] = tr.uv;
         ++s.n;
       }
-    head_ = (head_ + 1) % kWindow;
-    snapshots_ = std::min(snapshots_ + 1, kWindow);
+    head_ = (head_ + 1) % kHistory;
+    snapshots_ = std::min(snapshots_ + 1, kHistory);
+    ++snapshots_taken_;
     last_snapshot_ns_ = t_ns;
+  }
+
+  // The snapshot taken `back` snapshots before the newest (0: the newest).
+  const Snapshot& newest(int back) const {
+    return ring_[std::size_t((head_ + kHistory - 1 - back) % kHistory)];
   }
 
   // A snapshot is due every spacing, but waits, up to half a spacing, while a track measured since
@@ -169,12 +233,11 @@ class ShapeBootstrap {
   void try_window(std::int64_t t_ns) {
     std::array<int, kMaxTracks> common{};
     int nc = 0;
-    const Snapshot& newest = ring_[std::size_t((head_ + kWindow - 1) % kWindow)];
-    for (int i = 0; i < newest.n; ++i) {
-      const int id = newest.id[std::size_t(i)];
+    for (int i = 0; i < newest(0).n; ++i) {
+      const int id = newest(0).id[std::size_t(i)];
       bool everywhere = true;
       Eigen::Vector2d uv;
-      for (const Snapshot& s : ring_) everywhere = everywhere && place(s, id, uv);
+      for (int k = 0; k < kWindow; ++k) everywhere = everywhere && place(newest(k), id, uv);
       if (everywhere) common[std::size_t(nc++)] = id;
     }
     if (nc < M) return;
@@ -184,10 +247,10 @@ class ShapeBootstrap {
     for (int j = 0; j < M; ++j) pick[std::size_t(j)] = j;
     for (int tried = 0; tried < kMaxSubsets; ++tried) {
       TrackWindow<M, kWindow> w;
-      for (int k = 0; k < kWindow; ++k)
+      for (int k = 0; k < kWindow; ++k)  // oldest first
         for (int j = 0; j < M; ++j)
-          place(ring_[std::size_t((head_ + k) % kWindow)],
-                common[std::size_t(pick[std::size_t(j)])], w.uv[std::size_t(k)][std::size_t(j)]);
+          place(newest(kWindow - 1 - k), common[std::size_t(pick[std::size_t(j)])],
+                w.uv[std::size_t(k)][std::size_t(j)]);
       ++counters_.windows_tried;
       // The brightness code's cost of naming the picked tracks (names[j]: track j's marker).
       const auto brightness = [&](const std::array<int, M>& names) {
@@ -208,20 +271,110 @@ class ShapeBootstrap {
         counters_.made_at_ns = t_ns;
         for (int j = 0; j < M; ++j) {
           const int id = common[std::size_t(pick[std::size_t(j)])];
-          track_of_label_[std::size_t(shape.label_of_track[std::size_t(j)])] = id;
+          names_.track_of_label[std::size_t(shape.label_of_track[std::size_t(j)])] = id;
           for (BlobTrack& tr : tracker_.tracks())
             if (tr.id == id) tr.label = shape.label_of_track[std::size_t(j)];
         }
+        checked_back(shape.geometry);
         return;
       }
       if (!next_combination(pick, nc)) return;
     }
   }
 
-  int label_ahead(int id) const {
+  // The spans the names hold over, back from the newest snapshot: in each snapshot a plane mirror
+  // shows the named tracks where the shape has them, and clearly better than under any other
+  // naming (two named tracks swapped, or another track in a named one's place). Where another
+  // naming fits clearly better, the names go to its tracks before that snapshot: a reflection
+  // tracked by a track that had followed a light, or two tracks swapped where their reflections
+  // passed. One snapshot that shows no naming well (a track crowded by a lamp's tail, unseen) is
+  // passed over; two in a row, a snapshot no naming clearly fits, or no span left, end the names
+  // there. The window's own snapshots are checked too: its fit's bound, over all of them, passes
+  // a track that was a light's in a few.
+  void checked_back(const RigGeometry<M>& shape) {
+    // The shape as it is: its sigma is mostly its common offset's, which the mirror hides, and
+    // charged in every frame it would let a track 10 px off pass.
+    RigGeometry<M> exact = shape;
+    exact.marker_sigma_m = 0.0;
+    std::array<int, M> names = names_.track_of_label;
+    std::array<std::int64_t, M> held{}, until{};
+    held.fill(newest(0).t_ns);
+    until.fill(std::numeric_limits<std::int64_t>::max());
+    int spans = 0, misses = 0, back = 1;
+    for (; back < snapshots_; ++back) {
+      const Snapshot& s = newest(back);
+      std::array<int, M> seen = names;
+      const NamesSeen how = names_seen(s, exact, seen);
+      if (how == NamesSeen::kNoNamingWell && ++misses < 2) continue;
+      if (how != NamesSeen::kClearly) break;
+      misses = 0;
+      int changed = 0;
+      for (int i = 0; i < M; ++i) changed += seen[std::size_t(i)] != names[std::size_t(i)];
+      if (spans + changed > TrackNames<M>::kMaxSpans - M) break;
+      for (int i = 0; i < M; ++i) {
+        const std::size_t ii = std::size_t(i);
+        if (seen[ii] != names[ii]) {
+          names_.spans[std::size_t(spans++)] = NamedSpan{names[ii], i, held[ii], until[ii]};
+          names[ii] = seen[ii];
+          until[ii] = s.t_ns;
+        }
+        held[ii] = s.t_ns;
+      }
+    }
+    // Back to the first snapshot of the recording: the names hold from the first frame.
+    const bool from_first = back == snapshots_ && misses == 0 && snapshots_taken_ == snapshots_;
     for (int i = 0; i < M; ++i)
-      if (track_of_label_[std::size_t(i)] == id) return i;
-    return -1;
+      names_.spans[std::size_t(spans++)] =
+          NamedSpan{names[std::size_t(i)], i,
+                    from_first ? std::numeric_limits<std::int64_t>::min() : held[std::size_t(i)],
+                    until[std::size_t(i)]};
+  }
+
+  enum class NamesSeen { kClearly, kNoNamingWell, kAmbiguous };
+  // Which naming of snapshot s's tracks shows the shape, from `names` (track ids by name; in:
+  // those of the next snapshot, out: this one's): they, two of them swapped, or one's place taken
+  // by another track. Clearly: the best fits the mirror's chi-square (its mean and six standard
+  // deviations, 2 M - 3 dof) by a margin over the next.
+  NamesSeen names_seen(const Snapshot& s, const RigGeometry<M>& shape,
+                       std::array<int, M>& names) const {
+    constexpr int dof = 2 * M - 3;
+    const double bound = dof + 6.0 * std::sqrt(2.0 * dof), margin = 9.0;
+    double best = std::numeric_limits<double>::infinity(), next = best;
+    std::array<int, M> best_names = names;
+    const auto consider = [&](const std::array<int, M>& candidate) {
+      std::array<bool, M> all{};
+      all.fill(true);
+      std::array<Eigen::Vector2d, M> uv;
+      for (int i = 0; i < M; ++i)
+        if (!place(s, candidate[std::size_t(i)], uv[std::size_t(i)])) return;
+      const double cost = fit_mirror<M>(shape, all, uv).cost;
+      if (cost < best) {
+        next = best;
+        best = cost;
+        best_names = candidate;
+      } else {
+        next = std::min(next, cost);
+      }
+    };
+    consider(names);
+    for (int i = 0; i < M; ++i) {
+      for (int j = i + 1; j < M; ++j) {
+        std::array<int, M> swapped = names;
+        std::swap(swapped[std::size_t(i)], swapped[std::size_t(j)]);
+        consider(swapped);
+      }
+      for (int t = 0; t < s.n; ++t) {
+        const int id = s.id[std::size_t(t)];
+        if (std::find(names.begin(), names.end(), id) != names.end()) continue;
+        std::array<int, M> taken = names;
+        taken[std::size_t(i)] = id;
+        consider(taken);
+      }
+    }
+    if (!(best < bound)) return NamesSeen::kNoNamingWell;
+    if (!(best + margin < next)) return NamesSeen::kAmbiguous;
+    names = best_names;
+    return NamesSeen::kClearly;
   }
 
   double flux_of(int id) const { return track(id).flux; }
@@ -247,12 +400,14 @@ class ShapeBootstrap {
   BlobTracker tracker_;
   std::int64_t spacing_ns_;
   std::array<int, kMaxBlobs> blob_labels_{};  // per blob of the last frame, its track's name
-  std::array<Snapshot, kWindow> ring_{};
-  int head_ = 0, snapshots_ = 0;
+  std::array<Snapshot, kHistory> ring_{};
+  int head_ = 0, snapshots_ = 0;  // snapshots_: those held (at most kHistory)
+  std::int64_t snapshots_taken_ = 0;
   std::int64_t last_snapshot_ns_ = -(std::int64_t{1} << 62);
   RigShape<M> shape_{};
-  TrackNames<M> track_of_label_ = no_track_names<M>();
-  bool named_ahead_ = false;
+  TrackNames<M> names_ = no_track_names<M>();
+  bool named_ahead_ = false, named_ahead_settled_ = false;
+  std::int64_t settled_ns_ = 0;
   ShapeBootstrapCounters counters_{};
   // The LEDs' brightness code (coded_: not all equal), as the identifier has it.
   std::array<double, M> log_brightness_{};

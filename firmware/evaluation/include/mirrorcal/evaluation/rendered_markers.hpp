@@ -54,7 +54,7 @@ class RenderedMarkers final : public hal::MarkerSource<M>, public hal::MarkerRel
   // may be a permutation of the truth's); the identity until the names are given. named(): given.
   const std::array<int, M>& naming() const { return naming_; }
   bool named() const { return named_; }
-  const TrackNames<M>& track_names() const { return detect_.bootstrap().track_of_label(); }
+  const TrackNames<M>& track_names() const { return detect_.bootstrap().names(); }
 
  private:
   void record_naming();
