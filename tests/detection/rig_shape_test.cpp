@@ -253,7 +253,8 @@ TEST(RigShape, ADecisiveCodeNamesEveryWindowRight) {
 // The shape's names hold back from its window only as far as the named tracks show the shape. A
 // track that followed a light of the room (here 60 px off, closing in over 2 s) onto marker 2's
 // reflection is named from about when it met it, not from its first frame; with the reflection
-// tracked throughout, the names hold from the first frame.
+// tracked throughout, the names hold from the first frame; with the reflection seen beside the
+// light, the name passes back to the reflection's own track.
 TEST(ShapeBootstrap, NamesHoldBackOnlyAsFarAsTheTracksShowTheShape) {
   const std::uint64_t seed = 1;
   const mc::sim::Scenario s = mc::sim::random_scenario(seed);
@@ -261,7 +262,8 @@ TEST(ShapeBootstrap, NamesHoldBackOnlyAsFarAsTheTracksShowTheShape) {
   const mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
   mc::detection::IdentifierConfig<3> identical;
   identical.brightness = {1.0, 1.0, 1.0};
-  const auto names_after = [&](double light_until_s) {
+  // reflection_too: marker 2's reflection is seen beside the light, in a track of its own.
+  const auto names_after = [&](double light_until_s, bool reflection_too) {
     mc::detection::ShapeBootstrap<3> boot(priors_geometry<3>(s, prior), identical);
     for (const auto& f : data.frames) {
       if (boot.named()) break;
@@ -271,22 +273,24 @@ TEST(ShapeBootstrap, NamesHoldBackOnlyAsFarAsTheTracksShowTheShape) {
         mc::detection::Blob b;
         b.u = m.u;
         b.v = m.v;
-        if (m.id == 2 && t < light_until_s) b.u += 30.0 * std::min(light_until_s - t, 2.0);
         b.flux = 1700.0;
         b.spread = 1.5;
         b.area = 16;
         b.peak = 120;
+        const bool light = m.id == 2 && t < light_until_s;
+        if (light && reflection_too) blobs.push_back(b);
+        if (light) b.u += 30.0 * std::min(light_until_s - t, 2.0);
         blobs.push_back(b);
       }
       boot.feed(f.t_ns, blobs.data(), static_cast<int>(blobs.size()));
     }
     return boot.names();
   };
-  const mc::detection::TrackNames<3> throughout = names_after(0.0);
+  const mc::detection::TrackNames<3> throughout = names_after(0.0, false);
   ASSERT_TRUE(throughout.any());
   EXPECT_EQ(throughout.settled_ns(), std::numeric_limits<std::int64_t>::min());
   const double light_until_s = 5.0;
-  const mc::detection::TrackNames<3> after_light = names_after(light_until_s);
+  const mc::detection::TrackNames<3> after_light = names_after(light_until_s, false);
   ASSERT_TRUE(after_light.any());
   const double settled_s = 1e-9 * static_cast<double>(after_light.settled_ns());
   std::printf("names from the first frame, and from %.2f s after a light until %.1f s\n", settled_s,
@@ -304,4 +308,18 @@ TEST(ShapeBootstrap, NamesHoldBackOnlyAsFarAsTheTracksShowTheShape) {
   for (int track = 0; track < 3; ++track)
     named_at_one_second += after_light.label_at(track, second_ns) >= 0 ? 1 : 0;
   EXPECT_LT(named_at_one_second, 3);
+  // With the reflection in a track of its own beside the light's, every name is held at 1 s: where
+  // the light's track took the reflection on, the name passes back to the reflection's own.
+  const mc::detection::TrackNames<3> beside = names_after(light_until_s, true);
+  ASSERT_TRUE(beside.any());
+  int passed_back = 0;
+  for (int i = 0; i < 3; ++i) {
+    int holders = 0;
+    for (int track = 0; track < mc::detection::BlobTracker::kMaxTracks; ++track)
+      holders += beside.label_at(track, second_ns) == i ? 1 : 0;
+    EXPECT_EQ(holders, 1) << "name " << i;
+    passed_back += beside.label_at(beside.track_of_label[std::size_t(i)], second_ns) != i ? 1 : 0;
+  }
+  // On this rig the light's track took the reflection on (the tracker's choice where the two met).
+  EXPECT_EQ(passed_back, 1);
 }
