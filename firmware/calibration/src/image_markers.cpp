@@ -20,6 +20,9 @@ detection::DetectionConfig<M> named_detection_config(const io::MarkerLeds& leds,
   }
   for (std::size_t k = 0; k < naming->name_spans.size() && k < c.names_ahead.spans.size(); ++k)
     c.names_ahead.spans[k] = naming->name_spans[k];
+  c.names_ahead.shaped = naming->shape_c.size() == std::size_t(M);
+  for (std::size_t i = 0; i < naming->shape_c.size() && c.names_ahead.shaped; ++i)
+    c.names_ahead.shape_c[i] = naming->shape_c[i];
   c.prior.marker_sigma_m = naming->marker_sigma_m;
   c.prior.camera = naming->camera;
   c.prior.pixel_sigma = naming->pixel_sigma;

@@ -6,11 +6,12 @@
 // across the image, two tracks swapped where reflections crossed) does not fit, and the next
 // snapshot tries again. The fit names its tracks; back from the window, the names hold as far as
 // the older snapshots show the named tracks where the shape has them (another track may have
-// held a name there: checked_back). A track keeps its name while it lives: the
-// identifier's track cue (marker_identifier.hpp) labels each frame's blobs by their tracks' names
-// until the filter's prediction is sharp. A new track takes the name the identifier gives its
-// blob with the prediction (confirm), if no live track holds it; a sharp prediction renames a
-// track outright. Header-only; nothing allocates.
+// held a name there: checked_back), and on from it, each snapshot checks them the same way (a
+// named track may follow a room light off its reflection: checked_on). A track keeps its name
+// while it lives: the identifier's track cue (marker_identifier.hpp) labels each frame's blobs by
+// their tracks' names until the filter's prediction is sharp. A new track takes the name the
+// identifier gives its blob with the prediction (confirm), if no live track holds it; a sharp
+// prediction renames a track outright. Header-only; nothing allocates.
 #pragma once
 
 #include <algorithm>
@@ -45,6 +46,10 @@ struct TrackNames {
   static constexpr int kMaxSpans = 4 * M;
   std::array<int, M> track_of_label{};
   std::array<NamedSpan, kMaxSpans> spans{};
+  // The rig's shape the names were given by (camera frame, by name), which the named tracks are
+  // checked against as they go on; none (shaped false) for names given otherwise.
+  bool shaped = false;
+  std::array<Eigen::Vector3d, M> shape_c{};
   bool any() const {
     return std::any_of(track_of_label.begin(), track_of_label.end(),
                        [](int id) { return id >= 0; });
@@ -83,6 +88,7 @@ TrackNames<M> names_throughout(const std::array<int, M>& track_of_label) {
 struct ShapeBootstrapCounters {
   std::uint64_t windows_tried = 0;  // windows of tracks fitted
   std::int64_t made_at_ns = -1;     // the frame whose window gave the names (-1: not yet)
+  std::uint64_t renamed = 0;        // names the snapshots after it moved to another track
 };
 
 template <int M>
@@ -142,6 +148,9 @@ class ShapeBootstrap {
     if (!named() && snapshot_due(t_ns)) {
       take_snapshot(t_ns);
       if (snapshots_ >= kWindow) try_window(t_ns);
+    } else if (names_.shaped && settled() && snapshot_due(t_ns)) {
+      take_snapshot(t_ns);
+      checked_on();
     }
     tracker_.blob_labels(n, blob_labels_.data());
   }
@@ -275,6 +284,8 @@ class ShapeBootstrap {
           for (BlobTrack& tr : tracker_.tracks())
             if (tr.id == id) tr.label = shape.label_of_track[std::size_t(j)];
         }
+        names_.shaped = true;
+        names_.shape_c = shape.geometry.markers_c;
         checked_back(shape.geometry);
         return;
       }
@@ -328,6 +339,33 @@ class ShapeBootstrap {
           NamedSpan{names[std::size_t(i)], i,
                     from_first ? std::numeric_limits<std::int64_t>::min() : held[std::size_t(i)],
                     until[std::size_t(i)]};
+  }
+
+  // Whether each name is held by its track as the names were given: from the window's fit on, or
+  // once the spans of names given ahead have run to their last track.
+  bool settled() const { return shape_.made || named_ahead_settled_; }
+
+  // The names checked on, at each snapshot once they are settled, as checked_back() checks them
+  // back: where another naming clearly shows the shape, its tracks take the names (a named track
+  // that followed a room light off its reflection, a name whose track ended given to the one that
+  // took the reflection up). A snapshot that shows no naming clearly changes nothing.
+  void checked_on() {
+    RigGeometry<M> exact = prior_;
+    exact.markers_c = names_.shape_c;
+    exact.marker_sigma_m = 0.0;
+    std::array<int, M> names;
+    names.fill(-1);
+    for (const BlobTrack& tr : tracker_.tracks())
+      if (tr.id >= 0 && tr.label >= 0) names[std::size_t(tr.label)] = tr.id;
+    std::array<int, M> seen = names;
+    if (names_seen(newest(0), exact, seen) != NamesSeen::kClearly) return;
+    for (int i = 0; i < M; ++i) {
+      if (seen[std::size_t(i)] == names[std::size_t(i)]) continue;
+      for (BlobTrack& tr : tracker_.tracks())
+        if (tr.id >= 0 && (tr.label == i || tr.id == seen[std::size_t(i)]))
+          tr.label = tr.id == seen[std::size_t(i)] ? i : -1;
+      ++counters_.renamed;
+    }
   }
 
   enum class NamesSeen { kClearly, kNoNamingWell, kAmbiguous };
