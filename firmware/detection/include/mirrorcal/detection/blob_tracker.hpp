@@ -1,15 +1,17 @@
 // Blobs followed from frame to frame: nearest-neighbour association on each track's
 // constant-velocity prediction (the closest pairs first, then any two pairs exchanged where that
-// fits better), within a gate that widens with the track's speed. Only a single spot starts a
-// track, but one that is not (crowded by a lamp's tail, cut by the image's edge, merged with a
-// neighbour) carries it on unmeasured. A track unseen (a dark, hidden or lost reflection) coasts
-// with the others: the rig's reflections, and the room's lights, move together as the rig turns, so
-// the tracks seen in both frames move it by their mean step, and it is taken up again near there,
-// after those tracks have taken their blobs. It coasts up to kMaxCoastNs while other tracks carry
-// it, three frames alone, then ends. A reflection passing a lamp thus keeps its track, and its
-// name, where it would otherwise start a new one, unnamed. Each track carries a name (a marker, or
-// -1) that its owner gives it: the rig's shape fitted over frames (shape_bootstrap.hpp) or the
-// LEDs' blink code (blink_names.hpp). Header-only; nothing allocates.
+// fits better), within a gate that widens with the track's speed. The predictions are first moved
+// together by the one shift that brings most of them onto blobs: where the rig turns back, every
+// reflection misses its prediction by the same 10-30 px, more than two reflections' distance. Only
+// a single spot starts a track, but one that is not (crowded by a lamp's tail, cut by the image's
+// edge, merged with a neighbour) carries it on unmeasured. A track unseen (a dark, hidden or lost
+// reflection) coasts with the others: the rig's reflections, and the room's lights, move together
+// as the rig turns, so the tracks seen in both frames move it by their mean step, and it is taken
+// up again near there, after those tracks have taken their blobs. It coasts up to kMaxCoastNs while
+// other tracks carry it, three frames alone, then ends. A reflection passing a lamp thus keeps its
+// track, and its name, where it would otherwise start a new one, unnamed. Each track carries a name
+// (a marker, or -1) that its owner gives it: the rig's shape fitted over frames
+// (shape_bootstrap.hpp) or the LEDs' blink code (blink_names.hpp). Header-only; nothing allocates.
 #pragma once
 
 #include <algorithm>
@@ -60,6 +62,7 @@ class BlobTracker {
     taken_.fill(false);
     blob_track_.fill(-1);
     matched_.fill(false);
+    shift_ = common_shift(t_ns, blobs, n);
     // The tracks seen in the last frame first; their mean step carries the others.
     Eigen::Vector2d step_sum = Eigen::Vector2d::Zero();
     int steps = 0;
@@ -150,7 +153,7 @@ class BlobTracker {
     for (int t = 0; t < kMaxTracks; ++t) {
       const BlobTrack& tr = tracks_[std::size_t(t)];
       const double dt = 1e-9 * static_cast<double>(t_ns - tr.t_ns);
-      predicted[std::size_t(t)] = seen ? Eigen::Vector2d(tr.uv + dt * tr.velocity) : tr.coasted;
+      predicted[std::size_t(t)] = seen ? prediction(tr, dt) + shift_ : tr.coasted;
       gate[std::size_t(t)] =
           seen ? 15.0 + 0.5 * dt * tr.velocity.norm() : 15.0 + kCoastGatePxPerS * dt;
     }
@@ -187,6 +190,69 @@ class BlobTracker {
       take_up(t, blobs[b], t_ns, seen, common_velocity, step_sum, steps);
       blob_track_[std::size_t(b)] = t;
     }
+  }
+
+  // Where a track seen in the last frame would be now at its constant velocity, dt_s after it.
+  static Eigen::Vector2d prediction(const BlobTrack& tr, double dt_s) {
+    return tr.uv + dt_s * tr.velocity;
+  }
+
+  // What every seen track's prediction misses by: the rig's change of pace, which moves its
+  // reflections (and the room's lights) alike. Among the shifts that bring one prediction onto a
+  // blob (within kMaxShiftPx), the one that brings the most onto one within kShiftFitPx (their
+  // squared misses, each at most kShiftFitPx^2, summed), the smaller on a tie; then moved to those
+  // predictions' mean miss. None with fewer than two such tracks: one cannot tell its own motion
+  // from the others'.
+  Eigen::Vector2d common_shift(std::int64_t t_ns, const Blob* blobs, int n) const {
+    constexpr double kMaxShiftPx = 60.0, kShiftFitPx = 6.0;
+    std::array<Eigen::Vector2d, kMaxTracks> predicted;
+    int np = 0;
+    for (const BlobTrack& tr : tracks_)
+      if (tr.id >= 0 && tr.missed == 0)
+        predicted[std::size_t(np++)] = prediction(tr, 1e-9 * static_cast<double>(t_ns - tr.t_ns));
+    if (np < 2) return Eigen::Vector2d::Zero();
+    // The summed truncated squared misses under shift s, and the inliers' mean miss.
+    const auto misfit = [&](const Eigen::Vector2d& s, Eigen::Vector2d* mean_miss) {
+      double cost = 0.0;
+      Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+      int inliers = 0;
+      for (int p = 0; p < np; ++p) {
+        double nearest = kShiftFitPx * kShiftFitPx;
+        Eigen::Vector2d miss = Eigen::Vector2d::Zero();
+        for (int b = 0; b < n; ++b) {
+          if (blobs[b].wide) continue;
+          const Eigen::Vector2d d =
+              Eigen::Vector2d(blobs[b].u, blobs[b].v) - predicted[std::size_t(p)] - s;
+          if (d.squaredNorm() < nearest) {
+            nearest = d.squaredNorm();
+            miss = d;
+          }
+        }
+        cost += nearest;
+        if (nearest < kShiftFitPx * kShiftFitPx) {
+          sum += miss;
+          ++inliers;
+        }
+      }
+      if (mean_miss != nullptr && inliers > 0) *mean_miss = sum / inliers;
+      return cost;
+    };
+    Eigen::Vector2d best = Eigen::Vector2d::Zero();
+    double best_cost = misfit(best, nullptr);
+    for (int p = 0; p < np; ++p)
+      for (int b = 0; b < n; ++b) {
+        const Eigen::Vector2d s =
+            Eigen::Vector2d(blobs[b].u, blobs[b].v) - predicted[std::size_t(p)];
+        if (blobs[b].wide || s.norm() > kMaxShiftPx) continue;
+        const double cost = misfit(s, nullptr);
+        if (cost < best_cost - 1e-9 || (cost < best_cost + 1e-9 && s.norm() < best.norm())) {
+          best_cost = cost;
+          best = s;
+        }
+      }
+    Eigen::Vector2d mean_miss = Eigen::Vector2d::Zero();
+    misfit(best, &mean_miss);
+    return best + mean_miss;
   }
 
   // Any two tracks' blobs exchanged while that lowers their summed squared distance (within both
@@ -242,6 +308,7 @@ class BlobTracker {
   std::array<bool, kMaxTracks> matched_{};   // this frame's tracks that took a blob
   std::int64_t last_t_ns_ = 0;
   int next_id_ = 0;
+  Eigen::Vector2d shift_ = Eigen::Vector2d::Zero();  // this frame's common_shift()
 };
 
 }  // namespace mirrorcal::detection
