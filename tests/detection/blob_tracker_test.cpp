@@ -215,6 +215,25 @@ TEST(TrackNames, ASharpPredictionOverrulesTheNameOfALightsTrack) {
   EXPECT_EQ(identifier.blob_of(2), 3);
 }
 
+TEST(TrackNames, AVaguePredictionLabelsTheNamedTracksNotALightBesideThem) {
+  // A filter that has had no marker: every marker predicted at one pixel, 150 px off, with a
+  // sigma of 150 px (identical-LED room run 11, which then labelled nothing in 60 s). Each
+  // reflection's track is named; a room light's spot, unnamed, lies among them.
+  const std::array<Eigen::Vector2d, M> lost = {Eigen::Vector2d(560, 300), Eigen::Vector2d(560, 300),
+                                               Eigen::Vector2d(560, 300)};
+  const std::vector<Blob> blobs{spot(Eigen::Vector2d(368, 297)), spot(Eigen::Vector2d(336, 310)),
+                                spot(Eigen::Vector2d(436, 310)), spot(Eigen::Vector2d(361, 367))};
+  const std::array<int, 4> track_labels{2, 1, -1, 0};
+  mc::detection::MarkerIdentifier<M> identifier(identical_leds());
+  mc::MarkerFrame<M> frame;
+  auto vague = prediction_at(lost, 150.0);
+  identifier.identify(blobs.data(), 4, &vague, frame, track_labels.data());
+  EXPECT_EQ(identifier.blob_of(0), 3);
+  EXPECT_EQ(identifier.blob_of(1), 1);
+  EXPECT_EQ(identifier.blob_of(2), 0);
+  EXPECT_TRUE(frame.seen[0] && frame.seen[1] && frame.seen[2]);
+}
+
 TEST(TrackNames, ASharpPredictionTakesANameBackFromTheTrackThatHeldIt) {
   // The tracks started in the blobs' order: a light (track 0) holds name 0; marker 0's reflection
   // (track 1) is unnamed, and no prediction alone renames it while the light's track lives.

@@ -74,9 +74,10 @@ struct IdentifierConfig {
   // about a centimetre (mirror_fit_test: 99 % of frames told apart at 1 cm, 69 % at 2 cm).
   bool use_geometry = false;
   RigGeometry<M> geometry{};
-  // The track cue (shape_bootstrap.hpp): naming a blob otherwise than its track's name costs
-  // this much. More than the ambiguity margin, so that a track's name decides where nothing else
-  // does; less than a sharp prediction's disagreement, which overrules it.
+  // The track cue (shape_bootstrap.hpp): naming a blob otherwise than its track's name, or a
+  // blob of no named track a marker whose name another blob's track holds, costs this much. More
+  // than the ambiguity margin, so that a track's name decides where nothing else does; less than
+  // a sharp prediction's disagreement, which overrules it.
   double track_cost = 12.0;
   // A prediction this sharp (its larger sigma, px) needs no track cue: the filter has the marker,
   // and a track that swapped with a room light's as the two passed (whose names the cue would
@@ -141,6 +142,7 @@ class MarkerIdentifier {
 
     // Candidate blobs per marker, nearest first by Mahalanobis distance.
     std::array<bool, M> crossing{};
+    const std::array<bool, M> held = names_held(blobs, n, track_labels);
     for (int i = 0; i < M; ++i) {
       count_[i] = 0;
       if (i == dark_marker) continue;
@@ -164,7 +166,7 @@ class MarkerIdentifier {
       for (int j = 0; j < n; ++j) {
         if (!single_spot(blobs[j])) continue;
         const double against_track =
-            track_cue && track_labels[j] >= 0 && track_labels[j] != i ? config_.track_cost : 0.0;
+            track_cue && otherwise_named(track_labels[j], i, held) ? config_.track_cost : 0.0;
         if (prediction == nullptr) {
           // Without a prediction every blob is as near as any other: the brightest are the
           // candidates (markers are the scene's bright spots), whatever their order in the image.
@@ -231,6 +233,22 @@ class MarkerIdentifier {
  private:
   bool single_spot(const Blob& b) const {
     return detection::single_spot(b, config_.max_spread_px2);
+  }
+
+  // Which markers' names a track of this frame's single spots holds.
+  std::array<bool, M> names_held(const Blob* blobs, int n, const int* track_labels) const {
+    std::array<bool, M> held{};
+    for (int j = 0; j < n && track_labels != nullptr; ++j)
+      if (track_labels[j] >= 0 && track_labels[j] < M && single_spot(blobs[j]))
+        held[std::size_t(track_labels[j])] = true;
+    return held;
+  }
+
+  // Whether the track cue speaks against naming a blob whose track is named `label` (-1: none)
+  // marker i: its track holds another name, or it holds none while another blob's track holds
+  // i's (a room light's spot is as near a vague prediction as the reflection its track follows).
+  static bool otherwise_named(int label, int i, const std::array<bool, M>& held) {
+    return label >= 0 ? label != i : held[std::size_t(i)];
   }
 
   // Keeps marker i's kCandidates blobs of lowest rank, each with its cost d2.
