@@ -140,6 +140,19 @@ struct CodeMisfit {
   }
 };
 
+// Random rig 1, its simulated reflections and priors, and a bootstrap of its LEDs made identical.
+struct IdenticalRig {
+  std::uint64_t seed = 1;
+  mc::sim::Scenario s = mc::sim::random_scenario(seed);
+  mc::sim::SimData data = mc::sim::simulate(s, seed);
+  mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
+  mc::detection::ShapeBootstrap<3> bootstrap() const {
+    mc::detection::IdentifierConfig<3> identical;
+    identical.brightness = {1.0, 1.0, 1.0};
+    return mc::detection::ShapeBootstrap<3>(priors_geometry<3>(s, prior), identical);
+  }
+};
+
 // A clean spot of an identical LED at (u, v).
 mc::detection::Blob spot(double u, double v) {
   mc::detection::Blob b;
@@ -268,16 +281,11 @@ TEST(RigShape, ADecisiveCodeNamesEveryWindowRight) {
 // tracked throughout, the names hold from the first frame; with the reflection seen beside the
 // light, the name passes back to the reflection's own track.
 TEST(ShapeBootstrap, NamesHoldBackOnlyAsFarAsTheTracksShowTheShape) {
-  const std::uint64_t seed = 1;
-  const mc::sim::Scenario s = mc::sim::random_scenario(seed);
-  const mc::sim::SimData data = mc::sim::simulate(s, seed);
-  const mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
-  mc::detection::IdentifierConfig<3> identical;
-  identical.brightness = {1.0, 1.0, 1.0};
+  const IdenticalRig rig;
   // reflection_too: marker 2's reflection is seen beside the light, in a track of its own.
   const auto names_after = [&](double light_until_s, bool reflection_too) {
-    mc::detection::ShapeBootstrap<3> boot(priors_geometry<3>(s, prior), identical);
-    for (const auto& f : data.frames) {
+    mc::detection::ShapeBootstrap<3> boot = rig.bootstrap();
+    for (const auto& f : rig.data.frames) {
       if (boot.named()) break;
       const double t = 1e-9 * static_cast<double>(f.t_ns);
       std::vector<mc::detection::Blob> blobs;
@@ -336,15 +344,7 @@ TEST(ShapeBootstrap, NamesHoldBackOnlyAsFarAsTheTracksShowTheShape) {
 // that shows the light well off the shape gives name 2 back to the reflection's track. So does a
 // bootstrap named ahead by the first (a later pass over the same frames).
 TEST(ShapeBootstrap, ANamedTrackThatFollowsALightOffItsReflectionLosesTheName) {
-  const std::uint64_t seed = 1;
-  const mc::sim::Scenario s = mc::sim::random_scenario(seed);
-  const mc::sim::SimData data = mc::sim::simulate(s, seed);
-  const mc::Prior<3> prior = mc::sim::draw_prior<3>(s, data, mc::sim::derive_seed(seed, 7));
-  mc::detection::IdentifierConfig<3> identical;
-  identical.brightness = {1.0, 1.0, 1.0};
-  const auto fresh = [&] {
-    return mc::detection::ShapeBootstrap<3>(priors_geometry<3>(s, prior), identical);
-  };
+  const IdenticalRig rig;
   // Feeds the frames up to until_s, the light from light_s on; the labels of the last frame's
   // reflection of marker 2 and of the light (-2: not in that frame).
   struct Labels {
@@ -352,7 +352,7 @@ TEST(ShapeBootstrap, ANamedTrackThatFollowsALightOffItsReflectionLosesTheName) {
   };
   const auto feed = [&](mc::detection::ShapeBootstrap<3>& boot, double light_s, double until_s) {
     Labels last;
-    for (const auto& f : data.frames) {
+    for (const auto& f : rig.data.frames) {
       const double t = 1e-9 * static_cast<double>(f.t_ns);
       if (t > until_s) break;
       std::vector<mc::detection::Blob> blobs;
@@ -372,16 +372,16 @@ TEST(ShapeBootstrap, ANamedTrackThatFollowsALightOffItsReflectionLosesTheName) {
     }
     return last;
   };
-  mc::detection::ShapeBootstrap<3> clean = fresh();
+  mc::detection::ShapeBootstrap<3> clean = rig.bootstrap();
   const int name = feed(clean, 1e9, 1e9).reflection;  // the name the shape gives marker 2
   ASSERT_GE(clean.counters().made_at_ns, 0);
   ASSERT_GE(name, 0);
   EXPECT_EQ(clean.counters().renamed, 0U);  // nothing to check on but the reflections
   const double light_s = 1e-9 * static_cast<double>(clean.counters().made_at_ns) + 1.0;
   const double until_s = light_s + 3.0;
-  mc::detection::ShapeBootstrap<3> live = fresh();
+  mc::detection::ShapeBootstrap<3> live = rig.bootstrap();
   const Labels named_live = feed(live, light_s, until_s);
-  mc::detection::ShapeBootstrap<3> ahead = fresh();
+  mc::detection::ShapeBootstrap<3> ahead = rig.bootstrap();
   ahead.name_ahead(live.names());
   const Labels named_ahead = feed(ahead, light_s, until_s);
   std::printf(
