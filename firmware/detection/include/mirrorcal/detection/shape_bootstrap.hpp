@@ -369,10 +369,10 @@ class ShapeBootstrap {
   }
 
   enum class NamesSeen { kClearly, kNoNamingWell, kAmbiguous };
-  // Which naming of snapshot s's tracks shows the shape, from `names` (track ids by name; in:
-  // those of the next snapshot, out: this one's): they, two of them swapped, or one's place taken
-  // by another track. Clearly: the best fits the mirror's chi-square (its mean and six standard
-  // deviations, 2 M - 3 dof) by a margin over the next.
+  // Which naming of snapshot s's tracks shows the shape, from `names` (track ids by name, -1 for
+  // a name no track holds; in: those of the next snapshot, out: this one's): they, two of them
+  // swapped, or one's place taken by another track. Clearly: the best fits the mirror's chi-square
+  // (its mean and six standard deviations, 2 M - 3 dof) by a margin over the next.
   NamesSeen names_seen(const Snapshot& s, const RigGeometry<M>& shape,
                        std::array<int, M>& names) const {
     constexpr int dof = 2 * M - 3;
@@ -380,6 +380,7 @@ class ShapeBootstrap {
     double best = std::numeric_limits<double>::infinity(), next = best;
     std::array<int, M> best_names = names;
     const auto consider = [&](const std::array<int, M>& candidate) {
+      if (candidate == best_names && best < std::numeric_limits<double>::infinity()) return;
       std::array<bool, M> all{};
       all.fill(true);
       std::array<Eigen::Vector2d, M> uv;
@@ -394,21 +395,35 @@ class ShapeBootstrap {
         next = std::min(next, cost);
       }
     };
-    consider(names);
-    for (int i = 0; i < M; ++i) {
-      for (int j = i + 1; j < M; ++j) {
-        std::array<int, M> swapped = names;
-        std::swap(swapped[std::size_t(i)], swapped[std::size_t(j)]);
-        consider(swapped);
+    // The namings near `from`: it, two of its tracks swapped, or one's place taken by another.
+    const auto near = [&](const std::array<int, M>& from) {
+      consider(from);
+      for (int i = 0; i < M; ++i) {
+        for (int j = i + 1; j < M; ++j) {
+          std::array<int, M> swapped = from;
+          std::swap(swapped[std::size_t(i)], swapped[std::size_t(j)]);
+          consider(swapped);
+        }
+        for (int t = 0; t < s.n; ++t) {
+          const int id = s.id[std::size_t(t)];
+          if (std::find(from.begin(), from.end(), id) != from.end()) continue;
+          std::array<int, M> taken = from;
+          taken[std::size_t(i)] = id;
+          consider(taken);
+        }
       }
-      for (int t = 0; t < s.n; ++t) {
-        const int id = s.id[std::size_t(t)];
-        if (std::find(names.begin(), names.end(), id) != names.end()) continue;
-        std::array<int, M> taken = names;
-        taken[std::size_t(i)] = id;
-        consider(taken);
-      }
+    };
+    // A name no track holds (its track ended where two reflections merged) is given to each track
+    // that holds none in turn, and the namings near each tried: the others may have swapped there.
+    const auto unheld = std::find(names.begin(), names.end(), -1);
+    for (int t = 0; t < s.n && unheld != names.end(); ++t) {
+      const int id = s.id[std::size_t(t)];
+      if (std::find(names.begin(), names.end(), id) != names.end()) continue;
+      std::array<int, M> filled = names;
+      filled[std::size_t(unheld - names.begin())] = id;
+      near(filled);
     }
+    if (unheld == names.end()) near(names);
     if (!(best < bound)) return NamesSeen::kNoNamingWell;
     if (!(best + margin < next)) return NamesSeen::kAmbiguous;
     names = best_names;
