@@ -286,7 +286,7 @@ class ShapeBootstrap {
         }
         names_.shaped = true;
         names_.shape_c = shape.geometry.markers_c;
-        checked_back(shape.geometry);
+        checked_back();
         return;
       }
       if (!next_combination(pick, nc)) return;
@@ -302,11 +302,8 @@ class ShapeBootstrap {
   // passed over; two in a row, a snapshot no naming clearly fits, or no span left, end the names
   // there. The window's own snapshots are checked too: its fit's bound, over all of them, passes
   // a track that was a light's in a few.
-  void checked_back(const RigGeometry<M>& shape) {
-    // The shape as it is: its sigma is mostly its common offset's, which the mirror hides, and
-    // charged in every frame it would let a track 10 px off pass.
-    RigGeometry<M> exact = shape;
-    exact.marker_sigma_m = 0.0;
+  void checked_back() {
+    const RigGeometry<M> exact = exact_shape();
     std::array<int, M> names = names_.track_of_label;
     std::array<std::int64_t, M> held{}, until{};
     held.fill(newest(0).t_ns);
@@ -341,6 +338,15 @@ class ShapeBootstrap {
                     until[std::size_t(i)]};
   }
 
+  // The shape that gave the names, as it is: its sigma is mostly its common offset's, which the
+  // mirror hides, and charged in every frame it would let a track 10 px off pass.
+  RigGeometry<M> exact_shape() const {
+    RigGeometry<M> exact = prior_;
+    exact.markers_c = names_.shape_c;
+    exact.marker_sigma_m = 0.0;
+    return exact;
+  }
+
   // Whether each name is held by its track as the names were given: from the window's fit on, or
   // once the spans of names given ahead have run to their last track.
   bool settled() const { return shape_.made || named_ahead_settled_; }
@@ -350,9 +356,7 @@ class ShapeBootstrap {
   // that followed a room light off its reflection, a name whose track ended given to the one that
   // took the reflection up). A snapshot that shows no naming clearly changes nothing.
   void checked_on() {
-    RigGeometry<M> exact = prior_;
-    exact.markers_c = names_.shape_c;
-    exact.marker_sigma_m = 0.0;
+    const RigGeometry<M> exact = exact_shape();
     std::array<int, M> names;
     names.fill(-1);
     for (const BlobTrack& tr : tracker_.tracks())
