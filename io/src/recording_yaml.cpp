@@ -327,19 +327,29 @@ bool parse_imu_yaml(std::string_view text, const std::string& file, SensorInfo& 
 
 namespace {
 
-// A rolling shutter's line_delay (s per row, default 0: a global shutter). Real sensors read a
-// row in 5-100 us; a whole frame's readout beyond 0.1 s is no camera (or microseconds given as
-// seconds).
-bool parse_line_delay(const YamlMap& cam, CameraInfo& out) {
+// The shutter: a rolling shutter's line_delay (s per row, default 0: a global shutter) and the
+// exposure_time (s, the stamp at its middle; default 0: not modelled). Real sensors read a row in
+// 5-100 us; a whole frame's readout or an exposure beyond 0.1 s is no camera for this (or
+// microseconds or milliseconds given as seconds).
+bool parse_shutter(const YamlMap& cam, CameraInfo& out) {
   double& line_delay = out.intrinsics.line_delay_s;
+  double& exposure = out.intrinsics.exposure_s;
   line_delay = 0.0;
-  if (!cam.has("line_delay")) return true;
-  if (!cam.number("line_delay", line_delay)) return false;
-  if (!(line_delay >= 0.0 && line_delay * out.height <= 0.1))
-    return cam.fail(cam.node("line_delay"), "line_delay",
-                    "must be seconds per row, from 0 (global shutter) to a readout of 0.1 s over "
-                    "the image's " +
-                        std::to_string(out.height) + " rows");
+  exposure = 0.0;
+  if (cam.has("line_delay")) {
+    if (!cam.number("line_delay", line_delay)) return false;
+    if (!(line_delay >= 0.0 && line_delay * out.height <= 0.1))
+      return cam.fail(cam.node("line_delay"), "line_delay",
+                      "must be seconds per row, from 0 (global shutter) to a readout of 0.1 s over "
+                      "the image's " +
+                          std::to_string(out.height) + " rows");
+  }
+  if (cam.has("exposure_time")) {
+    if (!cam.number("exposure_time", exposure)) return false;
+    if (!(exposure >= 0.0 && exposure <= 0.1))
+      return cam.fail(cam.node("exposure_time"), "exposure_time",
+                      "must be the frames' exposure in seconds, from 0 (not modelled) to 0.1");
+  }
   return true;
 }
 
@@ -380,8 +390,7 @@ bool read_camera(const YamlMap& cam, const char* skew_key, CameraInfo& out) {
   if (cam.has("distortion_coeffs")) {
     const YAML::Node n = cam.node("distortion_coeffs");
     // "none" with an empty or all-zero list, as some tools write it.
-    if (d == Distortion::kNone && n.IsSequence() && n.size() == 0)
-      return parse_line_delay(cam, out);
+    if (d == Distortion::kNone && n.IsSequence() && n.size() == 0) return parse_shutter(cam, out);
     if (!cam.numbers("distortion_coeffs", 4, c)) return false;
     if (d == Distortion::kNone && (c[0] != 0.0 || c[1] != 0.0 || c[2] != 0.0 || c[3] != 0.0))
       return cam.fail(n, "distortion_coeffs",
@@ -393,7 +402,7 @@ bool read_camera(const YamlMap& cam, const char* skew_key, CameraInfo& out) {
   // radtan with zero coefficients (how Kalibr and we write an undistorted camera) is no lens.
   if (d == Distortion::kRadtan && c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0)
     d = Distortion::kNone;
-  return parse_line_delay(cam, out);
+  return parse_shutter(cam, out);
 }
 
 }  // namespace
@@ -618,6 +627,8 @@ bool write_sensor_yaml(const std::string& dir, const SensorInfo& s, std::string&
   cam += "  resolution: [" + std::to_string(s.width) + ", " + std::to_string(s.height) + "]\n";
   cam +=
       "  line_delay: " + number(s.intrinsics.line_delay_s) + "  # s per row; 0: global shutter\n";
+  cam += "  exposure_time: " + number(s.intrinsics.exposure_s) +
+         "  # s, the stamp at its middle; 0: not modelled\n";
   cam += "  rostopic: " + s.rostopic + "\n";
   return io::write_file(dir + "/imu.yaml", imu, error) &&
          io::write_file(dir + "/camchain.yaml", cam, error);

@@ -590,6 +590,31 @@ TEST_F(BadInput, LineDelaysInTheWrongUnitAreRefused) {
   EXPECT_EQ(r.sensors.intrinsics.line_delay_s, 3e-5);
 }
 
+// The exposure is seconds: milliseconds given as seconds, or a negative one, are refused; a real
+// one is read (the recording's camchain.yaml has the key, as record writes it).
+TEST_F(BadInput, ExposureTimesInTheWrongUnitAreRefused) {
+  const auto with_exposure = [&](const std::string& value) {
+    auto l = lines_of(dir() + "/camchain.yaml");
+    bool found = false;
+    for (auto& s : l)
+      if (s.find("exposure_time") != std::string::npos) {
+        s = "  exposure_time: " + value;
+        found = true;
+      }
+    ASSERT_TRUE(found);
+    write_lines(dir() + "/camchain.yaml", l);
+  };
+  with_exposure("4");
+  expect_error({dir() + "/camchain.yaml:", "cam0.exposure_time: must be the frames' exposure"});
+  with_exposure("-0.004");
+  expect_error({dir() + "/camchain.yaml:", "cam0.exposure_time: must be the frames' exposure"});
+  with_exposure("0.004");
+  mc::io::Recording r;
+  std::string err;
+  ASSERT_TRUE(mc::io::read_recording(dir(), 3, r, err)) << err;
+  EXPECT_EQ(r.sensors.intrinsics.exposure_s, 0.004);
+}
+
 TEST_F(BadInput, TruthFileThatIsDamaged) {
   spit(dir() + "/truth.yaml", "p_b_c: [0.01, 0.02]\n");
   expect_error({dir() + "/truth.yaml:1:", "p_b_c: expected a list of 3 numbers"});

@@ -378,6 +378,7 @@ TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
   std::string err;
   const std::string chain = tmp.path + "/camchain-imucam.yaml";
   r.intrinsics.line_delay_s = 2.5e-5;
+  r.intrinsics.exposure_s = 4e-3;
   mc::io::OutputSet out;
   ASSERT_TRUE(
       mc::calibration::write_camchain_imucam(out, chain, r, err) &&
@@ -399,6 +400,7 @@ TEST(CameraFiles, WrittenCamerasReadBackInMirrorcalsReaders) {
     EXPECT_EQ(c.height, 480) << file;
     EXPECT_EQ(c.rostopic, "/rig/front/image_raw") << file;
     EXPECT_EQ(k.line_delay_s, 2.5e-5) << file;
+    EXPECT_EQ(k.exposure_s, 4e-3) << file;
   };
   mc::io::SensorInfo sensors;
   std::vector<std::string> notes;

@@ -109,6 +109,10 @@ void write_imucam_chain(std::FILE* o, const CalibrationResult& r, bool imu_from_
   std::fprintf(o, "  resolution: [%d, %d]\n", r.width, r.height);
   std::fprintf(o, "  # s per row (a rolling shutter; 0: a global shutter)\n  line_delay: %.9g\n",
                k.line_delay_s);
+  std::fprintf(o,
+               "  # s, the frames' exposure, the stamp at its middle (0: not modelled)\n"
+               "  exposure_time: %.9g\n",
+               k.exposure_s);
   std::fprintf(o, "  rostopic: %s\n  cam_overlaps: []\n", r.rostopic.c_str());
   std::fprintf(o, "  # s: t_imu = t_cam + timeshift_cam_imu\n  timeshift_cam_imu: %.9f\n", r.t_d);
   if (imu_from_cam) {
@@ -615,6 +619,8 @@ bool write_result_yaml(io::OutputSet& out, const std::string& path, const Calibr
   }
   std::fprintf(o, "line_delay: %.17g  # s per row, held as camchain.yaml gave it\n",
                r.intrinsics.line_delay_s);
+  std::fprintf(o, "exposure_time: %.17g  # s, held as camchain.yaml gave it\n",
+               r.intrinsics.exposure_s);
   std::fprintf(o,
                "intrinsics_estimated: %s\nskew_estimated: %s\ndistortion_estimated: %s\n"
                "resolution: [%d, %d]\n",

@@ -253,6 +253,7 @@ void BatchSolver::start_parameters() {
   camera_model_ = nk_ > 0 ? pr.intrinsics_guess : in_.config.intrinsics;
   camera_model_.distortion = in_.config.intrinsics.distortion;
   camera_model_.line_delay_s = in_.config.intrinsics.line_delay_s;
+  camera_model_.exposure_s = in_.config.intrinsics.exposure_s;
   const Pinhole<double>& k = camera_model_;
   camera_ = {k.fu, k.fv, k.cu, k.cv, k.skew, k.coeffs[0], k.coeffs[1], k.coeffs[2], k.coeffs[3]};
   for (int j = 0; j < 3; ++j) p_b_c_[static_cast<std::size_t>(j)] = pr.p_b_c(j);

@@ -223,7 +223,8 @@ class ReprojectionFactor {
     e.gravity_n = gravity_n_.cast<T>();
     const Pinhole<T> k = camera_of(camera_, camera);
     Vec2<T> uv;
-    if (!project<T>(k, mirror_in_camera(s, e).image(Eigen::Map<const Vec3<T>>(marker)), uv))
+    const ExposedMirror<T> mirror(s, e, k.exposure_s);
+    if (!mirror.project_image(k, Eigen::Map<const Vec3<T>>(marker), uv))
       return false;  // behind the camera: the step that put it there is rejected
     r[0] = (uv.x() - uv_.x()) * inv_sigma_;
     r[1] = (uv.y() - uv_.y()) * inv_sigma_;
