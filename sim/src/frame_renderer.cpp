@@ -14,8 +14,8 @@ constexpr std::size_t kNoiseTable = std::size_t{1} << 18;
 constexpr std::uint64_t kNoiseStream = 0x4652414d45ull;  // "FRAME": seeds apart from simulate()'s
 constexpr std::uint64_t kSpotStream = 0x53504f54ull << 32;  // "SPOT", xor the frame's time
 constexpr std::uint64_t kRoomStream = 0x524f4f4dull;        // "ROOM"
-// Motion blur: a spot drawn as this many spots spread evenly over the exposure.
-constexpr int kExposureSteps = 5;
+// Motion blur: a spot drawn as this many spots at least, and at most (exposure_steps).
+constexpr int kMinExposureSteps = 5, kMaxExposureSteps = 64;
 
 }  // namespace
 
@@ -185,17 +185,31 @@ void FrameRenderer::render(std::int64_t t_ns, std::uint64_t frame_index, std::ui
   finish(frame_index, image);
 }
 
+// Motion blur: the spot drawn at the middles of `steps` equal parts of the exposure (its mean
+// over the exposure, as a continuous smear's centroid is, to 1 / steps^2), half a PSF sigma apart
+// along the smear at most, so that a long smear is a streak and not a row of separate spots.
+int FrameRenderer::exposure_steps(std::int64_t t_ns, double exposure, const Light& light) const {
+  Eigen::Vector2d first, last;
+  const auto half = std::llround(0.5 * exposure * 1e9);
+  if (!reflection_pixel(scenario_, t_ns - half, light.what, first) ||
+      !reflection_pixel(scenario_, t_ns + half, light.what, last))
+    return kMinExposureSteps;
+  const double length = (last - first).norm();
+  return std::clamp(static_cast<int>(std::ceil(length / (0.5 * light.psf_sigma_px))),
+                    kMinExposureSteps, kMaxExposureSteps);
+}
+
 bool FrameRenderer::draw_light(std::int64_t t_ns, const Light& light, const Eigen::Vector2d& offset,
                                Eigen::Vector2d& uv) {
   if (!reflection_pixel(scenario_, t_ns, light.what, uv)) return false;
   uv += offset;
   const double exposure = config_.room.enabled ? config_.room.exposure_s : 0.0;
-  const int steps = exposure > 0.0 ? kExposureSteps : 1;
+  const int steps = exposure > 0.0 ? exposure_steps(t_ns, exposure, light) : 1;
   Window drawn = spot_window(uv.x(), uv.y(), light.psf_sigma_px);
   for (int k = 0; k < steps; ++k) {
     Eigen::Vector2d at = uv;
     if (steps > 1) {
-      const double dt = exposure * (static_cast<double>(k) / (steps - 1) - 0.5);
+      const double dt = exposure * ((k + 0.5) / steps - 0.5);
       if (!reflection_pixel(scenario_, t_ns + std::llround(dt * 1e9), light.what, at)) continue;
       at += offset;
     }

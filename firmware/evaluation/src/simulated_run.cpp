@@ -101,6 +101,9 @@ CalibrationRun<M, 0, NI> run_simulation(const sim::Scenario& s, std::uint64_t se
   if (frames.identical_leds) render.brightness = {render.brightness[1]};
   render.blink.period = frames.blink_period;
   render.room.enabled = frames.room;
+  // The room's camera exposes its frames over a time that smears the spots: the filter is told it,
+  // as camchain.yaml's exposure_time tells a user's.
+  if (frames.room) config.intrinsics.exposure_s = render.room.exposure_s;
   const detection::RigGeometry<M> geometry =
       detection::prior_geometry(prior, config.intrinsics, config.pixel_sigma);
   const std::uint64_t render_seed = sim::derive_seed(seed, 200);

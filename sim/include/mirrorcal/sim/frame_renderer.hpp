@@ -105,6 +105,8 @@ class FrameRenderer {
   // The pixels a spot at (u, v) of the given PSF reaches (to 4 sigma), clipped to the image.
   Window spot_window(double u, double v, double psf_sigma_px) const;
   void add_spot(double u, double v, double peak, double psf_sigma_px);
+  // How many spots draw a light's smear over an exposure about t_ns.
+  int exposure_steps(std::int64_t t_ns, double exposure, const Light& light) const;
   // Draws a light as the camera saw it over the exposure about t_ns (motion blur), its spots
   // displaced by offset; false, and nothing drawn, if it is not in the image at t_ns. uv: where.
   bool draw_light(std::int64_t t_ns, const Light& light, const Eigen::Vector2d& offset,
