@@ -620,6 +620,7 @@ struct ExposedMirror {
   ExposedMirror(const State& x, const Exposure<S>& e, S exposure_s) {
     if (!(exposure_s > S(0))) {
       early = mirror_in_camera(x, e);
+      late = early;  // unused, but a copy of the struct reads it (GCC -O3 warns otherwise)
       return;
     }
     const S half_spread = exposure_s / S(2 * 1.7320508075688772);
