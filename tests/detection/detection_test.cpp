@@ -202,6 +202,39 @@ TEST(BlobDetector, SpotsUpdatedOverAStillFrameAreFoundWhereDrawn) {
   }
 }
 
+TEST(BlobDetector, ASmearsCentroidIsTheSpotsMeanOverTheExposure) {
+  // A spot slowing down as it crosses 50 px in an exposure: drawn at the middles of equal parts
+  // of the exposure, its streak is dense at the slow end. Its centroid must be the mean of those
+  // places (what the filter predicts: the mean projection over the exposure); a disc re-centred on
+  // the brightest piece walks toward the dense end. Drawn dim enough that the dense end does not
+  // clip, and bright enough that the sparse end stays above the threshold.
+  mc::sim::RenderConfig rc;
+  rc.noise_sigma = 0.0;
+  rc.background_low = rc.background_high = 20.0;
+  const double length = 50.0, angle = 0.6;
+  const int steps = 160;
+  for (const double slowing : {0.0, 0.4, 0.7}) {
+    Canvas c(rc);
+    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+    for (int k = 0; k < steps; ++k) {
+      // Time in (0, 1); distance covered ~ t - slowing * t^2 / 2, scaled to the length.
+      const double t = (k + 0.5) / steps;
+      const double s = length * (t - 0.5 * slowing * t * t) / (1.0 - 0.5 * slowing);
+      const Eigen::Vector2d at(200.3 + s * std::cos(angle), 150.7 + s * std::sin(angle));
+      c.renderer.add_spot(at.x(), at.y(), 9.0);
+      mean += at / steps;
+    }
+    const mc::hal::FrameView v = c.finish();
+    BlobDetector det({}, v.width, v.height);
+    Blob b[4];
+    ASSERT_EQ(det.detect(v, b, 4), 1) << "slowing " << slowing;
+    EXPECT_LT((Eigen::Vector2d(b[0].u, b[0].v) - mean).norm(), 0.05)
+        << "px, slowing " << slowing << ": at " << b[0].u << "," << b[0].v << ", mean "
+        << mean.transpose();
+    EXPECT_FALSE(b[0].wide) << "a smear is a spot's width across it";
+  }
+}
+
 TEST(BlobDetector, HonoursPaddedRows) {
   // The driver's bytes_per_line may exceed the row: padding full of bright bytes must not be read.
   Canvas c;

@@ -20,7 +20,8 @@ struct BlobConfig {
   // The window for the background and the centroid extends the blob's box by this many pixels:
   // enough to hold the spot's tails (about 3 PSF sigmas).
   int margin = 4;
-  // Radius of the disc the centroid is refined on (px): the spot's core, about 3 PSF sigmas.
+  // Radius of the disc the centroid is refined on (px): the spot's core, about 3 PSF sigmas. A spot
+  // smeared by motion is refined on the capsule of this radius about its smear.
   double centroid_radius = 3.5;
   // A blob whose bright pixels spread more than this (px^2) across their widest extent's
   // perpendicular (Blob::width) is wider than a spot in every direction: a lamp, a window, a lit
@@ -38,7 +39,8 @@ struct Blob {
   // Another blob lies within twice the centroid radius (a wide one's tail reaches further): its
   // tail may pull this centroid.
   bool crowded = false;
-  // The centroid's disc reaches past the image's edge: the spot is cut, the centroid biased.
+  // The centroid's disc (a smear's capsule) reaches past the image's edge: the spot is cut, the
+  // centroid biased.
   bool truncated = false;
   // The second moment of the pixels above the threshold (weighted by their excess) across their
   // widest extent (px^2, its smaller eigenvalue), and whether it exceeds max_width_px2.
@@ -74,18 +76,29 @@ class BlobDetector {
   const BlobCounters& counters() const { return counters_; }
 
  private:
-  // A connected region of bright pixels: its area, brightest luma, bounding box and width.
+  // The segment a spot's bright pixels span along their longest axis, from (u0, v0) to (u1, v1):
+  // the path it took over the exposure, and its core's reach at each end. Still: no longer than
+  // the spot is wide.
+  struct Smear {
+    double u0 = 0.0, v0 = 0.0, u1 = 0.0, v1 = 0.0;
+    bool still = true;
+    // The squared distance of the pixel (u, v) from the segment.
+    double distance2(double u, double v) const;
+  };
+  // A connected region of bright pixels: its area, brightest luma, bounding box, width and smear.
   struct Region {
     int area, peak, x0, y0, x1, y1;
     double width;
+    Smear smear;
   };
   Region fill(const hal::FrameView& f, int x, int y);
-  bool measure(const hal::FrameView& f, int x0, int y0, int x1, int y1, Blob& b) const;
+  Smear smear_of(int w, int area, double cu, double cv, double du, double dv) const;
+  bool measure(const hal::FrameView& f, const Region& region, Blob& b) const;
 
   BlobConfig config_;
   int max_width_, max_height_;
   std::vector<std::uint8_t> visited_;  // one flag per pixel
-  std::vector<std::int32_t> stack_;    // flood-fill work list (pixel indices)
+  std::vector<std::int32_t> queue_;    // flood-fill work list (pixel indices), then the region
   BlobCounters counters_{};
 };
 
