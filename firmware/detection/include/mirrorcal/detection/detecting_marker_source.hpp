@@ -78,7 +78,7 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
                         int max_height)
       : frames_(frames),
         detector_(config.blobs, max_width, max_height),
-        identifier_(config.identify),
+        identifier_(identifier_config(config)),
         bootstrap_shape_(config.bootstrap_shape && !config.blink.on()),
         bootstrap_(config.prior, config.identify),
         blink_on_(config.blink.on()),
@@ -154,6 +154,14 @@ class DetectingMarkerSource final : public hal::MarkerSource<M>, public hal::Mar
   }
 
  private:
+  // The identifier told the detector's crowding distance and, with the priors, the pixel noise.
+  static IdentifierConfig<M> identifier_config(const DetectionConfig<M>& config) {
+    IdentifierConfig<M> identify = config.identify;
+    identify.crowded_px = 2.0 * config.blobs.centroid_radius;
+    if (config.bootstrap_shape) identify.pixel_sigma_px = config.prior.pixel_sigma;
+    return identify;
+  }
+
   // The next frame the device has not flagged as damaged.
   hal::SourceStatus next_frame(hal::FrameView& view) {
     for (;;) {
