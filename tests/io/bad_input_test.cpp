@@ -63,6 +63,33 @@ class BadInput : public ::testing::Test {
     write_lines(path, l);
   }
   void drop_key(const std::string& path, const std::string& key) { set_key(path, key, ""); }
+  // Gives cam0's key of camchain.yaml (which the recording's has) this value.
+  void set_cam0(const std::string& key, const std::string& value) {
+    auto l = lines_of(dir() + "/camchain.yaml");
+    bool found = false;
+    for (auto& s : l)
+      if (s.find(key + ":") != std::string::npos) {
+        s = "  " + key + ": " + value;
+        found = true;
+      }
+    ASSERT_TRUE(found) << key;
+    write_lines(dir() + "/camchain.yaml", l);
+  }
+
+  // cam0's key given each of the bad values is refused with the reason; given good, the
+  // recording is read, and returned.
+  mc::io::Recording refused_then_read(const std::string& key, const std::vector<std::string>& bad,
+                                      const std::string& good, const std::string& reason) {
+    for (const std::string& value : bad) {
+      set_cam0(key, value);
+      expect_error({dir() + "/camchain.yaml:", "cam0." + key + ": " + reason});
+    }
+    set_cam0(key, good);
+    mc::io::Recording r;
+    std::string err;
+    EXPECT_TRUE(mc::io::read_recording(dir(), 3, r, err)) << err;
+    return r;
+  }
 
   // Reading fails with a message holding each of parts.
   void expect_error(const std::vector<std::string>& parts) {
@@ -426,10 +453,7 @@ TEST_F(BadInput, AFifoOrADeviceForAFileIsRefused) {
 }
 
 TEST_F(BadInput, CameraModelThatIsNotPinhole) {
-  auto l = lines_of(dir() + "/camchain.yaml");
-  for (auto& s : l)
-    if (s.find("camera_model") != std::string::npos) s = "  camera_model: omni";
-  write_lines(dir() + "/camchain.yaml", l);
+  set_cam0("camera_model", "omni");
   expect_error({dir() + "/camchain.yaml:", "cam0.camera_model: 'omni' is not supported"});
 }
 
@@ -455,12 +479,8 @@ TEST_F(BadInput, TimeOffsetsInTheWrongUnitAreRefused) {
 // Kalibr's pinhole lenses are read (radtan, equidistant); anything else is refused with a reason.
 TEST_F(BadInput, UnknownLensesAndBadCoefficientsAreRefused) {
   const auto with_lens = [&](const std::string& model, const std::string& coeffs) {
-    auto l = lines_of(dir() + "/camchain.yaml");
-    for (auto& s : l) {
-      if (s.find("distortion_model") != std::string::npos) s = "  distortion_model: " + model;
-      if (s.find("distortion_coeffs") != std::string::npos) s = "  distortion_coeffs: " + coeffs;
-    }
-    write_lines(dir() + "/camchain.yaml", l);
+    set_cam0("distortion_model", model);
+    set_cam0("distortion_coeffs", coeffs);
   };
   with_lens("fov", "[0.9, 0, 0, 0]");
   expect_error({dir() + "/camchain.yaml:", "distortion_model: 'fov' is not supported"});
@@ -573,45 +593,16 @@ TEST_F(BadInput, MarkerLedsThatCannotBeDrivenOrToldApartAreRefused) {
 // A rolling shutter's line_delay is seconds per row: microseconds given as seconds, or a negative
 // delay, are refused; a real one is read.
 TEST_F(BadInput, LineDelaysInTheWrongUnitAreRefused) {
-  const auto with_line_delay = [&](const std::string& value) {
-    auto l = lines_of(dir() + "/camchain.yaml");
-    for (auto& s : l)
-      if (s.find("line_delay") != std::string::npos) s = "  line_delay: " + value;
-    write_lines(dir() + "/camchain.yaml", l);
-  };
-  with_line_delay("30");
-  expect_error({dir() + "/camchain.yaml:", "cam0.line_delay: must be seconds per row"});
-  with_line_delay("-3e-5");
-  expect_error({dir() + "/camchain.yaml:", "cam0.line_delay: must be seconds per row"});
-  with_line_delay("3e-5");
-  mc::io::Recording r;
-  std::string err;
-  ASSERT_TRUE(mc::io::read_recording(dir(), 3, r, err)) << err;
+  const mc::io::Recording r =
+      refused_then_read("line_delay", {"30", "-3e-5"}, "3e-5", "must be seconds per row");
   EXPECT_EQ(r.sensors.intrinsics.line_delay_s, 3e-5);
 }
 
 // The exposure is seconds: milliseconds given as seconds, or a negative one, are refused; a real
 // one is read (the recording's camchain.yaml has the key, as record writes it).
 TEST_F(BadInput, ExposureTimesInTheWrongUnitAreRefused) {
-  const auto with_exposure = [&](const std::string& value) {
-    auto l = lines_of(dir() + "/camchain.yaml");
-    bool found = false;
-    for (auto& s : l)
-      if (s.find("exposure_time") != std::string::npos) {
-        s = "  exposure_time: " + value;
-        found = true;
-      }
-    ASSERT_TRUE(found);
-    write_lines(dir() + "/camchain.yaml", l);
-  };
-  with_exposure("4");
-  expect_error({dir() + "/camchain.yaml:", "cam0.exposure_time: must be the frames' exposure"});
-  with_exposure("-0.004");
-  expect_error({dir() + "/camchain.yaml:", "cam0.exposure_time: must be the frames' exposure"});
-  with_exposure("0.004");
-  mc::io::Recording r;
-  std::string err;
-  ASSERT_TRUE(mc::io::read_recording(dir(), 3, r, err)) << err;
+  const mc::io::Recording r =
+      refused_then_read("exposure_time", {"4", "-0.004"}, "0.004", "must be the frames' exposure");
   EXPECT_EQ(r.sensors.intrinsics.exposure_s, 0.004);
 }
 
