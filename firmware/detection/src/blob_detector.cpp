@@ -239,8 +239,7 @@ bool BlobDetector::measure(const hal::FrameView& f, const Region& region, Blob& 
   } else {
     // A smear's centroid is the mean of the spot's place over the exposure, which the model
     // predicts (ExposedMirror): measured over the capsule about its bright pixels' extent, which
-    // holds all of it.
-    // A disc re-centred on it wandered along the smear toward its densest piece.
+    // holds all of it. A disc re-centred on it walked along the smear to its densest piece.
     const Moments m = moments(cu, cv, [&](int x, int y) { return smear.distance2(x, y) <= r2; });
     if (!(m.ws > 0.0)) return false;
     cu += m.mu();
