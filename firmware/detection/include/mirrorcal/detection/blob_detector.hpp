@@ -21,7 +21,7 @@ struct BlobConfig {
   // enough to hold the spot's tails (about 3 PSF sigmas).
   int margin = 4;
   // Radius of the disc the centroid is refined on (px): the spot's core, about 3 PSF sigmas. A spot
-  // smeared by motion is refined on the capsule of this radius about its smear.
+  // smeared by motion is measured once on the capsule of this radius about its smear.
   double centroid_radius = 3.5;
   // A blob whose bright pixels spread more than this (px^2) across their widest extent's
   // perpendicular (Blob::width) is wider than a spot in every direction: a lamp, a window, a lit
